@@ -1,0 +1,127 @@
+"""Images as point clouds: bundled photos, pixels <-> (u, v, r, g, b) rows, patch streams.
+
+Pixel ``(row, col)`` becomes the point ``(u, v) = (col + 0.5, row + 0.5)`` (the pixel
+centre, as in :mod:`vbgs.camera`) with its colour in [0, 1].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+from skimage import data as skdata
+from skimage import io as skio
+from skimage.transform import resize
+
+from vbgs.data.streams import stream_order
+
+# Photos shipped inside scikit-image (no download needed).
+BUNDLED = (
+    "astronaut", "coffee", "chelsea", "cat", "rocket", "camera", "coins", "moon", "text",
+    "page", "clock", "hubble_deep_field", "immunohistochemistry", "logo", "colorwheel",
+    "retina", "brick", "grass", "gravel", "checkerboard",
+)
+
+
+def as_rgb(image, *, source: str = "image") -> np.ndarray:
+    """Validate and convert an image to float32 RGB ``[h, w, 3]`` in [0, 1].
+
+    Accepts grey ``[h, w]``, ``[h, w, 1]``, RGB or RGBA (alpha dropped); integers are
+    scaled by their dtype's maximum, floats must already lie in [0, 1].
+    """
+    img = np.asarray(image)
+    if img.dtype == bool:
+        img = img.astype(np.float32)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    if img.ndim != 3 or img.shape[2] not in (3, 4):
+        raise ValueError(
+            f"{source}: expected an image of shape [h, w], [h, w, 3] or [h, w, 4], got {img.shape}"
+        )
+    if img.shape[0] == 0 or img.shape[1] == 0:
+        raise ValueError(f"{source}: image is empty (shape {img.shape})")
+    img = img[..., :3]
+    if np.issubdtype(img.dtype, np.integer):
+        return (img.astype(np.float64) / np.iinfo(img.dtype).max).astype(np.float32)
+    if not np.issubdtype(img.dtype, np.floating):
+        raise TypeError(f"{source}: pixels must be integers or floats, got dtype {img.dtype}")
+    bad = ~np.isfinite(img)
+    if bad.any():
+        raise ValueError(f"{source}: {int(bad.sum())} pixel values are NaN or inf; clean the image first")
+    if img.min() < 0 or img.max() > 1:
+        raise ValueError(
+            f"{source}: float pixels must lie in [0, 1], got [{img.min():.3g}, {img.max():.3g}]; "
+            "divide by 255 for 8-bit data"
+        )
+    return img.astype(np.float32)
+
+
+def load_image(name_or_path: str | Path, size: int | tuple[int, int] | None = None) -> np.ndarray:
+    """A bundled photo by name (see ``BUNDLED``) or an image file by path, as float32
+    RGB ``[h, w, 3]`` in [0, 1], optionally resized (anti-aliased) to ``size`` (an int
+    for a square, or ``(height, width)``)."""
+    name = str(name_or_path)
+    if name in BUNDLED:
+        img = as_rgb(getattr(skdata, name)(), source=name)
+    else:
+        path = Path(name).expanduser()
+        if not path.is_file():
+            raise FileNotFoundError(
+                f"image {name!r} is neither a bundled photo ({', '.join(BUNDLED)}) nor an "
+                "existing file"
+            )
+        try:
+            raw = skio.imread(path)
+        except Exception as err:  # any decoder failure: say which file
+            raise ValueError(f"could not read image file {path}: {err}") from err
+        img = as_rgb(raw, source=str(path))
+    if size is not None:
+        h, w = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
+        if h < 1 or w < 1:
+            raise ValueError(f"image size must be positive, got {size!r}")
+        img = np.clip(resize(img, (h, w), anti_aliasing=True, order=1), 0, 1).astype(np.float32)
+    return img
+
+
+def pixel_centres(height: int, width: int) -> np.ndarray:
+    """``(u, v)`` of every pixel centre in row-major order, ``[h * w, 2]`` float32."""
+    v, u = np.mgrid[0:height, 0:width].astype(np.float32) + 0.5
+    return np.stack([u.ravel(), v.ravel()], -1)
+
+
+def image_to_points(image) -> tuple[np.ndarray, np.ndarray]:
+    """Image ``[h, w, 3]`` -> positions ``uv [h*w, 2]`` and colours ``rgb [h*w, 3]``."""
+    img = as_rgb(image)
+    h, w, _ = img.shape
+    return pixel_centres(h, w), img.reshape(-1, 3)
+
+
+def points_to_image(rgb, height: int, width: int) -> np.ndarray:
+    """Row-major colours ``[h*w, 3]`` back to an image ``[h, w, 3]``."""
+    rgb = np.asarray(rgb)
+    if rgb.shape != (height * width, 3):
+        raise ValueError(f"expected {height * width} colours of 3 channels, got {rgb.shape}")
+    return rgb.reshape(height, width, 3)
+
+
+def patch_stream(
+    image, patch: int = 8, order: str = "sequential", *, seed: int = 0
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Yield ``(uv [m, 2], rgb [m, 3])`` for each ``patch x patch`` tile of the image.
+
+    Tiles are in raster order for ``sequential`` (see :func:`stream_order`); edge tiles
+    of an image whose size is not a multiple of ``patch`` are smaller. Together the
+    tiles hold every pixel exactly once.
+    """
+    if not isinstance(patch, (int, np.integer)) or patch < 1:
+        raise ValueError(f"patch size must be a positive integer, got {patch!r}")
+    img = as_rgb(image)
+    h, w, _ = img.shape
+    uv = pixel_centres(h, w).reshape(h, w, 2)
+    tiles = [(r, c) for r in range(0, h, patch) for c in range(0, w, patch)]
+    for i in stream_order(len(tiles), order, seed=seed):
+        r, c = tiles[i]
+        yield uv[r : r + patch, c : c + patch].reshape(-1, 2), img[r : r + patch, c : c + patch].reshape(-1, 3)

@@ -1,0 +1,92 @@
+"""Loops over :func:`vbgs.model.update`: batch CAVI and streaming, with optional reassign.
+
+Kept apart from :mod:`vbgs.model` because they combine the model with
+:mod:`vbgs.reassign`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from vbgs.model import Assign, Mixture, PriorConfig, State, start, update
+from vbgs.reassign import reassign
+
+
+class FitInfo(NamedTuple):
+    elbo: np.ndarray  # [iterations]
+    iterations: int
+    converged: bool
+    moved: int  # components re-seeded in total
+
+
+def fit(
+    prior: Mixture,
+    xyz,
+    rgb,
+    *,
+    iters: int = 10,
+    tol: float = 1e-6,
+    config: PriorConfig = PriorConfig(),
+    key: jax.Array | None = None,
+    callback: Callable | None = None,
+) -> tuple[Mixture, FitInfo]:
+    """Batch CAVI on all the data: alternate E- and M-steps until the relative ELBO
+    change falls below ``tol`` or ``iters`` iterations have run.
+
+    Each iteration is one :func:`update` under the current posterior from empty
+    statistics. ``elbo[t]`` is the ELBO of the posterior after t iterations (elbo[0]
+    is the prior's). Without ``key`` this is plain CAVI and the ELBO never decreases.
+    With ``key``, unused components are re-seeded after every iteration
+    (:func:`vbgs.reassign.reassign`): a move outside CAVI that helps random
+    initialisations; the ELBO then usually, but not provably, keeps increasing.
+    ``callback(t, state, info)`` observes each iteration.
+    """
+    if not isinstance(iters, (int, np.integer)) or iters < 1:
+        raise ValueError(f"iters must be a positive integer, got {iters!r}")
+    empty = start(prior).stats
+    state = start(prior)
+    trace, moved, converged = [], 0, False
+    for t in range(iters):
+        state, info = update(State(state.prior, state.posterior, empty), xyz, rgb,
+                             assign="posterior", config=config)
+        trace.append(float(info.elbo))
+        if key is not None:
+            key, sub = jax.random.split(key)
+            state, rinfo = reassign(state, xyz, rgb, info.point_loglik, key=sub)
+            moved += int(rinfo.n_moved)
+        if callback is not None:
+            callback(t, state, info)
+        if t > 0 and abs(trace[-1] - trace[-2]) <= tol * abs(trace[-2]):
+            converged = True
+            break
+    return state.posterior, FitInfo(np.asarray(trace), len(trace), converged, moved)
+
+
+def stream(
+    prior: Mixture,
+    batches: Iterable[tuple[np.ndarray, np.ndarray]],
+    *,
+    assign: Assign = "prior",
+    config: PriorConfig = PriorConfig(),
+    key: jax.Array | None = None,
+    callback: Callable | None = None,
+) -> State:
+    """Continual learning: each ``(xyz, rgb)`` batch is seen once, through
+    :func:`update`; nothing is replayed. With ``key``, unused components are re-seeded
+    onto each batch's worst-explained points after its update (this changes the
+    reference model, so ``prior`` assignment is then no longer order-invariant).
+    ``callback(i, state, info)`` observes each batch.
+    """
+    state = start(prior)
+    for i, (xyz, rgb) in enumerate(batches):
+        state, info = update(state, xyz, rgb, assign=assign, config=config)
+        if key is not None:
+            key, sub = jax.random.split(key)
+            state, _ = reassign(state, xyz, rgb, info.point_loglik, key=sub)
+        if callback is not None:
+            callback(i, state, info)
+    return state

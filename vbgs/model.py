@@ -1,0 +1,348 @@
+"""The VBGS mixture: prior, posterior, E-step, M-step, ELBO, batch CAVI and streaming.
+
+A data point has a position ``xyz [d]`` (d = 2 for images, 3 for scenes) and a colour
+``rgb [3]``. Component k explains it with
+``pi_k N(xyz | mu_k, Sigma_k) N(rgb | mu_c,k, sigma_c^2 I)`` under the conjugate priors
+of :mod:`vbgs.expfam`. Because the model is conjugate, a batch changes the posterior
+only through summed statistics: ``posterior = m_step(prior, stats)``.
+
+State is immutable: ``state, info = update(state, xyz, rgb)``. Batch CAVI and streaming
+loops over :func:`update` live in :mod:`vbgs.fit`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import partial
+from typing import Literal, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vbgs import expfam
+from vbgs.expfam import NIW, ColourNormal, Stats
+
+Assign = Literal["prior", "posterior"]
+InitScheme = Literal["random", "data"]
+
+
+@dataclass(frozen=True)
+class PriorConfig:
+    """Prior strengths and the colour noise; hyperparameters, not state.
+
+    The spatial scale of the prior is not a constant: it is the length ``ell`` of the
+    cell each component would own if the components tiled the data's bounding box,
+    ``ell = (prod_i extent_i / K)^(1/d_eff)`` over the non-degenerate dimensions, so the
+    defaults work whatever the units, the extent or the number of components.
+
+    colour_noise: ``sigma_c``, the fixed colour standard deviation of a component (colours
+        in [0, 1]); small values make components colour-pure (the paper's "delta").
+    cov_scale: prior expected covariance ``E[Sigma] = (cov_scale * ell)^2 I``.
+    cov_strength: ``nu_0 - d - 1``; pseudo-points behind the prior covariance.
+    mean_strength: ``kappa_0``; pseudo-points behind the prior spatial mean.
+    colour_strength: ``lambda_0``; pseudo-points behind the prior colour mean.
+    alpha: Dirichlet concentration per component.
+    """
+
+    colour_noise: float = 0.05
+    cov_scale: float = 0.5
+    cov_strength: float = 1.0
+    mean_strength: float = 1.0
+    colour_strength: float = 1.0
+    alpha: float = 1.0
+
+    def __post_init__(self):
+        for name in ("colour_noise", "cov_scale", "cov_strength", "mean_strength",
+                     "colour_strength", "alpha"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"PriorConfig.{name} must be a positive finite number, got {value!r}")
+
+
+class Mixture(NamedTuple):
+    """Parameters of the whole mixture; the prior and the posterior share this type.
+
+    Spatial quantities live in a frame centred on ``origin`` (world = frame + origin).
+    """
+
+    space: NIW
+    colour: ColourNormal
+    alpha: jnp.ndarray  # [k]
+    origin: jnp.ndarray  # [d]
+
+    @property
+    def n_components(self) -> int:
+        return self.alpha.shape[0]
+
+    @property
+    def dim(self) -> int:
+        return self.origin.shape[0]
+
+
+class State(NamedTuple):
+    """What streaming carries from batch to batch: no data, only summed statistics."""
+
+    prior: Mixture
+    posterior: Mixture
+    stats: Stats
+
+
+class Info(NamedTuple):
+    """Per-update diagnostics.
+
+    elbo: ELBO of the assignment model on this batch, ``sum_n log sum_k exp(l_nk) - KL``
+        (for ``fit`` this is the objective that CAVI never decreases);
+    point_loglik: ``log sum_k exp(l_nk)`` per point ``[n]`` (how well each point is explained).
+    """
+
+    elbo: jnp.ndarray
+    point_loglik: jnp.ndarray
+
+
+# --------------------------------------------------------------------------- prior
+
+
+def cell_length(lo: np.ndarray, hi: np.ndarray, n_components: int) -> float:
+    """``ell``: side of the cell each of K components would own in the box [lo, hi].
+
+    Dimensions thinner than 1e-3 of the widest are treated as degenerate (planar
+    or linear data) and left out; a single point gets ``ell = 1``.
+    """
+    extent = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
+    widest = float(extent.max(initial=0.0))
+    if widest <= 0:
+        return 1.0
+    live = extent[extent > 1e-3 * widest]
+    return float(np.exp(np.log(live).sum() / live.size - np.log(n_components) / live.size))
+
+
+def make_prior(
+    means: jnp.ndarray,
+    colours: jnp.ndarray,
+    origin: jnp.ndarray,
+    ell: float,
+    config: PriorConfig = PriorConfig(),
+) -> Mixture:
+    """A prior with component spatial means ``means [k, d]`` (world) and colour means
+    ``colours [k, 3]``, scaled by the cell length ``ell`` (see :class:`PriorConfig`)."""
+    k, d = means.shape
+    dtype = means.dtype
+    ones = jnp.ones((k,), dtype)
+    var = (config.cov_scale * ell) ** 2
+    scale = jnp.broadcast_to(config.cov_strength * var * jnp.eye(d, dtype=dtype), (k, d, d))
+    space = NIW(
+        means - origin, config.mean_strength * ones, (d + 1.0 + config.cov_strength) * ones, scale
+    )
+    colour = ColourNormal(colours.astype(dtype), config.colour_strength * ones)
+    return Mixture(space, colour, config.alpha * ones, origin.astype(dtype))
+
+
+def init(
+    xyz,
+    rgb,
+    n_components: int,
+    *,
+    key: jax.Array,
+    scheme: InitScheme = "random",
+    config: PriorConfig = PriorConfig(),
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Mixture:
+    """A prior for ``n_components`` placed on data ``xyz [n, d]``, ``rgb [n, 3]``.
+
+    ``random``: spatial means uniform in the bounds (the data's box unless ``bounds``
+    is given) and colour means uniform in the data's colour box. ``data``: spatial
+    and colour means on randomly chosen data points (with replacement only when
+    there are more components than points).
+    """
+    xyz, rgb = check_points(xyz, rgb)
+    if not isinstance(n_components, (int, np.integer)) or n_components < 1:
+        raise ValueError(f"n_components must be a positive integer, got {n_components!r}")
+    if scheme not in ("random", "data"):
+        raise ValueError(f"unknown init scheme {scheme!r}: use 'random' or 'data'")
+    pts = np.asarray(xyz, np.float64)
+    lo, hi = (np.asarray(b, np.float64) for b in bounds) if bounds else (pts.min(0), pts.max(0))
+    origin = jnp.asarray(0.5 * (lo + hi), xyz.dtype)
+    k_pos, k_col, k_pick = jax.random.split(key, 3)
+    dtype = xyz.dtype
+    if scheme == "random":
+        u = jax.random.uniform(k_pos, (n_components, xyz.shape[1]), dtype)
+        # uniform in the box, expressed about the origin to keep precision far from 0
+        means = origin + (u - 0.5) * jnp.asarray(hi - lo, dtype)
+        c_lo, c_hi = rgb.min(0), rgb.max(0)
+        colours = c_lo + jax.random.uniform(k_col, (n_components, 3), dtype) * (c_hi - c_lo)
+    else:
+        n = xyz.shape[0]
+        idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)
+        means, colours = xyz[idx], rgb[idx]
+    return make_prior(means, colours, origin, cell_length(lo, hi, n_components), config)
+
+
+def check_points(xyz, rgb) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """Validate a batch at the library boundary: shapes, dtypes, finiteness."""
+    xyz_np, rgb_np = np.asarray(xyz), np.asarray(rgb)
+    if xyz_np.ndim != 2 or xyz_np.shape[1] not in (2, 3):
+        raise ValueError(f"positions must have shape [n, 2] or [n, 3], got {xyz_np.shape}")
+    if rgb_np.shape != (xyz_np.shape[0], 3):
+        raise ValueError(
+            f"colours must have shape [n, 3] matching {xyz_np.shape[0]} positions, got {rgb_np.shape}"
+        )
+    if xyz_np.shape[0] == 0:
+        raise ValueError("no points: the batch is empty")
+    for name, a in (("positions", xyz_np), ("colours", rgb_np)):
+        if not np.issubdtype(a.dtype, np.floating):
+            raise TypeError(f"{name} must be floating point, got dtype {a.dtype}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"{name} contain NaN or inf ({np.size(a) - np.isfinite(a).sum()} values)")
+    dtype = jnp.result_type(xyz_np.dtype, rgb_np.dtype)
+    return jnp.asarray(xyz_np, dtype), jnp.asarray(rgb_np, dtype)
+
+
+# --------------------------------------------------------------------------- E-step
+
+# Points per chunk are chosen so a chunk's [chunk, k] log-likelihood block holds about
+# this many entries (64 MB in float32): memory stays bounded whatever n and k.
+_BLOCK_ENTRIES = 1 << 24
+
+
+def chunk_size(n: int, k: int) -> int:
+    """Points per E-step chunk: a power of two, at most what ``n`` needs."""
+    target = max(64, _BLOCK_ENTRIES // max(k, 1))
+    return int(min(1 << (target.bit_length() - 1), 1 << max(0, (n - 1).bit_length())))
+
+
+def _features(x: jnp.ndarray, c: jnp.ndarray | None) -> jnp.ndarray:
+    """``phi = [vec(x x^T), x, c, 1]`` per point, ``[n, d*d + d (+ 3) + 1]``."""
+    parts = [(x[:, :, None] * x[:, None, :]).reshape(x.shape[0], -1), x]
+    if c is not None:
+        parts.append(c)
+    parts.append(jnp.ones((x.shape[0], 1), x.dtype))
+    return jnp.concatenate(parts, -1)
+
+
+def log_joint_weights(q: Mixture, colour_noise: float | None) -> jnp.ndarray:
+    """``W [k, F]`` with ``l_nk = phi_n . W_k - |c_n|^2 / (2 sigma_c^2)`` where
+    ``l_nk = E[log pi_k] + E[log N(x_n|mu_k,Sigma_k)] (+ E[log N(c_n|mu_c,k, sigma_c^2)])``.
+
+    With ``colour_noise=None`` the colour term is left out (responsibilities given the
+    position only, as the image renderer needs).
+    """
+    prec, pm, const = expfam.niw_loglik_coefficients(q.space)
+    k = prec.shape[0]
+    cols = [-0.5 * prec.reshape(k, -1), pm]
+    const = const + expfam.dirichlet_expected_log(q.alpha)
+    if colour_noise is not None:
+        lin, c_const = expfam.colour_loglik_coefficients(q.colour, colour_noise)
+        cols.append(lin)
+        const = const + c_const
+    cols.append(const[:, None])
+    return jnp.concatenate(cols, -1)
+
+
+def pad_points(x: jnp.ndarray, c: jnp.ndarray, chunk: int):
+    """Pad to a multiple of ``chunk`` with zero-weight rows; returns ``(x, c, w)``."""
+    n = x.shape[0]
+    n_pad = -n % chunk
+    w = jnp.concatenate([jnp.ones((n,), x.dtype), jnp.zeros((n_pad,), x.dtype)])
+    return jnp.pad(x, ((0, n_pad), (0, 0))), jnp.pad(c, ((0, n_pad), (0, 0))), w
+
+
+def e_step(q: Mixture, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray, colour_noise: float,
+           chunk: int) -> tuple[Stats, jnp.ndarray]:
+    """Dense E-step under ``q`` on centred points ``x [n, d]``, colours ``c [n, 3]`` and
+    point weights ``w [n]`` (0 for padding); n must be a multiple of ``chunk``.
+
+    ``r_nk = softmax_k l_nk`` in log space, chunk by chunk; returns the summed
+    statistics and ``log sum_k exp(l_nk)`` per point.
+    """
+    n, d = x.shape
+    weights = log_joint_weights(q, colour_noise)  # [k, F]
+    inv2var = 0.5 / colour_noise**2
+
+    def one_chunk(acc, batch):
+        xb, cb, wb = batch
+        phi = _features(xb, cb)  # [chunk, F]
+        logits = phi @ weights.T - inv2var * jnp.sum(cb**2, -1, keepdims=True)  # [chunk, k]
+        lse = jax.nn.logsumexp(logits, -1)  # [chunk]
+        resp = jnp.exp(logits - lse[:, None]) * wb[:, None]
+        return acc + resp.T @ phi, lse
+
+    shape = lambda a: a.reshape((n // chunk, chunk) + a.shape[1:])
+    k = weights.shape[0]
+    acc, lse = jax.lax.scan(
+        one_chunk, jnp.zeros((k, weights.shape[1]), x.dtype), (shape(x), shape(c), shape(w))
+    )
+    stats = Stats(
+        count=acc[:, -1],
+        sum_x=acc[:, d * d : d * d + d],
+        sum_xx=acc[:, : d * d].reshape(k, d, d),
+        sum_c=acc[:, d * d + d : d * d + d + 3],
+    )
+    return stats, lse.reshape(-1)
+
+
+# --------------------------------------------------------------------- M-step, ELBO
+
+
+def m_step(prior: Mixture, stats: Stats) -> Mixture:
+    """The conjugate posterior: ``prior + stats`` for every factor."""
+    return Mixture(
+        expfam.niw_posterior(prior.space, stats),
+        expfam.colour_posterior(prior.colour, stats),
+        expfam.dirichlet_posterior(prior.alpha, stats),
+        prior.origin,
+    )
+
+
+def kl(q: Mixture, p: Mixture, colour_noise: float) -> jnp.ndarray:
+    """``KL(q || p)`` summed over all factors and components."""
+    return (
+        expfam.niw_kl(q.space, p.space).sum()
+        + expfam.colour_kl(q.colour, p.colour, colour_noise).sum()
+        + expfam.dirichlet_kl(q.alpha, p.alpha)
+    )
+
+
+# ------------------------------------------------------------------ update and fit
+
+
+def start(prior: Mixture) -> State:
+    """The state before any data: posterior = prior, no statistics."""
+    return State(prior, prior, expfam.zero_stats(prior.n_components, prior.dim, prior.alpha.dtype))
+
+
+@partial(jax.jit, static_argnames=("assign", "colour_noise", "chunk"))
+def _update(state: State, x, c, w, assign: Assign, colour_noise: float, chunk: int):
+    q = state.prior if assign == "prior" else state.posterior
+    batch, lse = e_step(q, x, c, w, colour_noise, chunk)
+    stats = expfam.add_stats(state.stats, batch)
+    elbo = jnp.sum(lse * w) - kl(q, state.prior, colour_noise)
+    return State(state.prior, m_step(state.prior, stats), stats), Info(elbo, lse)
+
+
+def update(
+    state: State,
+    xyz,
+    rgb,
+    *,
+    assign: Assign = "prior",
+    config: PriorConfig = PriorConfig(),
+) -> tuple[State, Info]:
+    """Add one batch ``xyz [n, d]``, ``rgb [n, 3]`` (world units) to the state.
+
+    ``assign="prior"``: responsibilities under the fixed prior, so the result does not
+    depend on how the data are split or ordered; ``"posterior"``: under the current
+    posterior (online variational Bayes, order-dependent). No data are kept.
+    """
+    if assign not in ("prior", "posterior"):
+        raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
+    xyz, rgb = check_points(xyz, rgb)
+    if xyz.shape[1] != state.prior.dim:
+        raise ValueError(f"points are {xyz.shape[1]}-D but the model is {state.prior.dim}-D")
+    dtype = state.prior.alpha.dtype
+    n = xyz.shape[0]
+    chunk = chunk_size(n, state.prior.n_components)
+    x, c, w = pad_points((xyz - state.prior.origin).astype(dtype), rgb.astype(dtype), chunk)
+    new, info = _update(state, x, c, w, assign, float(config.colour_noise), chunk)
+    return new, Info(info.elbo, info.point_loglik[:n])

@@ -1,0 +1,44 @@
+"""2-D image rendering of a fitted mixture: the colour expected at each pixel.
+
+The 3-D splat rasterizer lives in :mod:`vbgs.raster`.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vbgs.data.images import pixel_centres
+from vbgs.model import Mixture, _features, chunk_size, log_joint_weights
+
+
+@partial(jax.jit, static_argnames=("chunk",))
+def _expected_colour(q: Mixture, x: jnp.ndarray, chunk: int) -> jnp.ndarray:
+    weights = log_joint_weights(q, colour_noise=None)  # [k, F]
+
+    def one_chunk(xb):
+        logits = _features(xb, None) @ weights.T  # [chunk, k]
+        return jax.nn.softmax(logits, -1) @ q.colour.mean  # [chunk, 3]
+
+    out = jax.lax.map(one_chunk, x.reshape(-1, chunk, x.shape[-1]))
+    return out.reshape(-1, 3)
+
+
+def expected_colour(q: Mixture, xy) -> jnp.ndarray:
+    """``E[c | x] = sum_k p(k | x) E[mu_c,k]`` at positions ``xy [n, d]`` (world units),
+    with ``p(k | x) = softmax_k(E[log pi_k] + E[log N(x | mu_k, Sigma_k)])`` — the
+    E-step's responsibilities with the colour left out."""
+    x = jnp.asarray(xy, q.alpha.dtype) - q.origin
+    n = x.shape[0]
+    chunk = chunk_size(n, q.n_components)
+    x = jnp.pad(x, ((0, -n % chunk), (0, 0)))
+    return _expected_colour(q, x, chunk)[:n]
+
+
+def render_image(q: Mixture, height: int, width: int) -> np.ndarray:
+    """Render a 2-D mixture fitted on pixel centres to an image ``[h, w, 3]`` in [0, 1]."""
+    rgb = expected_colour(q, pixel_centres(height, width))
+    return np.clip(np.asarray(rgb), 0.0, 1.0).reshape(height, width, 3)
