@@ -61,7 +61,7 @@ def zero_stats(k: int, d: int, dtype=jnp.float32) -> Stats:
 
 def add_stats(a: Stats, b: Stats) -> Stats:
     """Statistics of the union of two data sets."""
-    return Stats(*(x + y for x, y in zip(a, b)))
+    return Stats(*(x + y for x, y in zip(a, b, strict=True)))
 
 
 # ----------------------------------------------------------------------------- NIW

@@ -268,7 +268,9 @@ def e_step(q: Mixture, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray, colour_no
         resp = jnp.exp(logits - lse[:, None]) * wb[:, None]
         return acc + resp.T @ phi, lse
 
-    shape = lambda a: a.reshape((n // chunk, chunk) + a.shape[1:])
+    def shape(a):
+        return a.reshape((n // chunk, chunk) + a.shape[1:])
+
     k = weights.shape[0]
     acc, lse = jax.lax.scan(
         one_chunk, jnp.zeros((k, weights.shape[1]), x.dtype), (shape(x), shape(c), shape(w))

@@ -41,7 +41,8 @@ def _reassign(state: State, x, c, point_loglik, key, min_count, pool: int):
     moved = unused & (rank < pool)
     target = order[jnp.clip(rank, 0, pool - 1)]  # [k]
     prior = _move_prior(state.prior, moved, x[target], c[target])
-    keep = lambda a: jnp.where(moved.reshape((-1,) + (1,) * (a.ndim - 1)), 0.0, a)
+    def keep(a):
+        return jnp.where(moved.reshape((-1,) + (1,) * (a.ndim - 1)), 0.0, a)
     stats = jax.tree_util.tree_map(keep, state.stats)
     return State(prior, m_step(prior, stats), stats), ReassignInfo(moved, moved.sum())
 
