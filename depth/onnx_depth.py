@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from depth.model_io import discover, load_session, to_nhw
-from depth.preprocess import as_frames, input_hw, normalise, resize
+from depth.preprocess import as_frames, input_hw, resize, to_model_input
 from depth.presets import NO_MEAN, NO_STD, check_kind, get_preset
 
 DEFAULT_BATCH_SIZE = 4
@@ -123,10 +123,7 @@ class OnnxDepth:
     def preprocess(self, rgb: np.ndarray) -> np.ndarray:
         """Checked frames ``[n, h, w, 3]`` in [0, 1] -> the model's input tensor."""
         x = resize(rgb, self.input_hw(rgb.shape[1:3]), (1, 2))
-        x = normalise(x, self.mean, self.std)
-        if self.io.layout == "NCHW":
-            x = x.transpose(0, 3, 1, 2)
-        return np.ascontiguousarray(x, dtype=self.io.input_dtype)
+        return to_model_input(x, self.mean, self.std, self.io.layout, self.io.input_dtype)
 
     def run(self, x: np.ndarray) -> np.ndarray:
         """One ``session.run`` on a prepared input -> float32 ``[N, H', W']``."""
