@@ -56,7 +56,8 @@ def fit(
         trace.append(float(info.elbo))
         if key is not None:
             key, sub = jax.random.split(key)
-            state, rinfo = reassign(state, xyz, rgb, info.point_loglik, key=sub)
+            state, rinfo = reassign(state, xyz, rgb, info.point_loglik, key=sub,
+                                     colour_noise=config.colour_noise)
             moved += int(rinfo.n_moved)
         if callback is not None:
             callback(t, state, info)
@@ -76,17 +77,23 @@ def stream(
     callback: Callable | None = None,
 ) -> State:
     """Continual learning: each ``(xyz, rgb)`` batch is seen once, through
-    :func:`update`; nothing is replayed. With ``key``, unused components are re-seeded
-    onto each batch's worst-explained points after its update (this changes the
-    reference model, so ``prior`` assignment is then no longer order-invariant).
-    ``callback(i, state, info)`` observes each batch.
+    :func:`update`; nothing is replayed.
+
+    With ``key``, before each batch is learned the unused components are re-seeded
+    onto its worst-explained points (:func:`vbgs.reassign.reassign`, scored under the
+    assignment model), so new regions of the stream get fresh components. This costs
+    one more E-step per batch and changes the reference model, so ``prior``
+    assignment is then no longer order-invariant. ``callback(i, state, info)``
+    observes each batch.
     """
     state = start(prior)
     for i, (xyz, rgb) in enumerate(batches):
-        state, info = update(state, xyz, rgb, assign=assign, config=config)
         if key is not None:
             key, sub = jax.random.split(key)
-            state, _ = reassign(state, xyz, rgb, info.point_loglik, key=sub)
+            _, scored = update(state, xyz, rgb, assign=assign, config=config)
+            state, _ = reassign(state, xyz, rgb, scored.point_loglik, key=sub,
+                                colour_noise=config.colour_noise)
+        state, info = update(state, xyz, rgb, assign=assign, config=config)
         if callback is not None:
             callback(i, state, info)
     return state

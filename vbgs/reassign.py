@@ -1,10 +1,14 @@
 """Re-seed unused components where the data are poorly explained.
 
 A component is unused when it has received less than ``min_count`` points' worth of
-responsibility: its weight is still at its prior. Such components are moved (prior and
-posterior alike, their statistics cleared) onto the batch points with the lowest
-``log sum_k exp(l_nk)``, taking the position and colour of the point as the new
-prior means. The choice among the worst points is random but fixed by ``key``.
+responsibility: its weight is still at its prior. A point is poorly explained when
+its log-likelihood under the model, ``log sum_k exp(l_nk)``, is below what a fresh
+component placed exactly on it would give it (the log-joint of an unused component
+at its own prior means). Unused components are moved onto such points (prior and
+posterior alike, their statistics cleared), taking the point's position and colour
+as their new prior means: a move only where it helps, so streams do not pull
+components away from regions they have not reached yet. Which poorly explained
+points receive a component is random, fixed by ``key``.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from vbgs.model import Mixture, State, m_step
+from vbgs.model import Mixture, State, _features, log_joint_weights, m_step
 
 # Points' worth of responsibility below which a component counts as unused.
 MIN_COUNT = 0.5
@@ -24,6 +28,14 @@ MIN_COUNT = 0.5
 class ReassignInfo(NamedTuple):
     moved: jnp.ndarray  # [k] bool: which components were re-seeded
     n_moved: jnp.ndarray  # scalar
+    n_poor: jnp.ndarray  # scalar: points explained worse than a fresh component would
+
+
+def fresh_loglik(q: Mixture, colour_noise: float) -> jnp.ndarray:
+    """``l_kk``: each component's log-joint at its own spatial and colour means, ``[k]``."""
+    phi = _features(q.space.mean, q.colour.mean)  # [k, F]
+    own = jnp.sum(phi * log_joint_weights(q, colour_noise), -1)
+    return own - 0.5 * jnp.sum(q.colour.mean**2, -1) / colour_noise**2
 
 
 def _move_prior(prior: Mixture, moved, x_new, c_new) -> Mixture:
@@ -32,32 +44,43 @@ def _move_prior(prior: Mixture, moved, x_new, c_new) -> Mixture:
     return prior._replace(space=space, colour=colour)
 
 
-@partial(jax.jit, static_argnames=("pool",))
-def _reassign(state: State, x, c, point_loglik, key, min_count, pool: int):
+@partial(jax.jit, static_argnames=("colour_noise", "pool"))
+def _reassign(state: State, x, c, point_loglik, key, min_count, colour_noise: float, pool: int):
     unused = state.stats.count < min_count  # [k]
-    worst = jnp.argsort(point_loglik)[:pool]  # [pool] worst-explained first
-    order = jax.random.permutation(key, worst)  # random among the worst
+    fresh = jnp.max(jnp.where(unused, fresh_loglik(state.posterior, colour_noise), -jnp.inf))
+    poor = point_loglik < fresh  # [n]
+    priority = jnp.where(poor, jax.random.uniform(key, poor.shape), 2.0)
+    targets = jnp.argsort(priority)[:pool]  # poorly explained points in random order
     rank = jnp.cumsum(unused) - 1  # position of each unused component among the unused
-    moved = unused & (rank < pool)
-    target = order[jnp.clip(rank, 0, pool - 1)]  # [k]
+    moved = unused & (rank < jnp.minimum(poor.sum(), pool))
+    target = targets[jnp.clip(rank, 0, pool - 1)]  # [k]
     prior = _move_prior(state.prior, moved, x[target], c[target])
-    def keep(a):
+
+    def clear(a):
         return jnp.where(moved.reshape((-1,) + (1,) * (a.ndim - 1)), 0.0, a)
-    stats = jax.tree_util.tree_map(keep, state.stats)
-    return State(prior, m_step(prior, stats), stats), ReassignInfo(moved, moved.sum())
+
+    stats = jax.tree_util.tree_map(clear, state.stats)
+    return State(prior, m_step(prior, stats), stats), ReassignInfo(moved, moved.sum(), poor.sum())
 
 
 def reassign(
-    state: State, xyz, rgb, point_loglik, *, key: jax.Array, min_count: float = MIN_COUNT
+    state: State,
+    xyz,
+    rgb,
+    point_loglik,
+    *,
+    key: jax.Array,
+    colour_noise: float,
+    min_count: float = MIN_COUNT,
 ) -> tuple[State, ReassignInfo]:
-    """Move unused components onto the worst-explained points of the batch
-    ``xyz [n, d]``, ``rgb [n, 3]`` whose per-point log-likelihoods ``[n]`` come from the
-    last E-step (``Info.point_loglik``). At most one component per point; deterministic
-    under ``key``."""
+    """Move unused components onto poorly explained points of the batch
+    ``xyz [n, d]``, ``rgb [n, 3]``, given each point's log-likelihood ``[n]`` under the
+    model (``Info.point_loglik`` of an update). At most one component per point;
+    deterministic under ``key``."""
     prior = state.prior
     dtype = prior.alpha.dtype
     x = jnp.asarray(xyz, dtype) - prior.origin
     c = jnp.asarray(rgb, dtype)
-    n = x.shape[0]
-    pool = int(min(n, prior.n_components))
-    return _reassign(state, x, c, jnp.asarray(point_loglik, dtype), key, min_count, pool)
+    pool = int(min(x.shape[0], prior.n_components))
+    return _reassign(state, x, c, jnp.asarray(point_loglik, dtype), key, min_count,
+                     float(colour_noise), pool)
