@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +79,9 @@ def read_rgb(path: Path) -> np.ndarray:
     from skimage import io as skio
 
     try:
-        img = np.asarray(skio.imread(path))
+        with warnings.catch_warnings():  # imageio's plugin deprecation notes on a bad file
+            warnings.simplefilter("ignore", DeprecationWarning)
+            img = np.asarray(skio.imread(path))
     except Exception as err:  # imageio/PIL raise many types for a bad file
         raise CliError(f"cannot read image {path}: {err}") from err
     if img.ndim == 2:

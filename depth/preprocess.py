@@ -28,6 +28,8 @@ def as_frames(frames) -> tuple[np.ndarray, bool]:
             return _check_batch(frames[None], "frame"), True
         if frames.ndim == 4:
             return _check_batch(frames, "frames"), False
+        if frames.ndim == 2:
+            _check_one(frames, "frame")
         raise ValueError(
             f"frames must be one [h, w, 3] image or a batch [n, h, w, 3], got shape {frames.shape}"
         )
