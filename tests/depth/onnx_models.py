@@ -47,12 +47,16 @@ def channel_sum_model(
     batch: int | None = None,
     output: str = "NHW",
     pool: int = 1,
+    half_input: bool = False,
+    symbolic_channels: bool = False,
 ) -> onnx.ModelProto:
     """``y[n, i, j] = sum_c weights[c] * x[n, c, i, j] + bias`` (NCHW or NHWC input).
 
     ``size``/``batch`` fix the input's (H, W)/N (None: symbolic); ``output`` is the
     output layout "NHW", "N1HW" or "NHW1"; ``pool > 1`` average-pools the output by
     that factor (a model whose depth map is smaller than its input; NCHW only).
+    ``half_input`` declares a float16 input (cast to float inside);
+    ``symbolic_channels`` leaves the input and output channel axes unnamed sizes.
     """
     c_axis = 1 if layout == "NCHW" else 3
     w_shape = [1, 3, 1, 1] if layout == "NCHW" else [1, 1, 1, 3]
@@ -61,8 +65,9 @@ def channel_sum_model(
         _const("b", np.float32(bias)),
         _const("c_axis", np.array([c_axis], np.int64)),
     ]
-    nodes = [
-        helper.make_node("Mul", ["x", "w"], ["xw"]),
+    nodes = [helper.make_node("Cast", ["x"], ["x32"], to=FLOAT)] if half_input else []
+    nodes += [
+        helper.make_node("Mul", ["x32" if half_input else "x", "w"], ["xw"]),
         helper.make_node("ReduceSum", ["xw", "c_axis"], ["s"], keepdims=1),
         helper.make_node("Add", ["s", "b"], ["y4"]),  # [N,1,H,W] or [N,H,W,1]
     ]
@@ -82,8 +87,13 @@ def channel_sum_model(
         perm = [0, 2, 3, 1] if layout == "NCHW" else [0, 3, 1, 2]
         nodes.append(helper.make_node("Transpose", [last], ["y"], perm=perm))
     n = batch if batch is not None else "N"
-    out_shape = {"NHW": [n, "Ho", "Wo"], "N1HW": [n, 1, "Ho", "Wo"], "NHW1": [n, "Ho", "Wo", 1]}
-    x = helper.make_tensor_value_info("x", FLOAT, _image_shape(layout, size, batch))
+    one = "C1" if symbolic_channels else 1
+    out_shape = {"NHW": [n, "Ho", "Wo"], "N1HW": [n, one, "Ho", "Wo"], "NHW1": [n, "Ho", "Wo", one]}
+    in_shape = _image_shape(layout, size, batch)
+    if symbolic_channels:
+        in_shape[c_axis] = "C"
+    x_type = TensorProto.FLOAT16 if half_input else FLOAT
+    x = helper.make_tensor_value_info("x", x_type, in_shape)
     y = helper.make_tensor_value_info("y", FLOAT, out_shape[output])
     return _model(nodes, [x], [y], inits, "channel_sum")
 

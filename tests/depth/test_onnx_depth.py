@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from depth import PRESETS, OnnxDepth
+from depth.model_io import ModelIO, to_nhw
 from depth.preprocess import resize
 from depth.presets import IMAGENET_MEAN, IMAGENET_STD
 from tests.depth import onnx_models as om
@@ -140,3 +141,30 @@ def test_bad_frames_are_refused():
     frame[0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         model.predict(frame)
+
+
+def test_float16_input_is_fed_as_float16():
+    model = OnnxDepth(om.channel_sum_model(W, B, half_input=True).SerializeToString())
+    assert model.io.input_dtype == np.float16
+    frames = _frames(2, 8, 10)
+    np.testing.assert_allclose(model.predict(frames), _channel_sum(frames), atol=2e-3)
+
+
+@pytest.mark.parametrize("output", ["N1HW", "NHW1"])
+def test_symbolic_channel_axes_need_a_layout_and_resolve_at_run_time(output):
+    model_bytes = om.channel_sum_model(W, B, output=output, symbolic_channels=True)
+    model_bytes = model_bytes.SerializeToString()
+    with pytest.raises(ValueError, match="cannot tell the channel axis.*layout="):
+        OnnxDepth(model_bytes)
+    model = OnnxDepth(model_bytes, layout="NCHW")
+    frames = _frames(2, 8, 10)
+    np.testing.assert_allclose(model.predict(frames), _channel_sum(frames), atol=1e-6)
+
+
+def test_output_channel_axis_found_at_run_time_when_the_graph_does_not_say():
+    io = ModelIO("x", np.float32, "NCHW", None, (None, None), "y", None)
+    y = np.arange(12, dtype=np.float32).reshape(1, 3, 4)
+    np.testing.assert_array_equal(to_nhw(y[:, None], io), y)
+    np.testing.assert_array_equal(to_nhw(y[..., None], io), y)
+    with pytest.raises(ValueError, match=r"returned shape \(1, 2, 3, 4\)"):
+        to_nhw(np.zeros((1, 2, 3, 4)), io)
