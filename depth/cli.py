@@ -150,10 +150,17 @@ def fit_alignments(model: OnnxDepth, frames: list[Path], refs: dict[str, Path], 
         pooled_p.append(p)
         pooled_d.append(d)
         if args.align_scope == "per-frame":
-            per_frame[path.stem] = align(p, d, None, method, space=space, seed=args.seed)
-    fit = align(np.concatenate(pooled_p), np.concatenate(pooled_d), None, method,
-                space=space, seed=args.seed)
+            per_frame[path.stem] = _align_or_explain(p, d, method, space, args.seed, path.name)
+    fit = _align_or_explain(np.concatenate(pooled_p), np.concatenate(pooled_d), method, space,
+                            args.seed, f"{len(pooled_p)} reference frame(s)")
     return fit, per_frame
+
+
+def _align_or_explain(p, d, method, space, seed, where) -> Alignment:
+    try:
+        return align(p, d, None, method, space=space, seed=seed)
+    except ValueError as err:
+        raise CliError(f"alignment on {where} failed: {err}") from err
 
 
 def _batches(items: list, size: int):
