@@ -29,6 +29,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 PREVIEW_NAME = "_preview.png"
 UINT16_MAX = float(np.iinfo(np.uint16).max)
 SCOPES = ("global", "per-frame")
+DESCRIPTION = "RGB frames -> 16-bit millimetre depth PNGs with a user-supplied ONNX depth model."
 
 
 class CliError(Exception):
@@ -36,7 +37,7 @@ class CliError(Exception):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m depth", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m depth", description=DESCRIPTION)
     ap.add_argument("--model", required=True, type=Path, help="ONNX depth model (.onnx)")
     ap.add_argument("--input", required=True, type=Path, help="folder of RGB frames")
     ap.add_argument("--output", required=True, type=Path, help="folder for depth PNGs")
