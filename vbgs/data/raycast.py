@@ -1,0 +1,295 @@
+"""Analytic ray casting against textured primitives: exact colour and z-depth.
+
+The synthetic scenes (:mod:`vbgs.data.synthetic`) are lists of primitives. Each
+primitive implements
+
+* ``hit(origin [3], dirs [n, 3]) -> (t [n], uv [n, 2])``: ray parameter of the
+  nearest intersection with ``t > T_MIN`` (``inf`` on a miss) and the texture
+  coordinates there. ``t`` is measured in units of ``dirs``: rays built with a
+  camera-frame z component of 1 give ``t`` = z-depth directly;
+* ``distance(points [n, 3]) -> [n]``: unsigned Euclidean distance to the surface
+  (used by tests to check that depth is exact);
+* ``bounds() -> (lo [3], hi [3])``: an axis-aligned box around the surface.
+
+Surfaces are two-sided and unlit: colour is the texture (albedo) at the hit
+point, the same from every viewpoint, which is what view-independent splat
+colours can represent exactly. Textures are bundled scikit-image photos, resized
+once to ``TEXTURE_SIZE`` and sampled bilinearly with wrap-around, so ``uv``
+beyond [0, 1) tiles the photo. ``uv = (0, 0)`` is the photo's top-left corner,
+``u`` runs along its columns, ``v`` down its rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+from skimage import data as skdata
+from skimage.transform import resize
+
+from vbgs.camera import Camera, pixel_grid
+
+T_MIN = 1e-6  # smallest accepted ray parameter: ignores hits at the ray origin
+TEXTURE_SIZE = 256  # textures are resized once to TEXTURE_SIZE x TEXTURE_SIZE
+TEXTURES = ("astronaut", "coffee", "chelsea", "rocket", "camera", "brick", "grass",
+            "gravel", "immunohistochemistry", "colorwheel")  # fmt: skip
+
+
+@cache
+def texture(name: str) -> np.ndarray:
+    """Bundled scikit-image photo ``name`` as float32 ``[TEXTURE_SIZE, TEXTURE_SIZE, 3]`` in [0, 1]."""
+    if name not in TEXTURES:
+        raise ValueError(f"unknown texture {name!r}; known: {', '.join(TEXTURES)}")
+    img = np.asarray(getattr(skdata, name)(), np.float64)
+    img = img / 255.0 if img.max() > 1.0 else img
+    img = np.repeat(img[..., None], 3, -1) if img.ndim == 2 else img[..., :3]
+    out = resize(img, (TEXTURE_SIZE, TEXTURE_SIZE), order=1, anti_aliasing=True)
+    out = np.clip(out, 0.0, 1.0).astype(np.float32)
+    out.setflags(write=False)  # shared through the cache
+    return out
+
+
+def sample(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear, wrap-around lookup of ``tex [th, tw, 3]`` at ``uv [n, 2]`` -> ``[n, 3]``."""
+    th, tw = tex.shape[:2]
+    x = uv[:, 0] * tw - 0.5
+    y = uv[:, 1] * th - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    ax, ay = (x - x0)[:, None], (y - y0)[:, None]
+    c0, r0 = x0.astype(np.int64) % tw, y0.astype(np.int64) % th
+    c1, r1 = (c0 + 1) % tw, (r0 + 1) % th
+    top = tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax
+    bottom = tex[r1, c0] * (1 - ax) + tex[r1, c1] * ax
+    return top * (1 - ay) + bottom * ay
+
+
+@dataclass(frozen=True)
+class Surface:
+    """Appearance shared by all primitives: texture name, rgb tint, uv repeat (u, v)."""
+
+    texture: str
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    repeat: tuple[float, float] = (1.0, 1.0)
+
+    def colour(self, uv: np.ndarray) -> np.ndarray:
+        """Albedo ``[n, 3]`` at texture coordinates ``uv [n, 2]``."""
+        return sample(texture(self.texture), uv * np.asarray(self.repeat)) * np.asarray(self.tint)
+
+
+def _nearest_root(a, b, c, extra_ok=None):
+    """Smallest root ``t > T_MIN`` of ``a t^2 + 2 b t + c`` (``inf`` if none).
+
+    ``extra_ok(t) -> bool [n]`` can reject roots (e.g. outside a cylinder's height).
+    """
+    disc = b * b - a * c
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    safe_a = np.where(np.abs(a) > 1e-300, a, 1.0)
+    best = np.full(a.shape, np.inf)
+    for t in ((-b + sq) / safe_a, (-b - sq) / safe_a):  # the second (nearer) wins when valid
+        ok = (disc >= 0) & (np.abs(a) > 1e-300) & (t > T_MIN)
+        if extra_ok is not None:
+            ok &= extra_ok(t)
+        best = np.where(ok & (t < best), t, best)
+    return best
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """Sphere; uv = (longitude / 2 pi + 1/2, colatitude / pi) about the world z axis."""
+
+    centre: tuple[float, float, float]
+    radius: float
+    surface: Surface
+
+    def hit(self, origin, dirs):
+        oc = np.asarray(origin, float) - np.asarray(self.centre)  # [3]
+        t = _nearest_root(np.sum(dirs * dirs, -1), dirs @ oc, np.full(len(dirs), oc @ oc - self.radius**2))
+        p = (oc + np.where(np.isfinite(t), t, 0.0)[:, None] * dirs) / self.radius  # [n, 3] unit
+        u = 0.5 + np.arctan2(p[:, 1], p[:, 0]) / (2 * np.pi)
+        v = np.arccos(np.clip(p[:, 2], -1.0, 1.0)) / np.pi
+        return t, np.stack([u, v], -1)
+
+    def distance(self, points):
+        return np.abs(np.linalg.norm(points - np.asarray(self.centre), axis=-1) - self.radius)
+
+    def bounds(self):
+        c = np.asarray(self.centre, float)
+        return c - self.radius, c + self.radius
+
+
+@dataclass(frozen=True)
+class Quad:
+    """Parallelogram ``corner + a * edge_u + b * edge_v``, a, b in [0, 1]; uv = (a, b).
+
+    Give ``corner`` as the top-left of the photo as seen from the side it faces,
+    ``edge_u`` pointing right and ``edge_v`` down; ``edge_u`` and ``edge_v`` must be
+    perpendicular.
+    """
+
+    corner: tuple[float, float, float]
+    edge_u: tuple[float, float, float]
+    edge_v: tuple[float, float, float]
+    surface: Surface
+
+    def _local(self, q):  # q [n, 3] relative to the corner -> (a, b) each [n]
+        eu, ev = np.asarray(self.edge_u, float), np.asarray(self.edge_v, float)
+        return q @ eu / (eu @ eu), q @ ev / (ev @ ev)
+
+    def hit(self, origin, dirs):
+        p0 = np.asarray(self.corner, float)
+        n = np.cross(self.edge_u, self.edge_v)
+        denom = dirs @ n  # [n]
+        ok = np.abs(denom) > 1e-12
+        t = np.where(ok, ((p0 - origin) @ n) / np.where(ok, denom, 1.0), np.inf)
+        q = np.asarray(origin, float) - p0 + np.where(np.isfinite(t), t, 0.0)[:, None] * dirs
+        a, b = self._local(q)
+        ok &= (t > T_MIN) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
+        return np.where(ok, t, np.inf), np.stack([a, b], -1)
+
+    def distance(self, points):
+        a, b = self._local(points - np.asarray(self.corner, float))
+        a, b = np.clip(a, 0, 1)[:, None], np.clip(b, 0, 1)[:, None]
+        closest = np.asarray(self.corner) + a * np.asarray(self.edge_u) + b * np.asarray(self.edge_v)
+        return np.linalg.norm(points - closest, axis=-1)
+
+    def bounds(self):
+        p0, eu, ev = (np.asarray(x, float) for x in (self.corner, self.edge_u, self.edge_v))
+        pts = np.stack([p0, p0 + eu, p0 + ev, p0 + eu + ev])
+        return pts.min(0), pts.max(0)
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """Side of a vertical (world z) cylinder, z in [z_lo, z_hi]; uv = (angle / 2 pi, from top)."""
+
+    centre_xy: tuple[float, float]
+    radius: float
+    z_lo: float
+    z_hi: float
+    surface: Surface
+
+    def hit(self, origin, dirs):
+        o = np.asarray(origin, float)
+        ox, oy = o[0] - self.centre_xy[0], o[1] - self.centre_xy[1]
+        dx, dy, dz = dirs[:, 0], dirs[:, 1], dirs[:, 2]
+
+        def in_height(t):
+            z = o[2] + t * dz
+            return (z >= self.z_lo) & (z <= self.z_hi)
+
+        t = _nearest_root(dx * dx + dy * dy, ox * dx + oy * dy,
+                          np.full(len(dirs), ox * ox + oy * oy - self.radius**2), in_height)  # fmt: skip
+        tt = np.where(np.isfinite(t), t, 0.0)
+        u = 0.5 + np.arctan2(oy + tt * dy, ox + tt * dx) / (2 * np.pi)
+        v = (self.z_hi - (o[2] + tt * dz)) / (self.z_hi - self.z_lo)
+        return t, np.stack([u, v], -1)
+
+    def distance(self, points):
+        radial = np.hypot(points[:, 0] - self.centre_xy[0], points[:, 1] - self.centre_xy[1])
+        axial = np.maximum(np.maximum(self.z_lo - points[:, 2], points[:, 2] - self.z_hi), 0.0)
+        return np.hypot(radial - self.radius, axial)
+
+    def bounds(self):
+        c = np.asarray(self.centre_xy, float)
+        return np.r_[c - self.radius, self.z_lo], np.r_[c + self.radius, self.z_hi]
+
+
+@dataclass(frozen=True)
+class Disc:
+    """Horizontal disc (a cylinder cap) at height ``z``; uv maps its square [-r, r]^2 to [0, 1]^2."""
+
+    centre: tuple[float, float, float]
+    radius: float
+    surface: Surface
+
+    def hit(self, origin, dirs):
+        o, c = np.asarray(origin, float), np.asarray(self.centre, float)
+        ok = np.abs(dirs[:, 2]) > 1e-12
+        t = np.where(ok, (c[2] - o[2]) / np.where(ok, dirs[:, 2], 1.0), np.inf)
+        tt = np.where(np.isfinite(t), t, 0.0)
+        x, y = o[0] + tt * dirs[:, 0] - c[0], o[1] + tt * dirs[:, 1] - c[1]
+        ok &= (t > T_MIN) & (x * x + y * y <= self.radius**2)
+        uv = np.stack([x, -y], -1) / (2 * self.radius) + 0.5
+        return np.where(ok, t, np.inf), uv
+
+    def distance(self, points):
+        rho = np.hypot(points[:, 0] - self.centre[0], points[:, 1] - self.centre[1])
+        return np.hypot(points[:, 2] - self.centre[2], np.maximum(rho - self.radius, 0.0))
+
+    def bounds(self):
+        c = np.asarray(self.centre, float)
+        return c - [self.radius, self.radius, 0.0], c + [self.radius, self.radius, 0.0]
+
+
+def box(centre, half, yaw: float, sides, top: Surface, bottom: Surface | None = None,
+        inside: bool = False) -> list[Quad]:
+    """Six :class:`Quad` faces of a box rotated by ``yaw`` (radians) about world z.
+
+    ``half`` = half extents (hx, hy, hz) along the box's own axes; ``sides`` is one
+    :class:`Surface` or four (faces +x, +y, -x, -y of the box). Side photos
+    stand upright and unmirrored when seen from outside, or from inside with
+    ``inside=True`` (a room: ``top`` is then the ceiling, ``bottom`` the floor).
+    """
+    c, (hx, hy, hz) = np.asarray(centre, float), half
+    rot = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0, 0, 1]])
+    ex, ey, ez = rot[:, 0], rot[:, 1], np.array([0.0, 0.0, 1.0])
+    flip = -1.0 if inside else 1.0
+    sides = [sides] * 4 if isinstance(sides, Surface) else list(sides)
+    faces = []
+    # (outward axis, image-right direction seen from outside, half extents along them)
+    for side, (out, right, h_out, h_right) in zip(sides, ((ex, ey, hx, hy), (ey, -ex, hy, hx),
+                                       (-ex, -ey, hx, hy), (-ey, ex, hy, hx)), strict=True):  # fmt: skip
+        right = flip * right
+        corner = c + h_out * out - h_right * right + hz * ez
+        faces.append(Quad(tuple(corner), tuple(2 * h_right * right), tuple(-2 * hz * ez), side))
+    bottom = bottom or top
+    # a horizontal face seen from above: top-left at (-x, +y), u along +x, v along -y
+    z_seen_from_above = (-hz, bottom) if inside else (hz, top)
+    z_other = (hz, top) if inside else (-hz, bottom)
+    for (dz, surf), sign in ((z_seen_from_above, 1.0), (z_other, -1.0)):
+        corner = c + dz * ez - hx * ex + sign * hy * ey
+        faces.append(Quad(tuple(corner), tuple(2 * hx * ex), tuple(-sign * 2 * hy * ey), surf))
+    return faces
+
+
+def cast(prims, origin: np.ndarray, dirs: np.ndarray):
+    """Nearest hit over all primitives: ``t [n]`` (inf on a miss) and albedo ``[n, 3]`` (0 on a miss)."""
+    best_t = np.full(len(dirs), np.inf)
+    rgb = np.zeros((len(dirs), 3))
+    for prim in prims:
+        t, uv = prim.hit(origin, dirs)
+        closer = t < best_t
+        if np.any(closer):
+            best_t[closer] = t[closer]
+            rgb[closer] = prim.surface.colour(uv[closer])
+    return best_t, rgb
+
+
+def camera_rays(camera: Camera) -> np.ndarray:
+    """World directions ``[h * w, 3]`` through the pixel centres, with camera-frame z = 1."""
+    u, v = pixel_grid(camera)
+    d_cam = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], -1)
+    return d_cam.reshape(-1, 3) @ np.asarray(camera.pose, float)[:3, :3].T
+
+
+def render(prims, camera: Camera, background=(1.0, 1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ``rgb [h, w, 3]`` and z-depth ``[h, w]`` (0 where no surface is hit), float32."""
+    t, rgb = cast(prims, camera.position, camera_rays(camera))
+    hit = np.isfinite(t)
+    rgb[~hit] = background
+    shape = (camera.height, camera.width)
+    depth = np.where(hit, t, 0.0).reshape(shape)
+    return np.clip(rgb, 0, 1).reshape(shape + (3,)).astype(np.float32), depth.astype(np.float32)
+
+
+def distance_to_surfaces(prims, points: np.ndarray) -> np.ndarray:
+    """Distance ``[n]`` from each point ``[n, 3]`` to the nearest primitive surface."""
+    points = np.asarray(points, np.float64)
+    return np.min([p.distance(points) for p in prims], axis=0)
+
+
+def bounds_of(prims) -> tuple[np.ndarray, np.ndarray]:
+    """Union of the primitives' boxes as float32 ``(lo [3], hi [3])``."""
+    los, his = zip(*(p.bounds() for p in prims))
+    return np.min(los, 0).astype(np.float32), np.max(his, 0).astype(np.float32)

@@ -1,0 +1,162 @@
+"""RGB-D data types shared by the synthetic scenes and the dataset loaders.
+
+Conventions (see :mod:`vbgs.camera`):
+
+* ``rgb`` is float32 ``[h, w, 3]`` in [0, 1];
+* ``depth`` is float32 ``[h, w]`` z-depth (distance along the camera's optical
+  axis, not along the ray) in scene units; 0 marks a pixel without depth;
+* ``camera.pose`` is camera-to-world with OpenCV axes (x right, y down, z forward).
+
+Loaders and generators produce frames that pass :func:`validate_frame`; callers
+that build frames themselves can run it to get a message naming what is wrong.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from skimage.transform import resize
+
+from vbgs.camera import Camera, unproject
+
+
+class Frame(NamedTuple):
+    """One RGB-D image with its camera.
+
+    rgb: ``[h, w, 3]`` float32 in [0, 1]; depth: ``[h, w]`` float32 z-depth in
+    scene units, 0 = missing; camera: intrinsics, size and camera-to-world pose.
+    """
+
+    rgb: np.ndarray  # [h, w, 3]
+    depth: np.ndarray  # [h, w]
+    camera: Camera
+
+
+class Scene(NamedTuple):
+    """A set of RGB-D frames of one static scene.
+
+    name: a short label (synthetic scene name or dataset folder name);
+    train: frames in trajectory order (streaming order matters: consecutive frames
+    are neighbouring views); test: held-out views for evaluation;
+    bounds: world-space ``(lo [3], hi [3])`` box around the content;
+    background: the rgb colour seen where no geometry is hit (pixels with depth 0 in
+    object-centric scenes), the colour a renderer should composite onto.
+    """
+
+    name: str
+    train: list[Frame]
+    test: list[Frame]
+    bounds: tuple[np.ndarray, np.ndarray]
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def validate_frame(frame: Frame, what: str = "frame") -> Frame:
+    """Check shapes, dtypes and values of a frame; return it unchanged or raise ValueError.
+
+    ``what`` names the frame in the message (e.g. ``"train frame 3"``).
+    """
+    rgb, depth, cam = frame.rgb, frame.depth, frame.camera
+    if not isinstance(cam, Camera):
+        raise TypeError(f"{what}: camera must be a vbgs.camera.Camera, got {type(cam).__name__}")
+    shape = (int(cam.height), int(cam.width))
+    if not isinstance(rgb, np.ndarray) or rgb.shape != shape + (3,):
+        raise ValueError(
+            f"{what}: rgb has shape {getattr(rgb, 'shape', None)}, expected {shape + (3,)} "
+            f"(height, width, 3) to match the camera; resize the image or fix the camera size"
+        )
+    if not isinstance(depth, np.ndarray) or depth.shape != shape:
+        raise ValueError(
+            f"{what}: depth has shape {getattr(depth, 'shape', None)}, expected {shape} "
+            f"to match the camera; pass a single-channel [h, w] depth map"
+        )
+    for name, arr in (("rgb", rgb), ("depth", depth)):
+        if arr.dtype != np.float32:
+            raise ValueError(
+                f"{what}: {name} has dtype {arr.dtype}, expected float32; convert with "
+                f"arr.astype(np.float32) (and divide 8-bit colour by 255)"
+            )
+    n_bad = int(np.count_nonzero(~np.isfinite(rgb)))
+    if n_bad:
+        raise ValueError(f"{what}: rgb has {n_bad} NaN/inf values; fix or inpaint the image")
+    if rgb.size and (rgb.min() < 0.0 or rgb.max() > 1.0):
+        raise ValueError(
+            f"{what}: rgb values span [{rgb.min():.3g}, {rgb.max():.3g}], expected [0, 1]; "
+            f"divide 8-bit images by 255"
+        )
+    n_bad = int(np.count_nonzero(~np.isfinite(depth) | (depth < 0)))
+    if n_bad:
+        raise ValueError(
+            f"{what}: depth has {n_bad} NaN, inf or negative values; mark missing depth "
+            f"with 0, e.g. np.where(np.isfinite(d) & (d > 0), d, 0)"
+        )
+    pose = np.asarray(cam.pose)
+    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+        raise ValueError(f"{what}: camera pose must be a finite [4, 4] matrix, got {pose.shape}")
+    if not (cam.fx > 0 and cam.fy > 0):
+        raise ValueError(f"{what}: focal lengths must be positive, got fx={cam.fx}, fy={cam.fy}")
+    return frame
+
+
+def validate_scene(scene: Scene) -> Scene:
+    """Validate every frame and the bounds of a scene; return it unchanged or raise ValueError."""
+    if not scene.train:
+        raise ValueError(f"scene {scene.name!r} has no training frames")
+    for split, frames in (("train", scene.train), ("test", scene.test)):
+        for i, frame in enumerate(frames):
+            validate_frame(frame, f"scene {scene.name!r} {split} frame {i}")
+    lo, hi = (np.asarray(b) for b in scene.bounds)
+    if lo.shape != (3,) or hi.shape != (3,) or not np.all(lo <= hi):
+        raise ValueError(f"scene {scene.name!r}: bounds must be (lo[3], hi[3]) with lo <= hi")
+    return scene
+
+
+def bounds_from_frames(frames: list[Frame], max_depth: float = np.inf):
+    """Axis-aligned world box ``(lo [3], hi [3])`` around all valid depth points of ``frames``."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for f in frames:
+        xyz, _ = unproject(f.camera, f.rgb, f.depth, max_depth)  # [n, 3]
+        if len(xyz):
+            lo, hi = np.minimum(lo, xyz.min(0)), np.maximum(hi, xyz.max(0))
+    if not np.all(np.isfinite(lo)):
+        raise ValueError("no frame has valid depth, so the scene bounds are unknown")
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def target_size(width: int, height: int, size) -> tuple[int, int]:
+    """Output ``(width, height)`` for a requested ``size``.
+
+    ``None`` keeps the size; an int is the new longer side (aspect ratio kept,
+    rounded); a pair is ``(width, height)``.
+    """
+    if size is None:
+        return int(width), int(height)
+    if np.ndim(size) == 0:
+        s = int(size) / max(width, height)
+        return max(1, round(width * s)), max(1, round(height * s))
+    new_w, new_h = (int(x) for x in size)
+    return new_w, new_h
+
+
+def resize_frame(frame: Frame, size) -> Frame:
+    """Resize a frame to ``size`` (see :func:`target_size`), intrinsics consistently.
+
+    With pixel centres at ``col + 0.5`` a pixel edge at ``u`` maps to ``u * sx``,
+    so ``fx, cx`` scale by ``sx = new_w / w`` and ``fy, cy`` by ``sy`` exactly.
+    Colour is area-averaged when shrinking (anti-aliased); depth takes the source
+    pixel nearest each new pixel centre, so no depth is invented between surfaces
+    or from missing (0) pixels.
+    """
+    cam = frame.camera
+    new_w, new_h = target_size(cam.width, cam.height, size)
+    if (new_w, new_h) == (cam.width, cam.height):
+        return frame
+    sx, sy = new_w / cam.width, new_h / cam.height
+    rgb = resize(frame.rgb, (new_h, new_w), order=1, anti_aliasing=sx < 1 or sy < 1)
+    rows = np.minimum(((np.arange(new_h) + 0.5) / sy).astype(int), cam.height - 1)  # [new_h]
+    cols = np.minimum(((np.arange(new_w) + 0.5) / sx).astype(int), cam.width - 1)  # [new_w]
+    depth = frame.depth[rows[:, None], cols[None, :]]
+    camera = cam._replace(
+        fx=cam.fx * sx, fy=cam.fy * sy, cx=cam.cx * sx, cy=cam.cy * sy, width=new_w, height=new_h
+    )
+    return Frame(np.clip(rgb, 0.0, 1.0).astype(np.float32), depth.astype(np.float32), camera)
