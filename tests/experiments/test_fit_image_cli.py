@@ -1,0 +1,56 @@
+"""End to end: ``python -m experiments.run fit-image`` and ``bench image``."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from experiments.run import main
+
+
+def _run(*args):
+    return subprocess.run([sys.executable, "-m", "experiments.run", *args],
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_fit_image_json_and_png(tmp_path):
+    png = tmp_path / "cmp.png"
+    out = _run("fit-image", "--image", "coffee", "--size", "32", "--components", "300",
+               "--iters", "4", "--save", str(png), "--json")
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    for key in ("psnr", "ssim", "seconds", "components_used", "elbo"):
+        assert key in result
+    assert result["psnr"] > 24 and 0 < result["ssim"] <= 1
+    assert len(result["elbo"]) == 4 and result["elbo"][-1] >= result["elbo"][0]
+    assert png.stat().st_size > 10_000
+
+
+def test_fit_image_patch_stream_summary(capsys):
+    assert main(["fit-image", "--image", "chelsea", "--size", "24", "--components", "200",
+                 "--stream", "patches", "--order", "reversed", "--assign", "posterior"]) == 0
+    out = capsys.readouterr().out
+    assert "psnr" in out and "components_used" in out
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--image", "/no/such/file.png"], "neither a bundled photo"),
+        (["--components", "0"], "components must be a positive integer"),
+        (["--iters", "0"], "iters must be a positive integer"),
+    ],
+)
+def test_fit_image_bad_input_is_one_clear_line(args, message):
+    out = _run("fit-image", "--size", "8", *args)
+    assert out.returncode == 2
+    assert message in out.stderr and "Traceback" not in out.stderr
+
+
+def test_bench_image_writes_tables(tmp_path):
+    assert main(["bench", "image", "--sizes", "16", "--components", "20", "40",
+                 "--iters", "1", "--out", str(tmp_path)]) == 0
+    text = (tmp_path / "bench_image.md").read_text()
+    assert "Measured on:" in text and "seconds_per_iter" in text
+    assert len((tmp_path / "bench_image.csv").read_text().splitlines()) == 3
