@@ -291,5 +291,5 @@ def distance_to_surfaces(prims, points: np.ndarray) -> np.ndarray:
 
 def bounds_of(prims) -> tuple[np.ndarray, np.ndarray]:
     """Union of the primitives' boxes as float32 ``(lo [3], hi [3])``."""
-    los, his = zip(*(p.bounds() for p in prims))
+    los, his = zip(*(p.bounds() for p in prims), strict=True)
     return np.min(los, 0).astype(np.float32), np.max(his, 0).astype(np.float32)
