@@ -32,13 +32,23 @@ from vbgs.camera import Camera, pixel_grid
 
 T_MIN = 1e-6  # smallest accepted ray parameter: ignores hits at the ray origin
 TEXTURE_SIZE = 256  # textures are resized once to TEXTURE_SIZE x TEXTURE_SIZE
-TEXTURES = ("astronaut", "coffee", "chelsea", "rocket", "camera", "brick", "grass",
-            "gravel", "immunohistochemistry", "colorwheel")  # fmt: skip
+TEXTURES = (
+    "astronaut",
+    "coffee",
+    "chelsea",
+    "rocket",
+    "camera",
+    "brick",
+    "grass",
+    "gravel",
+    "immunohistochemistry",
+    "colorwheel",
+)
 
 
 @cache
 def texture(name: str) -> np.ndarray:
-    """Bundled scikit-image photo ``name`` as float32 ``[TEXTURE_SIZE, TEXTURE_SIZE, 3]`` in [0, 1]."""
+    """Bundled scikit-image photo ``name``, float32 ``[TEXTURE_SIZE, TEXTURE_SIZE, 3]``, [0, 1]."""
     if name not in TEXTURES:
         raise ValueError(f"unknown texture {name!r}; known: {', '.join(TEXTURES)}")
     img = np.asarray(getattr(skdata, name)(), np.float64)
@@ -104,7 +114,9 @@ class Sphere:
 
     def hit(self, origin, dirs):
         oc = np.asarray(origin, float) - np.asarray(self.centre)  # [3]
-        t = _nearest_root(np.sum(dirs * dirs, -1), dirs @ oc, np.full(len(dirs), oc @ oc - self.radius**2))
+        t = _nearest_root(
+            np.sum(dirs * dirs, -1), dirs @ oc, np.full(len(dirs), oc @ oc - self.radius**2)
+        )
         p = (oc + np.where(np.isfinite(t), t, 0.0)[:, None] * dirs) / self.radius  # [n, 3] unit
         u = 0.5 + np.arctan2(p[:, 1], p[:, 0]) / (2 * np.pi)
         v = np.arccos(np.clip(p[:, 2], -1.0, 1.0)) / np.pi
@@ -150,7 +162,9 @@ class Quad:
     def distance(self, points):
         a, b = self._local(points - np.asarray(self.corner, float))
         a, b = np.clip(a, 0, 1)[:, None], np.clip(b, 0, 1)[:, None]
-        closest = np.asarray(self.corner) + a * np.asarray(self.edge_u) + b * np.asarray(self.edge_v)
+        closest = (
+            np.asarray(self.corner) + a * np.asarray(self.edge_u) + b * np.asarray(self.edge_v)
+        )
         return np.linalg.norm(points - closest, axis=-1)
 
     def bounds(self):
@@ -178,8 +192,12 @@ class Cylinder:
             z = o[2] + t * dz
             return (z >= self.z_lo) & (z <= self.z_hi)
 
-        t = _nearest_root(dx * dx + dy * dy, ox * dx + oy * dy,
-                          np.full(len(dirs), ox * ox + oy * oy - self.radius**2), in_height)  # fmt: skip
+        t = _nearest_root(
+            dx * dx + dy * dy,
+            ox * dx + oy * dy,
+            np.full(len(dirs), ox * ox + oy * oy - self.radius**2),
+            in_height,
+        )
         tt = np.where(np.isfinite(t), t, 0.0)
         u = 0.5 + np.arctan2(oy + tt * dy, ox + tt * dx) / (2 * np.pi)
         v = (self.z_hi - (o[2] + tt * dz)) / (self.z_hi - self.z_lo)
@@ -197,7 +215,7 @@ class Cylinder:
 
 @dataclass(frozen=True)
 class Disc:
-    """Horizontal disc (a cylinder cap) at height ``z``; uv maps its square [-r, r]^2 to [0, 1]^2."""
+    """Horizontal disc (a cylinder cap); uv maps its square [-r, r]^2 to [0, 1]^2."""
 
     centre: tuple[float, float, float]
     radius: float
@@ -222,8 +240,15 @@ class Disc:
         return c - [self.radius, self.radius, 0.0], c + [self.radius, self.radius, 0.0]
 
 
-def box(centre, half, yaw: float, sides, top: Surface, bottom: Surface | None = None,
-        inside: bool = False) -> list[Quad]:
+def box(
+    centre,
+    half,
+    yaw: float,
+    sides,
+    top: Surface,
+    bottom: Surface | None = None,
+    inside: bool = False,
+) -> list[Quad]:
     """Six :class:`Quad` faces of a box rotated by ``yaw`` (radians) about world z.
 
     ``half`` = half extents (hx, hy, hz) along the box's own axes; ``sides`` is one
@@ -238,8 +263,11 @@ def box(centre, half, yaw: float, sides, top: Surface, bottom: Surface | None = 
     sides = [sides] * 4 if isinstance(sides, Surface) else list(sides)
     faces = []
     # (outward axis, image-right direction seen from outside, half extents along them)
-    for side, (out, right, h_out, h_right) in zip(sides, ((ex, ey, hx, hy), (ey, -ex, hy, hx),
-                                       (-ex, -ey, hx, hy), (-ey, ex, hy, hx)), strict=True):  # fmt: skip
+    for side, (out, right, h_out, h_right) in zip(
+        sides,
+        ((ex, ey, hx, hy), (ey, -ex, hy, hx), (-ex, -ey, hx, hy), (-ey, ex, hy, hx)),
+        strict=True,
+    ):
         right = flip * right
         corner = c + h_out * out - h_right * right + hz * ez
         faces.append(Quad(tuple(corner), tuple(2 * h_right * right), tuple(-2 * hz * ez), side))
@@ -254,7 +282,7 @@ def box(centre, half, yaw: float, sides, top: Surface, bottom: Surface | None = 
 
 
 def cast(prims, origin: np.ndarray, dirs: np.ndarray):
-    """Nearest hit over all primitives: ``t [n]`` (inf on a miss) and albedo ``[n, 3]`` (0 on a miss)."""
+    """Nearest hit of all primitives: ``t [n]`` (inf if none), albedo ``[n, 3]`` (0 if none)."""
     best_t = np.full(len(dirs), np.inf)
     rgb = np.zeros((len(dirs), 3))
     for prim in prims:
@@ -269,7 +297,9 @@ def cast(prims, origin: np.ndarray, dirs: np.ndarray):
 def camera_rays(camera: Camera) -> np.ndarray:
     """World directions ``[h * w, 3]`` through the pixel centres, with camera-frame z = 1."""
     u, v = pixel_grid(camera)
-    d_cam = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], -1)
+    d_cam = np.stack(
+        [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], -1
+    )
     return d_cam.reshape(-1, 3) @ np.asarray(camera.pose, float)[:3, :3].T
 
 

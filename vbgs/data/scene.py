@@ -1,4 +1,4 @@
-"""RGB-D data types shared by the synthetic scenes and the dataset loaders.
+"""RGB-D data types, and the small utilities every source of frames shares.
 
 Conventions (see :mod:`vbgs.camera`):
 
@@ -9,13 +9,18 @@ Conventions (see :mod:`vbgs.camera`):
 
 Loaders and generators produce frames that pass :func:`validate_frame`; callers
 that build frames themselves can run it to get a message naming what is wrong.
+The utilities (bounds, resizing, image reading, frame selection and hold-out)
+are shared by :mod:`vbgs.data.blender` and :mod:`vbgs.data.formats`.
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
+from pathlib import Path
+
 import numpy as np
+from skimage import io as skio
 from skimage.transform import resize
 
 from vbgs.camera import Camera, unproject
@@ -112,15 +117,61 @@ def validate_scene(scene: Scene) -> Scene:
 
 
 def bounds_from_frames(frames: list[Frame], max_depth: float = np.inf):
-    """Axis-aligned world box ``(lo [3], hi [3])`` around all valid depth points of ``frames``."""
+    """World box ``(lo [3], hi [3])`` float32 around all valid depth points of ``frames``.
+
+    Without any valid depth (an RGB-only dataset) it falls back to the box around
+    the camera centres.
+    """
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for f in frames:
         xyz, _ = unproject(f.camera, f.rgb, f.depth, max_depth)  # [n, 3]
         if len(xyz):
             lo, hi = np.minimum(lo, xyz.min(0)), np.maximum(hi, xyz.max(0))
     if not np.all(np.isfinite(lo)):
-        raise ValueError("no frame has valid depth, so the scene bounds are unknown")
+        if not frames:
+            raise ValueError("no frames, so the scene bounds are unknown")
+        centres = np.stack([f.camera.position for f in frames])  # [n, 3]
+        lo, hi = centres.min(0), centres.max(0)
     return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def select(n: int, stride: int = 1, max_frames: int | None = None) -> list[int]:
+    """Indices of every ``stride``-th of ``n`` frames, at most ``max_frames`` of them."""
+    if stride < 1:
+        raise ValueError(f"stride must be >= 1, got {stride}")
+    return list(range(0, n, stride))[:max_frames]
+
+
+def hold_out(frames: list, every: int | None) -> tuple[list, list]:
+    """Split a sequence into ``(train, test)``: positions ``every // 2 + j * every`` are test.
+
+    Starting at ``every // 2`` keeps the first frame of the stream in training.
+    ``every`` None or 0 holds nothing out.
+    """
+    if not every:
+        return list(frames), []
+    test = [i % every == every // 2 for i in range(len(frames))]
+    return [f for f, t in zip(frames, test, strict=True) if not t], [
+        f for f, t in zip(frames, test, strict=True) if t
+    ]
+
+
+def read_rgb(path: str | Path, background=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """Image file as float32 ``[h, w, 3]`` in [0, 1]; RGBA is composited onto ``background``."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"image not found: {path}")
+    img = np.asarray(skio.imread(path))
+    if img.dtype.kind in "ui":
+        img = img / (65535.0 if img.dtype == np.uint16 else 255.0)
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, -1)
+    if img.ndim != 3 or img.shape[-1] not in (3, 4):
+        raise ValueError(f"{path}: expected a grey, RGB or RGBA image, got shape {img.shape}")
+    if img.shape[-1] == 4:
+        alpha = img[..., 3:]
+        img = img[..., :3] * alpha + np.asarray(background, np.float64) * (1.0 - alpha)
+    return np.clip(img, 0.0, 1.0).astype(np.float32)
 
 
 def target_size(width: int, height: int, size) -> tuple[int, int]:

@@ -43,7 +43,9 @@ MOTORCYCLE_DOFFS = 31.086  # px, cx_right - cx_left
 MOTORCYCLE_BASELINE = 0.193001  # metres
 
 
-def disparity_to_depth(disp: np.ndarray, focal: float, baseline: float, doffs: float = 0.0) -> np.ndarray:
+def disparity_to_depth(
+    disp: np.ndarray, focal: float, baseline: float, doffs: float = 0.0
+) -> np.ndarray:
     """Z-depth ``f * baseline / (disp + doffs)`` ``[h, w]`` float32, 0 where disparity is unusable.
 
     Unusable: NaN, inf, or ``disp + doffs <= 0`` (no finite positive depth).
@@ -60,7 +62,14 @@ def stereo_motorcycle_frame() -> Frame:
     """The Middlebury Motorcycle left view as an RGB-D :class:`Frame` (depth in metres)."""
     left, _, disp = skdata.stereo_motorcycle()
     height, width = disp.shape
-    camera = Camera(MOTORCYCLE_FOCAL, MOTORCYCLE_FOCAL, MOTORCYCLE_CX + 0.5, MOTORCYCLE_CY + 0.5,
-                    int(width), int(height), np.eye(4))  # fmt: skip
+    camera = Camera(
+        MOTORCYCLE_FOCAL,
+        MOTORCYCLE_FOCAL,
+        MOTORCYCLE_CX + 0.5,
+        MOTORCYCLE_CY + 0.5,
+        int(width),
+        int(height),
+        np.eye(4),
+    )
     depth = disparity_to_depth(disp, MOTORCYCLE_FOCAL, MOTORCYCLE_BASELINE, MOTORCYCLE_DOFFS)
     return Frame((left[..., :3] / 255.0).astype(np.float32), depth, camera)

@@ -46,11 +46,20 @@ def object_primitives(seed: int = 0) -> list:
     yaw = rng.uniform(0.0, np.pi / 2)
     sx, sy = 0.40 + jx[0], -0.35 + jx[1]
     cx, cy = 0.45 + jz[0], 0.50 + jz[1]
-    platform = box((0.0, 0.0, -0.05), (0.95, 0.95, 0.05), 0.0,
-                   Surface("brick", (0.85, 0.6, 0.45), (4.0, 1.0)),
-                   Surface("gravel", (0.7, 0.75, 0.9), (3.0, 3.0)))  # fmt: skip
-    crate = box((-0.40 + jy[0], 0.30 + jy[1], 0.30), (0.30, 0.30, 0.30), yaw,
-                Surface("coffee"), Surface("rocket"))  # fmt: skip
+    platform = box(
+        (0.0, 0.0, -0.05),
+        (0.95, 0.95, 0.05),
+        0.0,
+        Surface("brick", (0.85, 0.6, 0.45), (4.0, 1.0)),
+        Surface("gravel", (0.7, 0.75, 0.9), (3.0, 3.0)),
+    )
+    crate = box(
+        (-0.40 + jy[0], 0.30 + jy[1], 0.30),
+        (0.30, 0.30, 0.30),
+        yaw,
+        Surface("coffee"),
+        Surface("rocket"),
+    )
     cap = Surface("immunohistochemistry")
     return [
         *platform,
@@ -68,12 +77,23 @@ def room_primitives(seed: int = 0) -> list:
     j = rng.uniform(-0.08, 0.08, (4, 2))  # [4, 2] xy jitters
     yaw = rng.uniform(0.0, np.pi)
     walls = [Surface(n, repeat=(2.0, 1.0)) for n in ("astronaut", "coffee", "chelsea", "rocket")]
-    room = box(ROOM_CENTRE, ROOM_HALF, 0.0, walls,
-               top=Surface("gravel", (0.95, 0.92, 0.85), (3.0, 3.0)),
-               bottom=Surface("brick", (0.8, 0.55, 0.4), (6.0, 5.0)), inside=True)  # fmt: skip
+    room = box(
+        ROOM_CENTRE,
+        ROOM_HALF,
+        0.0,
+        walls,
+        top=Surface("gravel", (0.95, 0.92, 0.85), (3.0, 3.0)),
+        bottom=Surface("brick", (0.8, 0.55, 0.4), (6.0, 5.0)),
+        inside=True,
+    )
     tx, ty = 0.40 + j[0, 0], 0.10 + j[0, 1]
-    table = box((tx, ty, 0.375), (0.45, 0.35, 0.375), yaw,
-                Surface("immunohistochemistry"), Surface("colorwheel"))  # fmt: skip
+    table = box(
+        (tx, ty, 0.375),
+        (0.45, 0.35, 0.375),
+        yaw,
+        Surface("immunohistochemistry"),
+        Surface("colorwheel"),
+    )
     px, py = -0.70 + j[1, 0], -0.40 + j[1, 1]
     return [
         *room,
@@ -96,8 +116,13 @@ def _frames(prims, poses, size, fov_x: float, background) -> list[Frame]:
 
 
 def _orbit_pose(azimuth: float, elevation: float) -> np.ndarray:
-    direction = np.array([np.cos(elevation) * np.cos(azimuth),
-                          np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])  # fmt: skip
+    direction = np.array(
+        [
+            np.cos(elevation) * np.cos(azimuth),
+            np.cos(elevation) * np.sin(azimuth),
+            np.sin(elevation),
+        ]
+    )
     return look_at(np.asarray(ORBIT_TARGET) + ORBIT_RADIUS * direction, ORBIT_TARGET)
 
 
@@ -113,10 +138,16 @@ def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) ->
     lo, hi = ORBIT_ELEVATION
     phase = rng.uniform(0.0, 2 * np.pi)
     s = np.arange(n_train) / max(n_train, 1)  # [n_train] fraction of the orbit
-    train = [_orbit_pose(phase + 2 * np.pi * f, 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(4 * np.pi * f))
-             for f in s]  # fmt: skip
-    test = [_orbit_pose(a, e) for a, e in zip(rng.uniform(0, 2 * np.pi, n_test),
-                                              rng.uniform(lo, hi, n_test), strict=True)]  # fmt: skip
+    train = [
+        _orbit_pose(
+            phase + 2 * np.pi * f, 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(4 * np.pi * f)
+        )
+        for f in s
+    ]
+    test = [
+        _orbit_pose(a, e)
+        for a, e in zip(rng.uniform(0, 2 * np.pi, n_test), rng.uniform(lo, hi, n_test), strict=True)
+    ]
     prims = object_primitives(seed)
     return Scene(
         name="object",
@@ -128,12 +159,19 @@ def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) ->
 
 
 def _walk_pose(phi: float, radius_scale: float, height: float, yaw: float) -> np.ndarray:
-    """Camera on the walkthrough ellipse at angle ``phi``, looking towards LOOK_TARGET turned by ``yaw``."""
-    eye = np.array([radius_scale * WALK_RADII[0] * np.cos(phi),
-                    radius_scale * WALK_RADII[1] * np.sin(phi), height])  # fmt: skip
+    """Camera on the walk ellipse at angle ``phi``; gaze at LOOK_TARGET turned by ``yaw``."""
+    eye = np.array(
+        [
+            radius_scale * WALK_RADII[0] * np.cos(phi),
+            radius_scale * WALK_RADII[1] * np.sin(phi),
+            height,
+        ]
+    )
     to_target = LOOK_TARGET - eye
     c, s = np.cos(yaw), np.sin(yaw)
-    turned = np.array([c * to_target[0] - s * to_target[1], s * to_target[0] + c * to_target[1], to_target[2]])
+    turned = np.array(
+        [c * to_target[0] - s * to_target[1], s * to_target[0] + c * to_target[1], to_target[2]]
+    )
     return look_at(eye, eye + turned)
 
 
@@ -148,10 +186,18 @@ def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> S
     rng = np.random.default_rng([seed, 2])
     phase = rng.uniform(0.0, 2 * np.pi)
     phis = phase + 2 * np.pi * np.arange(n_train) / max(n_train, 1)  # [n_train]
-    train = [_walk_pose(p, 1.0, WALK_HEIGHT + 0.12 * np.sin(3 * p), 0.6 * np.sin(2 * p)) for p in phis]
-    test = [_walk_pose(p, 0.85, h, y) for p, h, y in zip(rng.uniform(0, 2 * np.pi, n_test),
-                                                          rng.choice([1.2, 1.7], n_test),
-                                                          rng.uniform(-0.8, 0.8, n_test), strict=True)]  # fmt: skip
+    train = [
+        _walk_pose(p, 1.0, WALK_HEIGHT + 0.12 * np.sin(3 * p), 0.6 * np.sin(2 * p)) for p in phis
+    ]
+    test = [
+        _walk_pose(p, 0.85, h, y)
+        for p, h, y in zip(
+            rng.uniform(0, 2 * np.pi, n_test),
+            rng.choice([1.2, 1.7], n_test),
+            rng.uniform(-0.8, 0.8, n_test),
+            strict=True,
+        )
+    ]
     prims = room_primitives(seed)
     lo, hi = bounds_of(prims)
     return Scene(

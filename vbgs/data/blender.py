@@ -1,0 +1,182 @@
+"""The Blender / NeRF-synthetic layout: loader and writer.
+
+A folder holds ``transforms_train.json`` and ``transforms_test.json`` (or, for
+the test split, ``transforms_val.json``), each with
+
+* ``camera_angle_x``: horizontal field of view in radians (``camera_angle_y``
+  optional); or ``fl_x, fl_y, cx, cy`` in pixels, with pixel centres at
+  ``col + 0.5`` as nerfstudio writes them (these win when present);
+* ``frames[].file_path``: image path relative to the folder, with or without the
+  ``.png`` extension (``./train/r_0``);
+* ``frames[].transform_matrix``: 4x4 camera-to-world in OpenGL/Blender camera
+  axes (x right, y up, z backward), converted to OpenCV axes on loading.
+
+RGBA images are composited onto ``background`` (white by default, as for
+NeRF-synthetic). Depth sits beside each image, named after it: for
+``train/r_0.png`` either ``train/r_0_depth.png`` (16-bit, millimetres, 0 =
+missing) or ``train/r_0_depth.npy`` (float z-depth in metres, 0/NaN = missing);
+the PNG wins if both exist. (The ``r_0_depth_0000.png`` maps shipped with
+NeRF-synthetic's test split are 8-bit and not metric; they are not read.)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from skimage import io as skio
+
+from vbgs.camera import Camera, opengl_to_opencv
+from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
+from vbgs.data.scene import (
+    Frame,
+    Scene,
+    bounds_from_frames,
+    read_rgb,
+    resize_frame,
+    select,
+    validate_frame,
+)
+
+BLENDER_BACKGROUND = (1.0, 1.0, 1.0)
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+def _depth_beside(image: Path, depth_scale: float, require: bool, shape) -> np.ndarray:
+    stem = image.with_suffix("") if image.suffix.lower() in _IMAGE_SUFFIXES else image
+    png, npy = Path(f"{stem}_depth.png"), Path(f"{stem}_depth.npy")
+    if png.is_file():
+        return read_depth_png(png, depth_scale)
+    if npy.is_file():
+        depth = np.asarray(np.load(npy), np.float64)
+        with np.errstate(invalid="ignore"):
+            return np.where(np.isfinite(depth) & (depth > 0), depth, 0.0).astype(np.float32)
+    if require:
+        raise FileNotFoundError(
+            f"no depth for {image}: expected {png.name} (16-bit, millimetres) or {npy.name} "
+            f"(metres) beside it; estimate depth with `python -m depth`, or pass "
+            f"require_depth=False to load with all depth missing"
+        )
+    return np.zeros(shape, np.float32)
+
+
+def _camera(meta: dict, width: int, height: int, pose_gl: np.ndarray) -> Camera:
+    fx = meta.get("fl_x") or 0.5 * width / np.tan(0.5 * meta["camera_angle_x"])
+    if meta.get("fl_y"):
+        fy = meta["fl_y"]
+    elif "camera_angle_y" in meta:
+        fy = 0.5 * height / np.tan(0.5 * meta["camera_angle_y"])
+    else:
+        fy = fx
+    cx, cy = meta.get("cx", width / 2.0), meta.get("cy", height / 2.0)
+    return Camera(
+        float(fx), float(fy), float(cx), float(cy), width, height, opengl_to_opencv(pose_gl)
+    )
+
+
+def _load_split(path: Path, keep, size, background, depth_scale, require_depth) -> list[Frame]:
+    """Frames of one transforms file; ``keep(n)`` gives the frame indices to read."""
+    try:
+        meta = json.loads(path.read_text())
+        entries = list(meta["frames"])
+    except (json.JSONDecodeError, KeyError, TypeError) as err:
+        raise ValueError(f"{path}: not a transforms file with a 'frames' list ({err})") from err
+    if "camera_angle_x" not in meta and "fl_x" not in meta:
+        raise ValueError(f"{path}: needs 'camera_angle_x' (radians) or 'fl_x' (pixels)")
+    frames = []
+    for i in keep(len(entries)):
+        entry, what = entries[i], f"{path.name} frame {i}"
+        if (
+            not isinstance(entry, dict)
+            or "file_path" not in entry
+            or "transform_matrix" not in entry
+        ):
+            raise ValueError(f"{what}: needs 'file_path' and 'transform_matrix'")
+        base = path.parent / entry["file_path"]
+        if base.suffix.lower() in _IMAGE_SUFFIXES:
+            candidates = [base]
+        else:
+            candidates = [Path(f"{base}.png"), Path(f"{base}.jpg"), base]
+        image = next((c for c in candidates if c.is_file()), None)
+        if image is None:
+            raise FileNotFoundError(
+                f"{what}: image {entry['file_path']!r} not found (looked for {candidates[0]})"
+            )
+        rgb = read_rgb(image, background)  # [h, w, 3]
+        pose_gl = np.asarray(entry["transform_matrix"], np.float64)
+        if pose_gl.shape != (4, 4):
+            raise ValueError(f"{what}: transform_matrix must be 4x4, got shape {pose_gl.shape}")
+        cam = _camera(meta, rgb.shape[1], rgb.shape[0], pose_gl)
+        depth = _depth_beside(image, depth_scale, require_depth, rgb.shape[:2])
+        frames.append(resize_frame(validate_frame(Frame(rgb, depth, cam), str(image)), size))
+    return frames
+
+
+def load_blender(
+    folder,
+    size=None,
+    max_frames: int | None = None,
+    stride: int = 1,
+    max_test: int | None = None,
+    background=BLENDER_BACKGROUND,
+    depth_scale: float = MILLIMETRES,
+    require_depth: bool = True,
+) -> Scene:
+    """Load a Blender/NeRF-synthetic folder (see the module docstring).
+
+    size: resize (see :func:`~vbgs.data.scene.target_size`); stride, max_frames:
+    thin the training split; max_test: cap the test split; depth_scale: PNG
+    depth codes per scene unit; require_depth: raise if a frame has no depth
+    file (else its depth is all 0). Bounds come from the training depth.
+    """
+    folder = Path(folder)
+    train_json = folder / "transforms_train.json"
+    if not train_json.is_file():
+        raise FileNotFoundError(f"{train_json} not found: a Blender dataset needs this file")
+    tests = [folder / "transforms_test.json", folder / "transforms_val.json"]
+    test_json = next((p for p in tests if p.is_file()), None)
+    if test_json is None:
+        raise FileNotFoundError(f"{folder}: neither {tests[0].name} nor {tests[1].name} found")
+    background = tuple(float(c) for c in background)
+    args = (size, background, depth_scale, require_depth)
+    train = _load_split(train_json, lambda n: select(n, stride, max_frames), *args)
+    test = _load_split(test_json, lambda n: list(range(n))[:max_test], *args)
+    return Scene(folder.name, train, test, bounds_from_frames(train), background)
+
+
+def write_blender(scene: Scene, folder) -> Path:
+    """Write ``scene`` in the Blender layout that :func:`load_blender` reads; return the folder.
+
+    Files: ``train/r_000.png`` (8-bit RGB), ``train/r_000_depth.png`` (16-bit mm,
+    0 = missing), the same under ``test/``, and ``transforms_train.json`` /
+    ``transforms_test.json`` with ``camera_angle_x``, ``fl_x, fl_y, cx, cy, w, h``
+    and per-frame ``transform_matrix`` in OpenGL axes. Colour is quantised to
+    1/255 and depth to 1 mm; depth beyond 65.535 scene units is refused.
+    """
+    folder = Path(folder)
+    for split, frames in (("train", scene.train), ("test", scene.test)):
+        cams = {(f.camera.fx, f.camera.fy, f.camera.cx, f.camera.cy) + f.rgb.shape[1::-1]
+                for f in frames}  # fmt: skip
+        if len(cams) > 1:
+            raise ValueError(
+                f"write_blender: {split} frames have {len(cams)} different intrinsics or sizes; "
+                f"the Blender layout stores one camera per split (resize the frames first)"
+            )
+        meta: dict = {"frames": []}
+        if frames:
+            fx, fy, cx, cy, w, h = (float(x) for x in cams.pop())
+            meta.update(
+                camera_angle_x=2 * float(np.arctan(0.5 * w / fx)),
+                fl_x=fx, fl_y=fy, cx=cx, cy=cy, w=int(w), h=int(h),
+            )  # fmt: skip
+        (folder / split).mkdir(parents=True, exist_ok=True)
+        for i, f in enumerate(frames):
+            stem = f"{split}/r_{i:03d}"
+            rgb8 = np.round(np.clip(f.rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+            skio.imsave(folder / f"{stem}.png", rgb8, check_contrast=False)
+            write_depth_png(folder / f"{stem}_depth.png", f.depth, MILLIMETRES)
+            pose_gl = opengl_to_opencv(f.camera.pose)  # the axis flip is its own inverse
+            meta["frames"].append({"file_path": f"./{stem}", "transform_matrix": pose_gl.tolist()})
+        (folder / f"transforms_{split}.json").write_text(json.dumps(meta, indent=2))
+    return folder

@@ -1,0 +1,301 @@
+"""Dataset loaders returning :class:`~vbgs.data.scene.Scene`, and :func:`load_scene`.
+
+Three on-disk layouts are read (depth in metres, poses camera-to-world in
+OpenCV axes after loading):
+
+* **Blender / NeRF-synthetic** (``transforms_train.json``): see
+  :mod:`vbgs.data.blender`, whose ``load_blender`` and ``write_blender`` are
+  re-exported here.
+* **Replica as packaged by SplaTAM/NICE-SLAM**: ``results/frame000000.jpg``,
+  ``results/depth000000.png`` (16-bit, depth * 6553.5), ``traj.txt`` with one
+  row-major 4x4 camera-to-world (OpenCV axes) per line, one line per frame.
+* **TUM RGB-D**: ``rgb.txt``, ``depth.txt`` (``timestamp path`` lines, ``#``
+  comments), ``groundtruth.txt`` (``timestamp tx ty tz qx qy qz qw``), depth
+  PNGs at depth * 5000. Each rgb image is paired with the nearest depth image and
+  the nearest pose, both within ``max_time_diff`` seconds; others are dropped.
+  Poses are those of the colour camera's optical frame (x right, y down, z
+  forward, i.e. OpenCV axes), camera-to-world. Lens distortion is ignored.
+
+Published intrinsics (:class:`Intrinsics`) count pixel centres at integer
+coordinates (OpenCV); the library puts them at ``col + 0.5``, so 0.5 is added
+to cx, cy. They are rescaled when the images are not the published size.
+
+Replica and TUM hold out every ``test_every``-th frame (positions
+``test_every // 2, + test_every, ...`` of the strided sequence, so the stream
+starts on a training frame). ``stride`` keeps every stride-th frame and
+``max_frames`` caps the count before splitting; ``size`` resizes images and
+intrinsics together (see :func:`~vbgs.data.scene.resize_frame`). Bounds come
+from the training depth.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from vbgs.camera import Camera
+from vbgs.data.blender import load_blender, write_blender
+from vbgs.data.depth_png import read_depth_png
+from vbgs.data.scene import (
+    Frame,
+    Scene,
+    bounds_from_frames,
+    hold_out,
+    read_rgb,
+    resize_frame,
+    select,
+    validate_frame,
+)
+from vbgs.data.synthetic import SCENES, make_scene
+
+__all__ = [
+    "REPLICA_INTRINSICS",
+    "TUM_FR1_INTRINSICS",
+    "Intrinsics",
+    "detect_format",
+    "load_blender",
+    "load_replica",
+    "load_scene",
+    "load_tum",
+    "quaternion_to_matrix",
+    "write_blender",
+]
+
+REPLICA_DEPTH_SCALE = 6553.5
+TUM_DEPTH_SCALE = 5000.0
+
+
+class Intrinsics(NamedTuple):
+    """Published pinhole intrinsics for ``width x height`` images, pixel centres at integers."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def camera(self, width: int, height: int, pose: np.ndarray) -> Camera:
+        """A library :class:`Camera` for images of ``width x height`` (rescaled if they differ)."""
+        sx, sy = width / self.width, height / self.height
+        return Camera(
+            self.fx * sx,
+            self.fy * sy,
+            (self.cx + 0.5) * sx,
+            (self.cy + 0.5) * sy,
+            int(width),
+            int(height),
+            np.asarray(pose, np.float64),
+        )
+
+
+REPLICA_INTRINSICS = Intrinsics(600.0, 600.0, 599.5, 339.5, 1200, 680)
+TUM_FR1_INTRINSICS = Intrinsics(517.3, 516.5, 318.6, 255.3, 640, 480)
+
+
+# --------------------------------------------------------------------------- Replica
+
+
+def _numbered(folder: Path, prefix: str, suffix: str) -> dict[int, Path]:
+    pattern = re.compile(rf"{prefix}(\d+){re.escape(suffix)}$")
+    return {
+        int(m.group(1)): p
+        for p in folder.glob(f"{prefix}*{suffix}")
+        if (m := pattern.match(p.name))
+    }
+
+
+def _read_traj(path: Path) -> list[np.ndarray]:
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: Replica needs one 4x4 camera-to-world per line")
+    poses = []
+    for k, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            values = [float(x) for x in line.split()]
+        except ValueError:
+            values = []
+        if len(values) != 16:
+            raise ValueError(
+                f"{path} line {k}: expected 16 numbers (a row-major 4x4 pose), got {line[:60]!r}"
+            )
+        poses.append(np.asarray(values, np.float64).reshape(4, 4))
+    return poses
+
+
+def load_replica(
+    folder,
+    size=None,
+    max_frames: int | None = None,
+    stride: int = 1,
+    test_every: int | None = 8,
+    intrinsics: Intrinsics = REPLICA_INTRINSICS,
+    depth_scale: float = REPLICA_DEPTH_SCALE,
+) -> Scene:
+    """Load Replica in the SplaTAM layout (see module docstring)."""
+    folder = Path(folder)
+    results = folder / "results"
+    if not results.is_dir():
+        raise FileNotFoundError(
+            f"{results} not found: Replica needs results/frame*.jpg and depth*.png"
+        )
+    images, depths = _numbered(results, "frame", ".jpg"), _numbered(results, "depth", ".png")
+    if not images:
+        raise FileNotFoundError(f"no frame*.jpg images in {results}")
+    poses = _read_traj(folder / "traj.txt")
+    if len(poses) != len(images):
+        raise ValueError(
+            f"{folder / 'traj.txt'} has {len(poses)} poses for {len(images)} "
+            f"frame*.jpg images in {results}; they must match one to one"
+        )
+    ids = sorted(images)
+    frames = []
+    for k in select(len(ids), stride, max_frames):
+        i = ids[k]
+        if i not in depths:
+            raise FileNotFoundError(
+                f"{images[i].name} has no depth image: expected "
+                f"{results / f'depth{images[i].name[5:-4]}.png'}"
+            )
+        rgb = read_rgb(images[i])
+        cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], poses[k])
+        depth = read_depth_png(depths[i], depth_scale)
+        frames.append(resize_frame(validate_frame(Frame(rgb, depth, cam), str(images[i])), size))
+    train, test = hold_out(frames, test_every)
+    return Scene(folder.name, train, test, bounds_from_frames(train))
+
+
+# --------------------------------------------------------------------------- TUM RGB-D
+
+
+def _read_list(path: Path, n_values: int) -> tuple[np.ndarray, list[list[str]]]:
+    """Timestamps ``[n]`` and the remaining fields of a TUM list file (``#`` comments)."""
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{path} not found: a TUM RGB-D folder needs rgb.txt, depth.txt and groundtruth.txt"
+        )
+    stamps, rows = [], []
+    for k, line in enumerate(path.read_text().splitlines(), 1):
+        fields = line.split()
+        if not fields or fields[0].startswith("#"):
+            continue
+        try:
+            if len(fields) != n_values + 1:
+                raise ValueError
+            stamps.append(float(fields[0]))
+        except ValueError:
+            raise ValueError(
+                f"{path} line {k}: expected a timestamp and {n_values} value(s), got {line[:60]!r}"
+            ) from None
+        rows.append(fields[1:])
+    if not stamps:
+        raise ValueError(f"{path} lists no entries")
+    return np.asarray(stamps), rows
+
+
+def _nearest(stamps: np.ndarray, query: float) -> tuple[int, float]:
+    """Index into sorted ``stamps`` of the one closest to ``query``, and the time gap."""
+    j = int(np.searchsorted(stamps, query))
+    best = min(
+        (c for c in (j - 1, j) if 0 <= c < len(stamps)), key=lambda c: abs(stamps[c] - query)
+    )
+    return best, abs(stamps[best] - query)
+
+
+def quaternion_to_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
+    """Rotation ``[3, 3]`` of the (normalised) Hamilton quaternion ``(qx, qy, qz, qw)``."""
+    q = np.array([qw, qx, qy, qz], np.float64)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def load_tum(
+    folder,
+    size=None,
+    max_frames: int | None = None,
+    stride: int = 1,
+    test_every: int | None = 8,
+    intrinsics: Intrinsics = TUM_FR1_INTRINSICS,
+    depth_scale: float = TUM_DEPTH_SCALE,
+    max_time_diff: float = 0.02,
+) -> Scene:
+    """Load a TUM RGB-D sequence (see module docstring)."""
+    folder = Path(folder)
+    rgb_t, rgb_rows = _read_list(folder / "rgb.txt", 1)
+    depth_t, depth_rows = _read_list(folder / "depth.txt", 1)
+    pose_t, pose_rows = _read_list(folder / "groundtruth.txt", 7)
+    d_order, p_order = np.argsort(depth_t), np.argsort(pose_t)
+    matches = []
+    for i in np.argsort(rgb_t, kind="stable"):
+        jd, dd = _nearest(depth_t[d_order], rgb_t[i])
+        jp, dp = _nearest(pose_t[p_order], rgb_t[i])
+        if dd <= max_time_diff and dp <= max_time_diff:
+            matches.append((i, d_order[jd], p_order[jp]))
+    if not matches:
+        raise ValueError(
+            f"{folder}: no rgb image has both a depth image and a pose within "
+            f"{max_time_diff} s; check the timestamps or raise max_time_diff"
+        )
+    frames = []
+    for k in select(len(matches), stride, max_frames):
+        i, jd, jp = matches[k]
+        values = [float(v) for v in pose_rows[jp]]
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = quaternion_to_matrix(*values[3:]), values[:3]
+        rgb = read_rgb(folder / rgb_rows[i][0])
+        depth = read_depth_png(folder / depth_rows[jd][0], depth_scale)
+        cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], pose)
+        what = str(folder / rgb_rows[i][0])
+        frames.append(resize_frame(validate_frame(Frame(rgb, depth, cam), what), size))
+    train, test = hold_out(frames, test_every)
+    return Scene(folder.name, train, test, bounds_from_frames(train))
+
+
+# --------------------------------------------------------------------------- entry point
+
+LOADERS = {"blender": load_blender, "replica": load_replica, "tum": load_tum}
+
+
+def detect_format(folder) -> str:
+    """``"blender"``, ``"replica"`` or ``"tum"`` from the files in ``folder``."""
+    folder = Path(folder)
+    if any(folder.glob("transforms_*.json")):
+        return "blender"
+    if (folder / "traj.txt").exists() or (folder / "results").is_dir():
+        return "replica"
+    if any((folder / n).exists() for n in ("rgb.txt", "depth.txt", "groundtruth.txt")):
+        return "tum"
+    raise FileNotFoundError(
+        f"cannot tell the dataset format of {folder}: expected transforms_train.json (Blender), "
+        f"traj.txt + results/ (Replica) or rgb.txt + depth.txt + groundtruth.txt (TUM RGB-D)"
+    )
+
+
+def load_scene(path_or_name, format: str | None = None, **kw) -> Scene:
+    """A synthetic scene by name ("object", "room") or a dataset folder (format detected or given).
+
+    ``kw`` go to :func:`~vbgs.data.synthetic.make_scene` or to the loader
+    (``size``, ``max_frames``, ``stride``, ...).
+    """
+    path = Path(path_or_name)
+    if str(path_or_name) in SCENES and not path.is_dir():
+        return make_scene(str(path_or_name), **kw)
+    if not path.is_dir():
+        raise FileNotFoundError(
+            f"{path_or_name!r} is neither a dataset folder nor a synthetic scene "
+            f"name ({', '.join(SCENES)})"
+        )
+    format = format or detect_format(path)
+    if format not in LOADERS:
+        raise ValueError(f"unknown dataset format {format!r}; known: {', '.join(LOADERS)}")
+    return LOADERS[format](path, **kw)
