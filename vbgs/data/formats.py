@@ -284,6 +284,9 @@ def detect_format(folder) -> str:
 def load_scene(path_or_name, format: str | None = None, **kw) -> Scene:
     """A synthetic scene by name ("object", "room") or a dataset folder (format detected or given).
 
+    An existing folder wins over a synthetic name. The format is detected by
+    :func:`detect_format` unless ``format`` ("blender", "replica", "tum") is given.
+
     ``kw`` go to :func:`~vbgs.data.synthetic.make_scene` or to the loader
     (``size``, ``max_frames``, ``stride``, ...).
     """

@@ -96,7 +96,7 @@ def _nearest_root(a, b, c, extra_ok=None):
     sq = np.sqrt(np.maximum(disc, 0.0))
     safe_a = np.where(np.abs(a) > 1e-300, a, 1.0)
     best = np.full(a.shape, np.inf)
-    for t in ((-b + sq) / safe_a, (-b - sq) / safe_a):  # the second (nearer) wins when valid
+    for t in ((-b + sq) / safe_a, (-b - sq) / safe_a):  # both roots; keep the smaller valid one
         ok = (disc >= 0) & (np.abs(a) > 1e-300) & (t > T_MIN)
         if extra_ok is not None:
             ok &= extra_ok(t)
