@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from experiments.cli_common import fail, print_result
+from experiments.sweep.cli import add_report, add_sweep, run_report, run_sweep
 
 
 def _add_fit_image(sub):
@@ -65,7 +66,8 @@ def _bench(args) -> dict:
     return {"rows": rows, "files": [str(p) for p in paths]}
 
 
-COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "bench": (_add_bench, _bench)}
+COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "bench": (_add_bench, _bench),
+            "sweep": (add_sweep, run_sweep), "report": (add_report, run_report)}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,158 @@
+"""``sweep`` and ``report`` commands of ``python -m experiments.run``.
+
+A sweep writes into its results folder (default ``results/<config name>``):
+``config.toml`` (a copy), ``plan.json`` (the cells and skipped combinations),
+``sweep.log`` (one line per cell), ``cells/<key>.json``, ``renders/<key>*.png`` and,
+at the end, the report (``cells.csv``, ``tables.md``, figures).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+from tqdm.auto import tqdm
+
+DEFAULT_CONFIG = "experiments/configs/quick.toml"
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def add_sweep(sub) -> None:
+    from experiments.sweep.backends import BACKENDS
+
+    p = sub.add_parser("sweep", help="run a grid of cells from a TOML config (resumable), "
+                       "then write tables and plots")
+    p.add_argument("--config", default=DEFAULT_CONFIG, help="sweep config (TOML)")
+    p.add_argument("--out", help="results folder (default: results/<config name>)")
+    p.add_argument("--backend", choices=BACKENDS, default="local",
+                   help="local: process pool on this machine; serial: in this process; "
+                        "dask: an existing Dask cluster (--scheduler)")
+    p.add_argument("--scheduler", help="Dask scheduler address for --backend dask")
+    p.add_argument("--workers", type=_positive,
+                   help=f"local worker processes (default: all {os.cpu_count()} cores)")
+    p.add_argument("--force", action="store_true", help="re-run cells that already finished")
+    p.add_argument("--max-cells", type=_positive, help="run at most this many pending cells")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def add_report(sub) -> None:
+    p = sub.add_parser("report", help="tables and plots of a sweep's results folder")
+    p.add_argument("results_dir", help="a sweep's results folder, e.g. results/quick")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+class SweepLog:
+    """``sweep.log``: appended line by line, flushed at once (survives a kill)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def write(self, message: str) -> None:
+        stamp = datetime.now(UTC).isoformat(timespec="seconds")
+        with open(self.path, "a") as f:
+            f.write(f"{stamp} | {message}\n")
+
+
+def _metrics(record: dict) -> str:
+    if record["status"] != "ok":
+        return record.get("error", "").splitlines()[0][:160] if record.get("error") else ""
+    result = record["result"]
+    return " ".join(f"{k}={result[k]:.4g}" for k in ("psnr", "ssim", "depth_l1")
+                    if isinstance(result.get(k), (int, float)))
+
+
+def _write_plan(out: Path, config, plan, version: str) -> None:
+    from experiments.bench import machine
+    from experiments.sweep.cells import write_text_atomic
+
+    doc = {"name": config.name, "description": config.description, "config": config.source,
+           "version": version, "machine": machine(),
+           "cells": [{"key": c.key, "grid": c.grid, "settings": c.as_dict()}
+                     for c in plan.cells],
+           "skipped": [{"grid": s.grid, "settings": dict(s.settings), "reason": s.reason}
+                       for s in plan.skipped]}
+    write_text_atomic(out / "plan.json", json.dumps(doc, indent=1, default=str))
+    write_text_atomic(out / "config.toml", Path(config.source).read_text())
+
+
+def run_sweep(args) -> dict:
+    from experiments.sweep.backends import run_cells
+    from experiments.sweep.cells import expand, is_done, package_version, store_record
+    from experiments.sweep.config import load_config
+    from experiments.sweep.report import write_report
+
+    t0 = time.perf_counter()
+    config = load_config(args.config)
+    plan = expand(config)
+    out = Path(args.out or Path("results") / config.name)
+    out.mkdir(parents=True, exist_ok=True)
+    _write_plan(out, config, plan, package_version())
+    log = SweepLog(out / "sweep.log")
+    workers = args.workers or os.cpu_count() or 1
+    done = [] if args.force else [c for c in plan.cells if is_done(out, c.key)]
+    finished = {c.key for c in done}
+    todo = [c for c in plan.cells if c.key not in finished]
+    pending = todo[:args.max_cells] if args.max_cells else todo
+    log.write(f"sweep {config.name} from {config.source}: {len(plan.cells)} cells, "
+              f"{len(done)} already finished, {len(pending)} to run, "
+              f"{len(plan.skipped)} combinations skipped; backend {args.backend}"
+              + (f" ({workers} workers)" if args.backend == "local" else ""))
+    for s in plan.skipped:
+        log.write(f"skipped  | grid {s.grid} | {dict(s.settings)} | {s.reason}")
+    records = run_cells(pending, args.backend, workers=workers, scheduler=args.scheduler)
+    labels = plan.varying()
+    by_key = {c.key: c for c in pending}
+    counts = {"ok": 0, "failed": 0}
+    bar = tqdm(total=len(pending), unit="cell", desc=f"sweep {config.name}",
+               disable=not sys.stderr.isatty() or not pending)
+    for i, record in enumerate(records, 1):
+        record = store_record(out, record)
+        counts[record["status"] if record["status"] in counts else "failed"] += 1
+        wall = record.get("wall_seconds")
+        log.write(f"{record['status']:<8} | {i}/{len(pending)} | {record['key']} | "
+                  f"{by_key[record['key']].label(labels)} | {_metrics(record)} | "
+                  + (f"{wall:.1f} s | " if wall is not None else "")
+                  + f"pid {record.get('pid', '?')}@{record.get('host', '?')}")
+        if record["status"] != "ok":
+            tqdm.write(f"cell {record['key']} failed: {_metrics(record)}", file=sys.stderr)
+        bar.update()
+        bar.set_postfix(failed=counts["failed"], refresh=False)
+    bar.close()
+    report = write_report(out)
+    wall = time.perf_counter() - t0
+    log.write(f"done: {counts['ok']} finished, {counts['failed']} failed, {len(done)} reused, "
+              f"{len(todo) - len(pending)} not run (--max-cells), {wall:.1f} s; "
+              f"tables in {report['tables']}")
+    summary = {
+        "config": config.name, "results": str(out), "backend": args.backend,
+        "cells": len(plan.cells), "finished": counts["ok"], "failed": counts["failed"],
+        "reused": len(done), "skipped": len(plan.skipped),
+        "not_run": len(todo) - len(pending), "wall_seconds": round(wall, 2),
+        "tables": report["tables"], "csv": report["csv"], "figures": report["figures"],
+        "log": str(out / "sweep.log"),
+    }
+    if args.backend == "local":
+        summary["workers"] = min(workers, max(len(pending), 1))
+    if counts["failed"]:
+        summary["note"] = "failed cells keep their traceback in cells/<key>.json and rerun next time"
+    return summary
+
+
+def run_report(args) -> dict:
+    from experiments.sweep.report import write_report
+
+    return write_report(Path(args.results_dir))

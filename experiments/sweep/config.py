@@ -1,0 +1,247 @@
+"""Sweep configs: a TOML file -> frozen dataclasses, checked before any cell runs.
+
+Schema (see ``experiments/configs/README.md``)::
+
+    name = "quick"                 # required: names the results folder
+    description = "..."            # optional
+    [fixed]                        # optional: settings shared by every cell
+    size = 64
+    [[grid]]                       # one or more; cells = union of their cartesian products
+    task = ["image"]               # each value a list, or a scalar meaning [scalar]
+    dataset = ["astronaut", "coffee"]
+    components = [500, 2000]
+
+A grid's value for a key overrides ``[fixed]``'s. Every key must be a setting in
+:data:`SETTINGS` or a field of a task dataclass (so new task fields are accepted
+without code changes; their values are type-checked against the field's default).
+Errors are :class:`ConfigError` naming the file and the key, e.g.
+``quick.toml: grid[0].components: must be an integer >= 1, got -5``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import tomllib
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass
+from pathlib import Path
+from typing import Any
+
+from experiments.sweep.tasks import TASKS, TaskUnavailable
+
+
+class ConfigError(ValueError):
+    """A config that cannot run; the message names the file and the key."""
+
+
+def _replay(value: str) -> str | None:
+    """none | full | fifo:K | reservoir:K with K >= 1; returns a problem or None."""
+    if value in ("none", "full"):
+        return None
+    kind, _, size = value.partition(":")
+    if kind in ("fifo", "reservoir") and size.isdigit() and int(size) >= 1:
+        return None
+    return "must be none, full, fifo:K or reservoir:K (K a positive integer)"
+
+
+def _depth_model(value: str) -> str | None:
+    if value == "sensor":
+        return None
+    path = Path(value).expanduser()
+    if path.suffix != ".onnx":
+        return "must be \"sensor\" or the path of an .onnx depth model"
+    if not path.is_file():
+        return f"depth model file {value!r} does not exist"
+    return None
+
+
+@dataclass(frozen=True)
+class Spec:
+    """What values a setting accepts."""
+
+    types: tuple[type, ...]
+    doc: str
+    choices: tuple = ()
+    minimum: int | None = None
+    check: Callable[[Any], str | None] | None = None  # returns a problem, or None
+
+
+_INT, _STR = (int,), (str,)
+SETTINGS: dict[str, Spec] = {
+    "task": Spec(_STR, "which task runs the cell", tuple(TASKS)),
+    "dataset": Spec(_STR, "photo name, synthetic scene (object, room) or a dataset path"),
+    "method": Spec(_STR, "vbgs, or the gradient 3DGS baseline", ("vbgs", "gradient")),
+    "size": Spec(_INT, "image side / frame width in pixels", minimum=1),
+    "components": Spec(_INT, "mixture components (capacity)", minimum=1),
+    "iters": Spec(_INT, "CAVI iterations of a batch image fit", minimum=1),
+    "init": Spec(_STR, "component initialisation", ("random", "data")),
+    "seed": Spec(_INT, "random seed", minimum=0),
+    "stream": Spec(_STR, "image fit on all pixels, or a stream of patches",
+                   ("none", "patches")),
+    "order": Spec(_STR, "stream order", ("sequential", "shuffled", "reversed")),
+    "assign": Spec(_STR, "responsibilities under the prior or the current posterior",
+                   ("prior", "posterior")),
+    "patch": Spec(_INT, "patch side for image patch streams", minimum=1),
+    "reassign": Spec((bool, str), "re-seed unused components (auto: batch fits only)",
+                     (True, False, "auto")),
+    "replay": Spec(_STR, "replay buffer of the gradient baseline", check=_replay),
+    "estep": Spec(_STR, "E-step over all components, or the few nearby",
+                  ("dense", "sparse")),
+    "frames": Spec(_INT, "frames streamed from a scene", minimum=1),
+    "format": Spec(_STR, "dataset format of a scene path"),
+    "steps_per_frame": Spec(_INT, "optimisation steps per streamed frame", minimum=1),
+    "steps": Spec(_INT, "optimisation steps", minimum=1),
+    "depth_model": Spec(_STR, "\"sensor\" depth, or an .onnx model estimating it",
+                        check=_depth_model),
+}
+TOP_LEVEL = ("name", "description", "fixed", "grid")
+
+
+@dataclass(frozen=True)
+class Grid:
+    """One grid: each key with its tuple of values (fixed values merged in)."""
+
+    axes: tuple[tuple[str, tuple], ...]
+
+    def as_dict(self) -> dict[str, tuple]:
+        return dict(self.axes)
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    name: str
+    description: str
+    grids: tuple[Grid, ...]
+    source: str  # the file it came from, for messages and provenance
+
+
+def _type_name(types: tuple[type, ...]) -> str:
+    return " or ".join({int: "an integer", str: "a string", bool: "true/false",
+                        float: "a number"}.get(t, t.__name__) for t in types)
+
+
+def _is(value, types: tuple[type, ...]) -> bool:
+    if isinstance(value, bool):  # TOML true is not an integer here
+        return bool in types
+    if float in types and isinstance(value, int):
+        return True
+    return isinstance(value, types)
+
+
+def _task_fields() -> dict[str, Any]:
+    """Field name -> default value over every task whose module is importable."""
+    out = {}
+    for kind in TASKS.values():
+        if kind.available():
+            for name, f in kind.fields().items():
+                out.setdefault(name, f.default)
+    return out
+
+
+def _spec_for(key: str, where: str, extra: dict[str, Any]) -> Spec:
+    if key in SETTINGS:
+        return SETTINGS[key]
+    if key in extra:  # a task field the table above does not know: check by its default
+        default = extra[key]
+        types = (type(default),) if default not in (None, MISSING) else ()
+        return Spec(types, "task field")
+    known = sorted(set(SETTINGS) | set(extra))
+    hint = difflib.get_close_matches(key, known, n=1)
+    raise ConfigError(f"{where}: unknown key {key!r}"
+                      + (f" (did you mean {hint[0]!r}?)" if hint else "")
+                      + f"; known settings: {', '.join(known)}")
+
+
+def _check_value(key: str, value, spec: Spec, where: str) -> None:
+    if spec.types and not _is(value, spec.types):
+        raise ConfigError(f"{where}: must be {_type_name(spec.types)}, got {value!r}")
+    if spec.choices and value not in spec.choices:
+        raise ConfigError(f"{where}: must be one of {', '.join(map(str, spec.choices))}, "
+                          f"got {value!r}")
+    if spec.minimum is not None and value < spec.minimum:
+        what = "positive" if spec.minimum == 1 else f">= {spec.minimum}"
+        raise ConfigError(f"{where}: must be a {what} integer, got {value!r}")
+    if spec.check is not None and (problem := spec.check(value)):
+        raise ConfigError(f"{where}: {problem}, got {value!r}")
+
+
+def _values(raw, where: str) -> tuple:
+    values = tuple(raw) if isinstance(raw, list) else (raw,)
+    if not values:
+        raise ConfigError(f"{where}: an empty list gives no cells; give at least one value")
+    if isinstance(raw, dict) or any(isinstance(v, (list, dict)) for v in values):
+        raise ConfigError(f"{where}: must be a value or a flat list of values, got {raw!r}")
+    if len(set(map(repr, values))) != len(values):
+        raise ConfigError(f"{where}: repeats a value in {raw!r}")
+    return values
+
+
+def _check_datasets(axes: dict[str, tuple], where: str) -> None:
+    """Each dataset must be a built-in name of a task in the grid, or an existing path
+    (pairs of a task with another task's built-in dataset are skipped by the rules)."""
+    kinds = [TASKS[task] for task in axes["task"]]
+    for dataset in axes["dataset"]:
+        if not any(kind.dataset_exists(dataset) for kind in kinds):
+            names = "; ".join(f"{k.name}: {', '.join(k.dataset_names())}" for k in kinds)
+            raise ConfigError(f"{where}.dataset: {dataset!r} is neither a built-in dataset "
+                              f"({names}) nor an existing path")
+
+
+def parse_config(data: dict, source: str = "<config>") -> SweepConfig:
+    """Validate a parsed TOML document and freeze it."""
+    for key in data:
+        if key not in TOP_LEVEL:
+            raise ConfigError(f"{source}: unknown top-level key {key!r}; expected "
+                              f"{', '.join(TOP_LEVEL)}")
+    name = data.get("name")
+    if not isinstance(name, str) or not name.strip() or "/" in name:
+        raise ConfigError(f"{source}: name: must be a non-empty string without '/', "
+                          f"got {name!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise ConfigError(f"{source}: description: must be a string, got {description!r}")
+    fixed = data.get("fixed", {})
+    if not isinstance(fixed, dict):
+        raise ConfigError(f"{source}: fixed: must be a table ([fixed]), got {fixed!r}")
+    grids = data.get("grid")
+    if not isinstance(grids, list) or not grids or not all(isinstance(g, dict) for g in grids):
+        raise ConfigError(f"{source}: grid: give at least one [[grid]] table")
+    extra = _task_fields()
+    for key, value in fixed.items():
+        where = f"{source}: fixed.{key}"
+        if isinstance(value, (list, dict)):
+            raise ConfigError(f"{where}: [fixed] takes single values; put lists in a [[grid]]")
+        _check_value(key, value, _spec_for(key, where, extra), where)
+    frozen = []
+    for i, grid in enumerate(grids):
+        axes = {key: (value,) for key, value in fixed.items()}
+        for key, raw in grid.items():
+            where = f"{source}: grid[{i}].{key}"
+            spec = _spec_for(key, where, extra)
+            axes[key] = _values(raw, where)
+            for value in axes[key]:
+                _check_value(key, value, spec, where)
+        for required in ("task", "dataset"):
+            if required not in axes:
+                raise ConfigError(f"{source}: grid[{i}]: missing key {required!r} "
+                                  "(set it in the grid or in [fixed])")
+        for task in axes["task"]:
+            try:
+                TASKS[task].load()
+            except TaskUnavailable as err:
+                raise ConfigError(f"{source}: grid[{i}].task: {err}") from None
+        _check_datasets(axes, f"{source}: grid[{i}]")
+        frozen.append(Grid(tuple(axes.items())))
+    return SweepConfig(name=name, description=description, grids=tuple(frozen), source=source)
+
+
+def load_config(path: str | Path) -> SweepConfig:
+    """Read and validate a sweep config file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"sweep config {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    return parse_config(data, str(path))

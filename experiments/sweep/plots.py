@@ -1,0 +1,173 @@
+"""Figures of a sweep: PSNR against components, PSNR against seconds, forgetting
+curves and a grid of renders. Each function returns ``(path, note)``: the PNG written,
+or ``None`` and a note saying why there is nothing to plot."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import matplotlib
+import pandas as pd
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
+
+# Settings that tell lines apart (when they vary); the others are averaged over.
+LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth")
+MAX_RENDERS_PER_ROW, MAX_RENDER_ROWS = 6, 6
+
+
+def _line_columns(df: pd.DataFrame, style: list[str]) -> list[str]:
+    return [c for c in LINE_STYLE if c in style and c in df
+            and df[c].astype(str).nunique() > 1]
+
+
+def _labels(df: pd.DataFrame, cols: list[str]) -> pd.Series:
+    if not cols:
+        return pd.Series("all cells", index=df.index)
+    parts = [df[c].map(lambda v, c=c: "" if pd.isna(v) else f"{c}={v}") for c in cols]
+    return pd.concat(parts, axis=1).apply(lambda r: ", ".join(p for p in r if p), axis=1)
+
+
+def _colours(labels: pd.Series) -> dict:
+    """The same colour for the same line label in every panel."""
+    cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    return {label: cycle[i % len(cycle)] for i, label in enumerate(sorted(labels.unique()))}
+
+
+def _panels(n: int, width: float = 5.5, height: float = 4.2):
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(width * cols, height * rows), squeeze=False)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    return fig, list(axes.flat)
+
+
+def _save(fig, path: Path, title: str) -> Path:
+    fig.suptitle(title, fontsize=13)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_psnr_vs_components(df: pd.DataFrame, style: list[str], path: Path):
+    if df.empty or "components" not in df or "psnr" not in df:
+        return None, "no finished cell has components and PSNR"
+    cols = _line_columns(df, style)
+    df = df.assign(_label=_labels(df, cols))
+    colours = _colours(df["_label"])
+    panels = list(df.groupby(["task", "dataset"], sort=True))
+    fig, axes = _panels(len(panels))
+    for ax, ((task, dataset), part) in zip(axes, panels, strict=False):
+        for label, line in part.groupby("_label", sort=True):
+            stats = line.groupby("components")["psnr"].agg(["mean", "std", "count"])
+            ax.errorbar(stats.index, stats["mean"], yerr=stats["std"].fillna(0), marker="o",
+                        capsize=3, label=label, color=colours[label])
+        ax.set_xscale("log", base=2)
+        ticks = sorted(part["components"].unique())
+        ax.set_xticks(ticks, [str(int(t)) for t in ticks])
+        ax.set_xlabel("components (count, log scale)")
+        ax.set_ylabel("PSNR (dB)")
+        ax.set_title(f"{task}: {dataset}")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    return _save(fig, path, "PSNR against number of components "
+                 "(mean ± std over seeds and other settings)"), ""
+
+
+def plot_psnr_vs_seconds(df: pd.DataFrame, style: list[str], path: Path):
+    if df.empty or "seconds" not in df or "psnr" not in df:
+        return None, "no finished cell reports seconds and PSNR"
+    cols = [c for c in _line_columns(df, style) if c in ("method", "stream", "replay", "estep")]
+    df = df.assign(_label=_labels(df, cols))
+    colours = _colours(df["_label"])
+    markers = dict(zip(colours, itertools.cycle("osD^v<>ph*"), strict=False))
+    panels = list(df.groupby("task", sort=True))
+    fig, axes = _panels(len(panels), width=6.5)
+    for ax, (task, part) in zip(axes, panels, strict=False):
+        for label, points in part.groupby("_label", sort=True):
+            ax.scatter(points["seconds"], points["psnr"], s=28, alpha=0.75,
+                       marker=markers[label], color=colours[label], label=label)
+        ax.set_xscale("log")
+        ax.set_xlabel("wall-clock seconds per fit (s, log scale)")
+        ax.set_ylabel("PSNR (dB)")
+        ax.set_title(f"{task} task: each point one cell")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize="small")
+    return _save(fig, path, "Runtime against error"), ""
+
+
+def plot_forgetting(records: list[dict], path: Path):
+    rows = []
+    for r in records:
+        curve = (r.get("result") or {}).get("forgetting_curve") if r.get("status") == "ok" else None
+        for point in curve or []:
+            rows.append({**r["settings"], "frames_seen": point[0], "early_psnr": point[1]})
+    if not rows:
+        return None, ("skipped: no cell reports a `forgetting_curve` (the scene task's "
+                      "streamed cells do)")
+    df = pd.DataFrame(rows)
+    cols = _line_columns(df, list(df.columns))
+    df = df.assign(_label=_labels(df, cols))
+    colours = _colours(df["_label"])
+    panels = list(df.groupby(["task", "dataset"], sort=True))
+    fig, axes = _panels(len(panels), width=6.5)
+    for ax, ((task, dataset), part) in zip(axes, panels, strict=False):
+        for label, line in part.groupby("_label", sort=True):
+            stats = line.groupby("frames_seen")["early_psnr"].agg(["mean", "std"])
+            ax.plot(stats.index, stats["mean"], marker=".", label=label, color=colours[label])
+            ax.fill_between(stats.index, stats["mean"] - stats["std"].fillna(0),
+                            stats["mean"] + stats["std"].fillna(0), alpha=0.2,
+                            color=colours[label])
+        ax.set_xlabel("frames seen (count)")
+        ax.set_ylabel("held-out PSNR of the early views (dB)")
+        ax.set_title(f"{task}: {dataset}")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    return _save(fig, path, "Forgetting: quality of the first views as the stream goes on"), ""
+
+
+def _image(path: Path):
+    return plt.imread(path) if path.is_file() else None
+
+
+def plot_renders(df: pd.DataFrame, style: list[str], out: Path, path: Path):
+    """One row per task and dataset: the target, then the render of one cell per line
+    style (the one with the most components, lowest seed)."""
+    if df.empty:
+        return None, "no finished cells"
+    cols = _line_columns(df, style)
+    df = df.assign(_label=_labels(df, cols))
+    keys = [c for c in ("components", "seed") if c in df]
+    rows = []
+    for (task, dataset), part in df.groupby(["task", "dataset"], sort=True):
+        picked = []
+        for _, line in part.groupby("_label", sort=True):
+            best = line.sort_values(keys, ascending=[False, True][:len(keys)]).iloc[0]
+            render = _image(out / "renders" / f"{best['key']}.png")
+            if render is not None:
+                picked.append((best, render))
+        if picked:
+            target = _image(out / "renders" / f"{picked[0][0]['key']}.target.png")
+            rows.append((f"{task}: {dataset}", target, picked[:MAX_RENDERS_PER_ROW]))
+    if not rows:
+        return None, "no cell saved a render"
+    rows = rows[:MAX_RENDER_ROWS]
+    ncols = 1 + max(len(picked) for _, _, picked in rows)
+    fig, axes = plt.subplots(len(rows), ncols, figsize=(2.9 * ncols, 3.9 * len(rows)),
+                             squeeze=False)
+    for (name, target, picked), axrow in zip(rows, axes, strict=True):
+        for ax in axrow:
+            ax.axis("off")
+        if target is not None:
+            axrow[0].imshow(target)
+        axrow[0].set_title(f"target\n{name}", fontsize=9)
+        for ax, (row, render) in zip(axrow[1:], picked, strict=False):
+            ax.imshow(render)
+            size = f", k={int(row['components'])}" if "components" in row else ""
+            label = row["_label"].replace(", ", "\n")
+            ax.set_title(f"{row['psnr']:.2f} dB{size}\n{label}", fontsize=8)
+    return _save(fig, path, "Target and renders (PSNR in dB, k = components)"), ""

@@ -1,0 +1,204 @@
+"""Reports of a sweep folder: ``cells.csv``, ``tables.md`` and the figures.
+
+``cells.csv`` has one row per cell (failed ones included, with their error): every
+setting, every scalar the task returned, and where and how long it ran. Lists such as
+the ELBO trace or the forgetting curve stay in ``cells/<key>.json``.
+
+``tables.md`` gives PSNR / SSIM / depth L1 as mean ± std over seeds (n = number of
+seeds), one table per task, one row per combination of the other settings. A setting a
+cell does not have (``assign`` for a batch fit, say) shows as "—".
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from experiments.sweep.cells import load_record
+from experiments.sweep.plots import (
+    plot_forgetting,
+    plot_psnr_vs_components,
+    plot_psnr_vs_seconds,
+    plot_renders,
+)
+from experiments.sweep.rules import apply_rules
+from experiments.sweep.tasks import TASKS
+
+# Grouping columns in this order first; any other varying setting follows.
+GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
+               "replay", "estep", "depth")
+METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("depth_l1", "depth L1"),
+           ("seconds", "fit s"), ("components_used", "used"))
+NOT_GROUPED = ("seed", "depth_model")  # seeds are averaged; depth_model shows as `depth`
+
+
+def load_records(out: Path) -> tuple[list[dict], dict]:
+    """The stored records of the cells the last sweep planned (all cells without a plan),
+    and the plan (``{}`` when there is none)."""
+    out = Path(out)
+    if not out.is_dir():
+        raise FileNotFoundError(f"results folder {str(out)!r} does not exist")
+    plan_file = out / "plan.json"
+    plan = json.loads(plan_file.read_text()) if plan_file.is_file() else {}
+    if plan:
+        keys = [c["key"] for c in plan["cells"]]
+    else:
+        keys = sorted(p.stem for p in (out / "cells").glob("*.json"))
+    records = [r for r in (load_record(out, k) for k in keys) if r is not None]
+    if not records:
+        raise FileNotFoundError(f"no finished cells in {out}/cells; run a sweep into it first")
+    return records, plan
+
+
+def _row(record: dict, setting_names: set[str]) -> dict:
+    """Settings, then the result's scalars; a result value of a setting some other cell
+    sets is left out (a batch fit's ``order``, say, does not apply to it)."""
+    settings = record.get("settings", {})
+    row = {"key": record["key"], "status": record.get("status"), **settings}
+    if "depth_model" in settings:
+        row["depth"] = "sensor" if settings["depth_model"] in (None, "sensor") else "estimated"
+    task = TASKS.get(settings.get("task"))
+    result = record.get("result") or {}
+    for name in sorted(setting_names - set(settings)):
+        if _applies(settings, name, result.get(name)):
+            row[name] = result[name]  # the task's default, shown where it applies
+    for name, value in result.items():
+        if name in row or name in setting_names or (task and name == task.dataset_field):
+            continue
+        if value is None or isinstance(value, (str, bool, int, float)):
+            row[name] = value
+    row["error"] = record.get("error")
+    for name in ("wall_seconds", "pid", "host", "started", "finished", "version"):
+        row[name] = record.get(name)
+    return row
+
+
+def _applies(settings: dict, name: str, value) -> bool:
+    """Whether a setting the cell left at its task's default applies to the cell."""
+    if value is None or not isinstance(value, (str, bool, int, float)):
+        return False
+    try:
+        verdict = apply_rules({**settings, name: value})
+    except Exception:  # a task module that is gone: just do not fill it in
+        return False
+    return verdict.settings is not None and name in verdict.settings
+
+
+def cells_frame(records: list[dict]) -> pd.DataFrame:
+    names = {k for r in records for k in r.get("settings", {})}
+    return pd.DataFrame([_row(r, names) for r in records])
+
+
+def setting_columns(records: list[dict]) -> list[str]:
+    names = {k for r in records for k in r.get("settings", {})}
+    if "depth_model" in names:
+        names.add("depth")
+    order = [c for c in GROUP_ORDER if c in names]
+    return order + sorted(names - set(order))
+
+
+def _cell(value):
+    if pd.isna(value):
+        return "—"
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+def _mean_std(values: pd.Series) -> str:
+    values = values.dropna()
+    if values.empty:
+        return "—"
+    mean = values.mean()
+    digits = 3 if abs(mean) < 10 else 2
+    if len(values) < 2:
+        return f"{mean:.{digits}f}"
+    return f"{mean:.{digits}f} ± {values.std(ddof=1):.{digits}f}"
+
+
+def summary_table(df: pd.DataFrame, settings: list[str]) -> tuple[str, dict]:
+    """Markdown table of one task's ok cells, and the settings constant across them."""
+    cols = [c for c in settings if c in df and c not in NOT_GROUPED and df[c].notna().any()]
+    fixed = {c: df[c].iloc[0] for c in cols
+             if df[c].notna().all() and df[c].astype(str).nunique() == 1}
+    group = [c for c in cols if c not in fixed]
+    metrics = [(m, label) for m, label in METRICS if m in df and df[m].notna().any()]
+    rows = []
+    grouped = df.groupby(group, dropna=False, sort=True) if group else [((), df)]
+    for values, part in grouped:
+        values = values if isinstance(values, tuple) else (values,)
+        row = {c: _cell(v) for c, v in zip(group, values, strict=True)}
+        row.update({label: _mean_std(part[m]) for m, label in metrics})
+        row["n"] = len(part)
+        rows.append(row)
+    return pd.DataFrame(rows).to_markdown(index=False), fixed
+
+
+def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dict,
+                 path: Path) -> Path:
+    settings = setting_columns(records)
+    ok = df[df.status == "ok"]
+    lines = [f"# Sweep results: {plan.get('name', Path(path).parent.name)}", ""]
+    if plan.get("description"):
+        lines += [plan["description"], ""]
+    lines += [f"{len(df)} cells: {len(ok)} ok, {int((df.status != 'ok').sum())} failed; "
+              f"{len(plan.get('skipped', []))} grid combinations skipped. "
+              f"Code version {plan.get('version', '?')}.", ""]
+    if plan.get("machine"):
+        lines += [f"Measured on: {plan['machine']}", ""]
+    lines += ["Metrics are mean ± std over seeds (n cells per row); `fit s` is the task's "
+              "own timing of the fit and render (it includes JAX compilation the first "
+              "time a worker meets a shape).", ""]
+    for task, part in ok.groupby("task", sort=True):
+        table, fixed = summary_table(part, settings)
+        lines += [f"## {task} task", ""]
+        if fixed:
+            lines += ["Same for every row: "
+                      + ", ".join(f"{k} = {v}" for k, v in fixed.items()), ""]
+        lines += [table, ""]
+    failed = df[df.status != "ok"]
+    if len(failed):
+        lines += ["## Failed cells", "", "Tracebacks are in `cells/<key>.json`; failed cells "
+                  "run again on the next sweep.", ""]
+        shown = failed[["key", *[c for c in settings if c in failed]]].copy()
+        shown["error"] = failed["error"].fillna("").str.splitlines().str[-1].str[:120]
+        lines += [shown.fillna("—").to_markdown(index=False), ""]
+    if plan.get("skipped"):
+        reasons = pd.Series([s["reason"].split(": ", 1)[-1] if s["reason"].startswith("same")
+                             else s["reason"] for s in plan["skipped"]])
+        lines += ["## Skipped grid combinations", ""]
+        lines += [reasons.value_counts().rename_axis("reason").reset_index()
+                  .to_markdown(index=False), ""]
+    lines += ["## Figures", ""]
+    for name, (file, note) in figures.items():
+        lines.append(f"- {name}: " + (f"![{name}]({file.name})" if file else note))
+    Path(path).write_text("\n".join(lines) + "\n")
+    return Path(path)
+
+
+def write_report(out: Path) -> dict:
+    """Write cells.csv, tables.md and the figures into the sweep folder ``out``."""
+    out = Path(out)
+    records, plan = load_records(out)
+    df = cells_frame(records)
+    df.to_csv(out / "cells.csv", index=False)
+    ok = df[df.status == "ok"].copy()
+    style = [c for c in setting_columns(records) if c in ok]
+    for column in ("psnr", "ssim", "seconds", "components"):
+        if column in ok:
+            ok[column] = pd.to_numeric(ok[column], errors="coerce").astype(np.float64)
+    figures = {
+        "PSNR against components": plot_psnr_vs_components(ok, style,
+                                                           out / "psnr_vs_components.png"),
+        "PSNR against wall-clock seconds": plot_psnr_vs_seconds(ok, style,
+                                                                out / "psnr_vs_seconds.png"),
+        "forgetting curves": plot_forgetting(records, out / "forgetting.png"),
+        "renders": plot_renders(ok, style, out, out / "renders.png"),
+    }
+    tables = write_tables(df, records, plan, figures, out / "tables.md")
+    files = [out / "cells.csv", tables] + [f for f, _ in figures.values() if f]
+    return {"results": str(out), "cells": len(df), "ok": int((df.status == "ok").sum()),
+            "failed": int((df.status != "ok").sum()), "tables": str(tables),
+            "csv": str(out / "cells.csv"), "figures": [str(f) for f in files[2:]],
+            "notes": [note for f, note in figures.values() if not f]}

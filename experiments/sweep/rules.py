@@ -1,0 +1,85 @@
+"""Which grid combinations make a cell: the validity rules, in one table.
+
+Each rule names a setting, when it applies, and its effect:
+
+* ``skip``: the combination is invalid and no cell is made (logged with the reason);
+* ``drop``: the setting has no meaning for this cell, so it is removed from the cell's
+  settings; combinations that then coincide collapse into one cell (the others are
+  logged as duplicates). A grid may therefore vary ``assign`` next to
+  ``method = ["vbgs", "gradient"]`` and get one gradient cell per remaining setting.
+
+After the table, any setting that is neither descriptive (task, dataset, method) nor a
+field of the cell's task dataclass is dropped the same way ("not a setting of the image
+task"). ``experiments/configs/README.md`` lists the same rules for users.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from experiments.sweep.tasks import DESCRIPTIVE, TASKS, task_fields
+
+SKIP, DROP = "skip", "drop"
+
+
+@dataclass(frozen=True)
+class Rule:
+    setting: str
+    when: Callable[[dict], bool]
+    effect: str  # SKIP or DROP
+    reason: str
+
+
+def _gradient(s: dict) -> bool:
+    return s.get("method") == "gradient"
+
+
+def _batch_image(s: dict) -> bool:
+    return s["task"] == "image" and s.get("stream", "none") == "none"
+
+
+def _streamed_image(s: dict) -> bool:
+    return s["task"] == "image" and s.get("stream", "none") != "none"
+
+
+RULES: tuple[Rule, ...] = (
+    # setting       when                                    effect  reason
+    Rule("method", lambda s: s["task"] == "image" and _gradient(s), SKIP,
+         "the image task is VBGS only (no gradient baseline for photos)"),
+    Rule("replay", lambda s: not _gradient(s) and s.get("replay", "none") != "none", SKIP,
+         "replay buffers belong to the gradient baseline; VBGS streams without one"),
+    Rule("dataset", lambda s: not TASKS[s["task"]].dataset_exists(s["dataset"]), SKIP,
+         "the dataset is another task's built-in dataset"),
+    Rule("assign", _gradient, DROP, "the gradient baseline has no E-step assignment"),
+    Rule("estep", _gradient, DROP, "the gradient baseline has no E-step"),
+    Rule("order", _batch_image, DROP, "a batch image fit sees all pixels at once"),
+    Rule("assign", _batch_image, DROP, "a batch image fit iterates CAVI on all pixels"),
+    Rule("patch", _batch_image, DROP, "patches exist only in patch streams"),
+    Rule("iters", _streamed_image, DROP, "a patch stream makes one pass over the patches"),
+)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    settings: dict | None  # the cell's settings, or None when skipped
+    reason: str  # why it was skipped, or which settings were dropped and why
+
+
+def apply_rules(settings: dict) -> Verdict:
+    """Apply :data:`RULES` and the task-field filter to one grid combination."""
+    s = dict(settings)
+    s.setdefault("method", "vbgs")
+    dropped = []
+    for rule in RULES:
+        if rule.setting in s and rule.when(s) and rule.setting not in dict(dropped):
+            if rule.effect == SKIP:
+                return Verdict(None, f"{rule.setting}={s[rule.setting]!r}: {rule.reason}")
+            dropped.append((rule.setting, rule.reason))
+    for name, _ in dropped:
+        s.pop(name, None)
+    fields = task_fields(s["task"]) | set(DESCRIPTIVE)
+    for name in sorted(set(s) - fields):
+        dropped.append((name, f"not a setting of the {s['task']} task"))
+        s.pop(name)
+    return Verdict(s, "; ".join(f"{name} dropped ({why})" for name, why in dropped))

@@ -1,0 +1,124 @@
+"""The tasks a sweep can run, and how a cell's settings become a task object.
+
+A task is a frozen dataclass plus a ``run_*(task, progress=False) -> dict`` function in
+its own module. A cell's settings are matched to the dataclass's fields *by name*
+(``dataclasses.fields``), so a field added to a task flows through the sweep without
+code changes here. The only translations are listed in :class:`TaskKind`:
+
+* ``dataset`` (the sweep's generic name) becomes the task's own field
+  (``image`` for the image task, ``scene`` for the scene task);
+* ``reassign = "auto"`` means on for batch image fits and off for patch streams
+  (as ``fit-image --reassign auto`` does);
+* ``depth_model = "sensor"`` means ``None``: use the dataset's own depth.
+
+Modules are imported lazily, so a task whose module is not there yet (the scene task
+while it is being written) only fails for the cells that need it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.util
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+class TaskUnavailable(ValueError):
+    """A task's module cannot be imported."""
+
+
+def _image_values(values: dict) -> dict:
+    if values.get("reassign", "auto") == "auto":
+        values["reassign"] = values.get("stream", "none") == "none"
+    return values
+
+
+def _scene_values(values: dict) -> dict:
+    if values.get("depth_model") in ("sensor", "none", ""):
+        values["depth_model"] = None
+    return values
+
+
+def _image_names() -> tuple[str, ...]:
+    from vbgs.data.images import BUNDLED
+
+    return BUNDLED
+
+
+def _scene_names() -> tuple[str, ...]:
+    from vbgs.data.synthetic import SCENES
+
+    return tuple(SCENES)
+
+
+@dataclass(frozen=True)
+class TaskKind:
+    """Where a task lives and how the sweep's generic settings map onto it."""
+
+    name: str
+    module: str
+    cls: str
+    run: str
+    dataset_field: str  # the task field the sweep's ``dataset`` setting fills
+    dataset_names: Callable[[], tuple[str, ...]]  # built-in datasets; others are paths
+    translate: Callable[[dict], dict] = field(default=lambda values: values)
+
+    def available(self) -> bool:
+        return importlib.util.find_spec(self.module) is not None
+
+    def load(self) -> tuple[type, Callable]:
+        """The task dataclass and its run function."""
+        try:
+            mod = importlib.import_module(self.module)
+        except ModuleNotFoundError as err:
+            if err.name != self.module:
+                raise
+            raise TaskUnavailable(
+                f"task {self.name!r} needs the module {self.module}, which is not installed "
+                "in this checkout yet; drop the task from the config or update the code"
+            ) from err
+        return getattr(mod, self.cls), getattr(mod, self.run)
+
+    def fields(self) -> dict[str, dataclasses.Field]:
+        """The task dataclass's fields by name (the settings a cell can pass through)."""
+        cls, _ = self.load()
+        return {f.name: f for f in dataclasses.fields(cls)}
+
+    def dataset_exists(self, dataset: str) -> bool:
+        return dataset in self.dataset_names() or Path(dataset).expanduser().exists()
+
+
+TASKS: dict[str, TaskKind] = {
+    "image": TaskKind("image", "experiments.image_task", "ImageTask", "run_image",
+                      "image", _image_names, _image_values),
+    "scene": TaskKind("scene", "experiments.scene_task", "SceneTask", "run_scene",
+                      "scene", _scene_names, _scene_values),
+}
+
+# Settings every cell may carry whatever its task: they describe the cell.
+DESCRIPTIVE = ("task", "dataset", "method")
+
+
+def task_fields(task: str) -> set[str]:
+    """Names a cell of ``task`` passes to its dataclass (``dataset`` included)."""
+    kind = TASKS[task]
+    return (set(kind.fields()) - {kind.dataset_field}) | {"dataset"}
+
+
+def build_task(settings: dict):
+    """The task object for a cell: its dataclass built from the settings it has fields for."""
+    kind = TASKS[settings["task"]]
+    cls, _ = kind.load()
+    values = dict(settings)
+    values[kind.dataset_field] = values.pop("dataset")
+    values = kind.translate(values)
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in values.items() if k in names})
+
+
+def run_task(settings: dict) -> dict:
+    """Build and run one cell's task; returns the task's result dict."""
+    _, run = TASKS[settings["task"]].load()
+    return run(build_task(settings), progress=False)
