@@ -12,7 +12,7 @@ Local workers are started with the 'spawn' method and each set to one compute th
 intra_op_parallelism_threads=1``, ``OMP_NUM_THREADS=1`` and friends), so N workers use
 N cores instead of N x cores threads fighting over them. JAX compilation dominates
 small cells, so the local backend (a) hands each worker chunks of cells that share
-array shapes (same settings apart from :data:`AFFINITY_FREE`), compiling each shape
+array shapes (same settings apart from :data:`~experiments.sweep.cells.AFFINITY_FREE`), compiling each shape
 once per worker, and (b) turns on JAX's persistent compilation cache in the workers
 (``~/.cache/vbgs/jax``; set ``VBGS_JAX_CACHE`` to another folder, or to ``off``).
 Records travel back to this process through a queue, one per finished cell.
@@ -31,7 +31,7 @@ from collections.abc import Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from experiments.sweep.cells import Cell, execute_cell, failed_record
+from experiments.sweep.cells import Cell, execute_cell, failed_record, shape_signature
 
 BACKENDS = ("local", "serial", "dask")
 
@@ -43,9 +43,6 @@ SINGLE_THREAD_ENV = {
     "TF_NUM_INTRAOP_THREADS": "1",
 }
 SINGLE_THREAD_XLA = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
-# Settings that (usually) leave array shapes alone: cells differing only in these share
-# compiled code, so they go to the same worker. Only scheduling depends on this list.
-AFFINITY_FREE = ("seed", "order", "init", "dataset", "reassign")
 LOST_AFTER_S = 10.0  # how long to wait for the records of a chunk that returned
 
 
@@ -99,8 +96,7 @@ def affinity_chunks(cells: list[Cell], workers: int) -> list[list[Cell]]:
     (chunks of at most ceil(n / (2 workers)) cells), largest chunks first."""
     groups: dict[tuple, list[Cell]] = {}
     for cell in cells:
-        shape = tuple(kv for kv in cell.settings if kv[0] not in AFFINITY_FREE)
-        groups.setdefault(shape, []).append(cell)
+        groups.setdefault(shape_signature(cell.as_dict()), []).append(cell)
     size = max(1, math.ceil(len(cells) / (2 * workers)))
     chunks = [g[i:i + size] for g in groups.values() for i in range(0, len(g), size)]
     return sorted(chunks, key=len, reverse=True)

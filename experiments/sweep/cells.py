@@ -76,6 +76,17 @@ class Plan:
                 if len(v) > 1 or sum(k in c.as_dict() for c in self.cells) < n]
 
 
+# Settings that (usually) leave array shapes alone: cells differing only in these share
+# compiled code. Used to send such cells to the same worker and to flag a worker's first
+# cell of a shape as "cold" (its timing likely includes JAX compilation).
+AFFINITY_FREE = ("seed", "order", "init", "dataset", "reassign")
+_SHAPES_SEEN: set[tuple] = set()  # per process: shape signatures already run here
+
+
+def shape_signature(settings: dict) -> tuple:
+    return tuple(sorted((k, repr(v)) for k, v in settings.items() if k not in AFFINITY_FREE))
+
+
 def cell_key(settings: dict, version: str | None = None) -> str:
     blob = json.dumps({"settings": settings, "version": version or package_version()},
                       sort_keys=True, default=str)
@@ -138,7 +149,10 @@ def execute_cell(key: str, settings: dict) -> dict:
     """
     from experiments.sweep.tasks import run_task
 
-    where = {"pid": os.getpid(), "host": socket.gethostname(), "started": _now()}
+    shape = shape_signature(settings)
+    where = {"pid": os.getpid(), "host": socket.gethostname(), "started": _now(),
+             "cold": shape not in _SHAPES_SEEN}
+    _SHAPES_SEEN.add(shape)
     t0 = time.perf_counter()
     try:
         result = run_task(settings)

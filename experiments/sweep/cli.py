@@ -46,6 +46,8 @@ def add_sweep(sub) -> None:
                    help=f"local worker processes (default: all {os.cpu_count()} cores)")
     p.add_argument("--force", action="store_true", help="re-run cells that already finished")
     p.add_argument("--max-cells", type=_positive, help="run at most this many pending cells")
+    p.add_argument("--no-report", action="store_true",
+                   help="skip the tables and figures at the end (run `report` later)")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
@@ -132,7 +134,16 @@ def run_sweep(args) -> dict:
         bar.update()
         bar.set_postfix(failed=counts["failed"], refresh=False)
     bar.close()
-    report = write_report(out)
+    try:
+        report = ({"tables": None, "csv": None, "figures": []} if args.no_report
+                  else write_report(out))
+    except Exception as err:  # the cells are stored; a report bug must not hide that
+        log.write(f"report failed: {type(err).__name__}: {err}")
+        tqdm.write(f"report failed ({type(err).__name__}: {err}); the cells are stored in "
+                   f"{out}/cells; retry with: python -m experiments.run report {out}",
+                   file=sys.stderr)
+        report = {"tables": None, "csv": None, "figures": [],
+                  "error": f"{type(err).__name__}: {err}"}
     wall = time.perf_counter() - t0
     log.write(f"done: {counts['ok']} finished, {counts['failed']} failed, {len(done)} reused, "
               f"{len(todo) - len(pending)} not run (--max-cells), {wall:.1f} s; "
@@ -147,6 +158,8 @@ def run_sweep(args) -> dict:
     }
     if args.backend == "local":
         summary["workers"] = min(workers, max(len(pending), 1))
+    if report.get("error"):
+        summary["report_error"] = report["error"]
     if counts["failed"]:
         summary["note"] = "failed cells keep their traceback in cells/<key>.json and rerun next time"
     return summary

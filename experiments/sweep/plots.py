@@ -8,10 +8,12 @@ import itertools
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 import pandas as pd
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
 
 # Settings that tell lines apart (when they vary); the others are averaged over.
 LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth")
@@ -23,10 +25,14 @@ def _line_columns(df: pd.DataFrame, style: list[str]) -> list[str]:
             and df[c].astype(str).nunique() > 1]
 
 
+def _plain(value):
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
 def _labels(df: pd.DataFrame, cols: list[str]) -> pd.Series:
     if not cols:
         return pd.Series("all cells", index=df.index)
-    parts = [df[c].map(lambda v, c=c: "" if pd.isna(v) else f"{c}={v}") for c in cols]
+    parts = [df[c].map(lambda v, c=c: "" if pd.isna(v) else f"{c}={_plain(v)}") for c in cols]
     return pd.concat(parts, axis=1).apply(lambda r: ", ".join(p for p in r if p), axis=1)
 
 
@@ -34,6 +40,17 @@ def _colours(labels: pd.Series) -> dict:
     """The same colour for the same line label in every panel."""
     cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     return {label: cycle[i % len(cycle)] for i, label in enumerate(sorted(labels.unique()))}
+
+
+def _legend(fig, axes) -> None:
+    """One legend for the figure, under the panels, each label once."""
+    entries = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            entries.setdefault(label, handle)
+    if entries:
+        fig.legend(entries.values(), entries.keys(), loc="upper center", fontsize="small",
+                   bbox_to_anchor=(0.5, 0.0), ncol=min(3, len(entries)), frameon=False)
 
 
 def _panels(n: int, width: float = 5.5, height: float = 4.2):
@@ -73,7 +90,7 @@ def plot_psnr_vs_components(df: pd.DataFrame, style: list[str], path: Path):
         ax.set_ylabel("PSNR (dB)")
         ax.set_title(f"{task}: {dataset}")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize="small")
+    _legend(fig, axes)
     return _save(fig, path, "PSNR against number of components "
                  "(mean ± std over seeds and other settings)"), ""
 
@@ -82,21 +99,33 @@ def plot_psnr_vs_seconds(df: pd.DataFrame, style: list[str], path: Path):
     if df.empty or "seconds" not in df or "psnr" not in df:
         return None, "no finished cell reports seconds and PSNR"
     cols = [c for c in _line_columns(df, style) if c in ("method", "stream", "replay", "estep")]
+    if "components" in df and df["components"].nunique() > 1:
+        cols.append("components")
     df = df.assign(_label=_labels(df, cols))
     colours = _colours(df["_label"])
     markers = dict(zip(colours, itertools.cycle("osD^v<>ph*"), strict=False))
     panels = list(df.groupby("task", sort=True))
     fig, axes = _panels(len(panels), width=6.5)
     for ax, (task, part) in zip(axes, panels, strict=False):
-        for label, points in part.groupby("_label", sort=True):
+        cold = part["cold"].fillna(False).astype(bool) if "cold" in part else False
+        for label, points in part[~cold].groupby("_label", sort=True):
             ax.scatter(points["seconds"], points["psnr"], s=28, alpha=0.75,
                        marker=markers[label], color=colours[label], label=label)
+        for label, points in part[cold].groupby("_label", sort=True):
+            ax.scatter(points["seconds"], points["psnr"], s=28, alpha=0.75,
+                       marker=markers[label], facecolors="none", edgecolors=colours[label])
+        if np.any(cold):
+            ax.scatter([], [], marker="o", facecolors="none", edgecolors="grey",
+                       label="hollow: a worker's first cell of its shape (includes compilation)")
         ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("wall-clock seconds per fit (s, log scale)")
         ax.set_ylabel("PSNR (dB)")
         ax.set_title(f"{task} task: each point one cell")
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize="small")
+    _legend(fig, axes)
     return _save(fig, path, "Runtime against error"), ""
 
 
@@ -126,7 +155,7 @@ def plot_forgetting(records: list[dict], path: Path):
         ax.set_ylabel("held-out PSNR of the early views (dB)")
         ax.set_title(f"{task}: {dataset}")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize="small")
+    _legend(fig, axes)
     return _save(fig, path, "Forgetting: quality of the first views as the stream goes on"), ""
 
 

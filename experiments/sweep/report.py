@@ -71,7 +71,7 @@ def _row(record: dict, setting_names: set[str]) -> dict:
         if value is None or isinstance(value, (str, bool, int, float)):
             row[name] = value
     row["error"] = record.get("error")
-    for name in ("wall_seconds", "pid", "host", "started", "finished", "version"):
+    for name in ("wall_seconds", "cold", "pid", "host", "started", "finished", "version"):
         row[name] = record.get(name)
     return row
 
@@ -111,7 +111,7 @@ def _mean_std(values: pd.Series) -> str:
     if values.empty:
         return "—"
     mean = values.mean()
-    digits = 3 if abs(mean) < 10 else 2
+    digits = 3 if abs(mean) < 10 else 2 if abs(mean) < 100 else 1
     if len(values) < 2:
         return f"{mean:.{digits}f}"
     return f"{mean:.{digits}f} ± {values.std(ddof=1):.{digits}f}"
@@ -120,8 +120,8 @@ def _mean_std(values: pd.Series) -> str:
 def summary_table(df: pd.DataFrame, settings: list[str]) -> tuple[str, dict]:
     """Markdown table of one task's ok cells, and the settings constant across them."""
     cols = [c for c in settings if c in df and c not in NOT_GROUPED and df[c].notna().any()]
-    fixed = {c: df[c].iloc[0] for c in cols
-             if df[c].notna().all() and df[c].astype(str).nunique() == 1}
+    fixed = {c: _cell(df[c].dropna().iloc[0]) for c in cols
+             if df[c].dropna().astype(str).nunique() == 1}
     group = [c for c in cols if c not in fixed]
     metrics = [(m, label) for m, label in METRICS if m in df and df[m].notna().any()]
     rows = []
@@ -130,6 +130,10 @@ def summary_table(df: pd.DataFrame, settings: list[str]) -> tuple[str, dict]:
         values = values if isinstance(values, tuple) else (values,)
         row = {c: _cell(v) for c, v in zip(group, values, strict=True)}
         row.update({label: _mean_std(part[m]) for m, label in metrics})
+        if "seconds" in part and "cold" in part and (~part["cold"].fillna(False)).any():
+            row["fit s"] = _mean_std(part.loc[~part["cold"].fillna(False), "seconds"])
+        elif "seconds" in part and "cold" in part:
+            row["fit s"] = row["fit s"] + " †"
         row["n"] = len(part)
         rows.append(row)
     return pd.DataFrame(rows).to_markdown(index=False), fixed
@@ -147,14 +151,15 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
               f"Code version {plan.get('version', '?')}.", ""]
     if plan.get("machine"):
         lines += [f"Measured on: {plan['machine']}", ""]
-    lines += ["Metrics are mean ± std over seeds (n cells per row); `fit s` is the task's "
-              "own timing of the fit and render (it includes JAX compilation the first "
-              "time a worker meets a shape).", ""]
+    lines += ["Metrics are mean ± std over seeds (n cells per row). `fit s` is the task's "
+              "own timing of fit and render, over the cells that were not the first of their "
+              "array shapes in their worker (those include JAX compilation; † marks a row "
+              "that has only such cells).", ""]
     for task, part in ok.groupby("task", sort=True):
         table, fixed = summary_table(part, settings)
         lines += [f"## {task} task", ""]
         if fixed:
-            lines += ["Same for every row: "
+            lines += ["Same for every row (where it applies): "
                       + ", ".join(f"{k} = {v}" for k, v in fixed.items()), ""]
         lines += [table, ""]
     failed = df[df.status != "ok"]
@@ -162,7 +167,8 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
         lines += ["## Failed cells", "", "Tracebacks are in `cells/<key>.json`; failed cells "
                   "run again on the next sweep.", ""]
         shown = failed[["key", *[c for c in settings if c in failed]]].copy()
-        shown["error"] = failed["error"].fillna("").str.splitlines().str[-1].str[:120]
+        shown["error"] = failed["error"].map(
+            lambda e: e.strip().splitlines()[0][:120] if isinstance(e, str) and e.strip() else "")
         lines += [shown.fillna("—").to_markdown(index=False), ""]
     if plan.get("skipped"):
         reasons = pd.Series([s["reason"].split(": ", 1)[-1] if s["reason"].startswith("same")

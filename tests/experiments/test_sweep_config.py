@@ -1,0 +1,144 @@
+"""Sweep configs: parsing, refusals naming the key, and the validity rules."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+from experiments.run import main
+from experiments.sweep.cells import cell_key, expand
+from experiments.sweep.config import ConfigError, load_config, parse_config
+
+CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
+
+
+def _config(**grid):
+    return {"name": "t", "fixed": {"size": 16, "iters": 2},
+            "grid": [{"task": "image", "dataset": ["astronaut"], "components": [20], **grid}]}
+
+
+def test_quick_config_parses_and_expands():
+    config = load_config(CONFIGS / "quick.toml")
+    assert config.name == "quick" and len(config.grids) == 2
+    plan = expand(config)
+    cells = [c.as_dict() for c in plan.cells]
+    assert len(cells) == 112 and not plan.skipped
+    values = {k: {c[k] for c in cells if k in c} for k in ("init", "components", "order",
+                                                          "assign", "seed", "dataset")}
+    assert values["init"] == {"random", "data"} and len(values["components"]) >= 2
+    assert values["order"] == {"sequential", "shuffled", "reversed"}
+    assert values["assign"] == {"prior", "posterior"} and values["seed"] == {0, 1}
+    assert len(values["dataset"]) >= 2
+    assert all(c["stream"] == "patches" for c in cells if "order" in c)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("experiments.scene_task") is None,
+                    reason="the scene task (experiments/scene_task.py) is not there yet")
+def test_paper_config_parses():
+    plan = expand(load_config(CONFIGS / "paper.toml"))
+    tasks = {c.as_dict()["task"] for c in plan.cells}
+    assert tasks == {"image", "scene"}
+    assert not any(c.as_dict().get("method") == "vbgs"
+                   and c.as_dict().get("replay", "none") != "none" for c in plan.cells)
+
+
+@pytest.mark.parametrize(
+    "grid, message",
+    [
+        ({"compnents": [20]}, "grid[0].compnents: unknown key 'compnents' (did you mean "
+                              "'components'?)"),
+        ({"components": [20, -5]}, "grid[0].components: must be a positive integer, got -5"),
+        ({"components": [0]}, "grid[0].components: must be a positive integer, got 0"),
+        ({"components": ["500"]}, "grid[0].components: must be an integer, got '500'"),
+        ({"components": [True]}, "grid[0].components: must be an integer, got True"),
+        ({"init": ["zeros"]}, "grid[0].init: must be one of random, data, got 'zeros'"),
+        ({"order": "backwards"}, "grid[0].order: must be one of sequential"),
+        ({"dataset": ["/no/such/photo.png"]}, "grid[0].dataset: '/no/such/photo.png' is "
+                                              "neither a built-in dataset"),
+        ({"task": ["video"]}, "grid[0].task: must be one of image, scene, got 'video'"),
+        ({"replay": ["fifo:0"]}, "grid[0].replay: must be none, full, fifo:K or reservoir:K"),
+        ({"depth_model": ["model.pt"]}, "grid[0].depth_model: must be \"sensor\" or the path"),
+        ({"seed": []}, "grid[0].seed: an empty list gives no cells"),
+        ({"seed": [0, 0]}, "grid[0].seed: repeats a value"),
+        ({"seed": [[0, 1]]}, "grid[0].seed: must be a value or a flat list"),
+    ],
+)
+def test_bad_values_name_the_key(grid, message):
+    with pytest.raises(ConfigError) as err:
+        parse_config(_config(**grid), "bad.toml")
+    assert message in str(err.value)
+    assert str(err.value).startswith("bad.toml: ")
+
+
+@pytest.mark.parametrize(
+    "doc, message",
+    [
+        ({"grid": [{"task": "image", "dataset": "astronaut"}]}, "name: must be a non-empty"),
+        ({"name": "t", "grids": []}, "unknown top-level key 'grids'"),
+        ({"name": "t"}, "grid: give at least one [[grid]] table"),
+        ({"name": "t", "fixed": {"size": [16]}, "grid": [{"task": "image",
+                                                          "dataset": "astronaut"}]},
+         "fixed.size: [fixed] takes single values"),
+        ({"name": "t", "fixed": {"size": -1}, "grid": [{"task": "image",
+                                                        "dataset": "astronaut"}]},
+         "fixed.size: must be a positive integer"),
+        ({"name": "t", "grid": [{"dataset": "astronaut"}]}, "grid[0]: missing key 'task'"),
+    ],
+)
+def test_bad_structure(doc, message):
+    with pytest.raises(ConfigError, match=None) as err:
+        parse_config(doc, "bad.toml")
+    assert message in str(err.value)
+
+
+def test_bad_config_is_refused_before_any_cell_runs(tmp_path, capsys):
+    config = tmp_path / "bad.toml"
+    config.write_text('name = "bad"\n[[grid]]\ntask = "image"\ndataset = "astronaut"\n'
+                      'size = 16\ncomponents = [20, -3]\n')
+    out = tmp_path / "results"
+    assert main(["sweep", "--config", str(config), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "grid[0].components: must be a positive integer, got -3" in err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_not_toml_and_missing_file(tmp_path):
+    bad = tmp_path / "x.toml"
+    bad.write_text("name = \n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(bad)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_config(tmp_path / "missing.toml")
+
+
+def test_rules_skip_invalid_and_collapse_settings_that_do_not_apply():
+    config = parse_config({
+        "name": "t", "fixed": {"task": "image", "size": 16, "components": 20},
+        "grid": [
+            # batch fits: order/assign do not apply, so 3 x 2 combinations make 1 cell
+            {"dataset": "astronaut", "stream": "none", "order": ["sequential", "reversed",
+                                                                 "shuffled"],
+             "assign": ["prior", "posterior"], "method": ["vbgs", "gradient"]},
+            # patch streams: every order x assign is its own cell; iters does not apply
+            {"dataset": "astronaut", "stream": "patches", "iters": [2, 3],
+             "order": ["sequential", "reversed"], "assign": ["prior", "posterior"]},
+        ]}, "rules.toml")
+    plan = expand(config)
+    cells = [c.as_dict() for c in plan.cells]
+    batch = [c for c in cells if c["stream"] == "none"]
+    stream = [c for c in cells if c["stream"] == "patches"]
+    assert len(batch) == 1 and "order" not in batch[0] and "assign" not in batch[0]
+    assert batch[0]["method"] == "vbgs"
+    assert len(stream) == 4 and all("iters" not in c for c in stream)
+    reasons = [s.reason for s in plan.skipped]
+    assert sum("image task is VBGS only" in r for r in reasons) == 6
+    assert sum(r.startswith("same cell as") and "order dropped" in r for r in reasons) == 5
+    assert sum("iters dropped" in r for r in reasons) == 4
+    assert len(cells) + len(plan.skipped) == 6 * 2 + 2 * 2 * 2
+
+
+def test_cell_key_is_stable_and_depends_on_settings_and_version():
+    a = {"task": "image", "dataset": "astronaut", "components": 20}
+    assert cell_key(a, "1") == cell_key(dict(reversed(list(a.items()))), "1")
+    assert cell_key(a, "1") != cell_key({**a, "components": 21}, "1")
+    assert cell_key(a, "1") != cell_key(a, "2")
