@@ -7,10 +7,13 @@ stores each one as it arrives. A task error is already a failed record; a worker
 dies (killed, out of memory) becomes a failed record here, so a sweep never stops for
 one cell.
 
-Local workers are started with the 'spawn' method and each set to one compute thread
-*before* JAX is imported in them (``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false
-intra_op_parallelism_threads=1``, ``OMP_NUM_THREADS=1`` and friends), so N workers use
-N cores instead of N x cores threads fighting over them. JAX compilation dominates
+Local workers are started with the 'spawn' method and each held to one core *before*
+JAX is imported in them: ``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false
+intra_op_parallelism_threads=1``, ``OMP_NUM_THREADS=1`` and friends, and (on Linux) CPU
+affinity to a core of its own, worker i on the i-th allowed CPU. The affinity is what
+actually holds XLA's CPU runtime to one thread in current JAX releases (the flags alone
+left a worker using 1.7 cores here), so N workers use N cores instead of N x cores
+threads fighting over them. JAX compilation dominates
 small cells, so the local backend (a) hands each worker chunks of cells that share
 array shapes (same settings apart from :data:`~experiments.sweep.cells.AFFINITY_FREE`), compiling each shape
 once per worker, and (b) turns on JAX's persistent compilation cache in the workers
@@ -62,11 +65,28 @@ def compile_cache_dir() -> str | None:
 _RESULTS = None  # in a local worker: the queue its records go back through
 
 
-def single_thread_worker(results=None, cache_dir: str | None = None) -> None:
-    """Pool initializer: one compute thread per worker process and the compilation
-    cache. Runs before any task is unpickled, hence before JAX is imported here."""
+def _pin(slot, cpus: list[int]) -> None:
+    """Pin this process to the next CPU of ``cpus`` (slot: a shared counter)."""
+    if slot is None or not cpus or not hasattr(os, "sched_setaffinity"):
+        return
+    with slot.get_lock():
+        index = slot.value
+        slot.value += 1
+    try:
+        os.sched_setaffinity(0, {cpus[index % len(cpus)]})
+    except OSError:  # a CPU that went away, a container refusing: run unpinned
+        pass
+
+
+def single_thread_worker(results=None, cache_dir: str | None = None, slot=None,
+                         cpus: list[int] | None = None) -> None:
+    """Pool initializer: one compute thread per worker process (thread-count variables
+    and a CPU of its own), and the compilation cache. Runs before any task is
+    unpickled, hence before JAX is imported here (XLA sizes its pools by the CPUs it
+    may use)."""
     global _RESULTS
     _RESULTS = results
+    _pin(slot, cpus or [])
     os.environ.update(SINGLE_THREAD_ENV)
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_cpu_multi_thread_eigen" not in flags:
@@ -114,9 +134,10 @@ def run_local(cells: list[Cell], workers: int) -> Iterator[dict]:
     chunks = affinity_chunks(cells, workers)
     ctx = multiprocessing.get_context("spawn")
     results = ctx.Queue()
+    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
     pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(chunks))), mp_context=ctx,
                                initializer=single_thread_worker,
-                               initargs=(results, compile_cache_dir()))
+                               initargs=(results, compile_cache_dir(), ctx.Value("i", 0), cpus))
     reported: set[str] = set()
     try:
         futures = {pool.submit(_run_chunk, [(c.key, c.as_dict()) for c in chunk]): chunk

@@ -152,6 +152,8 @@ def execute_cell(key: str, settings: dict) -> dict:
     shape = shape_signature(settings)
     where = {"pid": os.getpid(), "host": socket.gethostname(), "started": _now(),
              "cold": shape not in _SHAPES_SEEN}
+    if hasattr(os, "sched_getaffinity"):
+        where["cpus"] = sorted(os.sched_getaffinity(0))
     _SHAPES_SEEN.add(shape)
     t0 = time.perf_counter()
     try:

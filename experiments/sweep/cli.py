@@ -94,12 +94,16 @@ def _write_plan(out: Path, config, plan, version: str) -> None:
 def run_sweep(args) -> dict:
     from experiments.sweep.backends import run_cells
     from experiments.sweep.cells import expand, is_done, package_version, store_record
-    from experiments.sweep.config import load_config
+    from experiments.sweep.config import ConfigError, load_config
     from experiments.sweep.report import write_report
 
     t0 = time.perf_counter()
     config = load_config(args.config)
     plan = expand(config)
+    if not plan.cells:
+        reasons = sorted({s.reason for s in plan.skipped})
+        raise ConfigError(f"{config.source}: the grids make no cells; every combination was "
+                          f"skipped: {'; '.join(reasons[:3])}")
     out = Path(args.out or Path("results") / config.name)
     out.mkdir(parents=True, exist_ok=True)
     _write_plan(out, config, plan, package_version())

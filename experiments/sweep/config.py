@@ -132,9 +132,12 @@ def _task_fields() -> dict[str, Any]:
     """Field name -> default value over every task whose module is importable."""
     out = {}
     for kind in TASKS.values():
-        if kind.available():
-            for name, f in kind.fields().items():
-                out.setdefault(name, f.default)
+        try:
+            fields = kind.fields() if kind.available() else {}
+        except TaskUnavailable:  # refused later, and only if a grid uses that task
+            fields = {}
+        for name, f in fields.items():
+            out.setdefault(name, f.default)
     return out
 
 

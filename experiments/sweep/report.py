@@ -73,6 +73,8 @@ def _row(record: dict, setting_names: set[str]) -> dict:
     row["error"] = record.get("error")
     for name in ("wall_seconds", "cold", "pid", "host", "started", "finished", "version"):
         row[name] = record.get(name)
+    if record.get("cpus") is not None:
+        row["cpus"] = " ".join(map(str, record["cpus"]))  # the CPUs the worker could use
     return row
 
 
@@ -149,6 +151,10 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
     lines += [f"{len(df)} cells: {len(ok)} ok, {int((df.status != 'ok').sum())} failed; "
               f"{len(plan.get('skipped', []))} grid combinations skipped. "
               f"Code version {plan.get('version', '?')}.", ""]
+    missing = len(plan.get("cells", [])) - len(df)
+    if missing > 0:
+        lines += [f"**{missing} planned cells have no result yet** (interrupted, or "
+                  "`--max-cells`): run the sweep again to finish them.", ""]
     if plan.get("machine"):
         lines += [f"Measured on: {plan['machine']}", ""]
     lines += ["Metrics are mean ± std over seeds (n cells per row). `fit s` is the task's "

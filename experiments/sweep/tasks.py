@@ -74,12 +74,20 @@ class TaskKind:
             mod = importlib.import_module(self.module)
         except ModuleNotFoundError as err:
             if err.name != self.module:
-                raise
+                raise TaskUnavailable(f"task {self.name!r}: importing {self.module} failed: "
+                                      f"{err}") from err
             raise TaskUnavailable(
                 f"task {self.name!r} needs the module {self.module}, which is not installed "
                 "in this checkout yet; drop the task from the config or update the code"
             ) from err
-        return getattr(mod, self.cls), getattr(mod, self.run)
+        except Exception as err:  # a module that is there but broken: say which
+            raise TaskUnavailable(f"task {self.name!r}: importing {self.module} failed: "
+                                  f"{type(err).__name__}: {err}") from err
+        try:
+            return getattr(mod, self.cls), getattr(mod, self.run)
+        except AttributeError as err:
+            raise TaskUnavailable(f"task {self.name!r}: {self.module} has no {err.name} "
+                                  f"(expected {self.cls} and {self.run})") from err
 
     def fields(self) -> dict[str, dataclasses.Field]:
         """The task dataclass's fields by name (the settings a cell can pass through)."""

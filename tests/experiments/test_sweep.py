@@ -54,6 +54,8 @@ def test_local_backend_two_workers_end_to_end(tmp_path):
     assert len(rows) == 4 and {r["status"] for r in rows} == {"ok"}
     assert len({r["pid"] for r in rows}) == 2, "both worker processes should have run cells"
     assert str(os.getpid()) not in {r["pid"] for r in rows}
+    if len(os.sched_getaffinity(0)) >= 2:  # each worker pinned to a core of its own
+        assert len({r["cpus"] for r in rows}) == 2 and all(" " not in r["cpus"] for r in rows)
     tables = (out / "tables.md").read_text()
     assert "PSNR (dB)" in tables and "astronaut" in tables and "± " in tables
     for name in FIGURES:

@@ -142,3 +142,12 @@ def test_cell_key_is_stable_and_depends_on_settings_and_version():
     assert cell_key(a, "1") == cell_key(dict(reversed(list(a.items()))), "1")
     assert cell_key(a, "1") != cell_key({**a, "components": 21}, "1")
     assert cell_key(a, "1") != cell_key(a, "2")
+
+
+def test_grids_that_make_no_cells_are_refused(tmp_path, capsys):
+    config = tmp_path / "none.toml"
+    config.write_text('name = "none"\n[[grid]]\ntask = "image"\ndataset = "astronaut"\n'
+                      'method = "gradient"\n')
+    assert main(["sweep", "--config", str(config), "--out", str(tmp_path / "res")]) == 2
+    err = capsys.readouterr().err
+    assert "the grids make no cells" in err and "the image task is VBGS only" in err
