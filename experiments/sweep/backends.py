@@ -1,4 +1,4 @@
-"""Where cells run: ``serial`` (in this process), ``local`` (a process pool on this
+"""Where cells run: ``serial`` (in this process), ``local`` (worker processes on this
 machine) or ``dask`` (an existing Dask distributed cluster).
 
 Each backend takes the cells and yields finished records (see
@@ -7,18 +7,19 @@ stores each one as it arrives. A task error is already a failed record; a worker
 dies (killed, out of memory) becomes a failed record here, so a sweep never stops for
 one cell.
 
-Local workers are started with the 'spawn' method and each held to one core *before*
-JAX is imported in them: ``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false
-intra_op_parallelism_threads=1``, ``OMP_NUM_THREADS=1`` and friends, and (on Linux) CPU
-affinity to a core of its own, worker i on the i-th allowed CPU. The affinity is what
-actually holds XLA's CPU runtime to one thread in current JAX releases (the flags alone
-left a worker using 1.7 cores here), so N workers use N cores instead of N x cores
-threads fighting over them. JAX compilation dominates
-small cells, so the local backend (a) hands each worker chunks of cells that share
-array shapes (same settings apart from :data:`~experiments.sweep.cells.AFFINITY_FREE`), compiling each shape
-once per worker, and (b) turns on JAX's persistent compilation cache in the workers
-(``~/.cache/vbgs/jax``; set ``VBGS_JAX_CACHE`` to another folder, or to ``off``).
-Records travel back to this process through a queue, one per finished cell.
+Local workers are 'spawn'ed processes, each held to one core *before* JAX is imported
+in it: ``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1``,
+``OMP_NUM_THREADS=1`` and friends, and (on Linux) CPU affinity, worker i on the i-th
+allowed CPU. The affinity is what actually holds XLA's CPU runtime to one core in
+current JAX releases (with the flags alone a worker used 1.7 cores here), so N workers
+use N cores instead of N x cores threads fighting over them.
+
+JAX compilation dominates small cells, so workers take *chunks* of cells that share
+array shapes (same settings apart from ``cells.AFFINITY_FREE``), compiling each shape
+once per worker, and share JAX's persistent compilation cache (``~/.cache/vbgs/jax``;
+set ``VBGS_JAX_CACHE`` to another folder, or to ``off``). Records come back through a
+queue, one per finished cell. Stopping the sweep (Ctrl-C, an error) terminates the
+workers; a worker whose sweep was killed outright stops before its next cell.
 """
 
 from __future__ import annotations
@@ -28,10 +29,9 @@ import multiprocessing
 import os
 import queue
 import sys
-import time
+import threading
 import traceback
 from collections.abc import Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from experiments.sweep.cells import Cell, execute_cell, failed_record, shape_signature
@@ -46,7 +46,6 @@ SINGLE_THREAD_ENV = {
     "TF_NUM_INTRAOP_THREADS": "1",
 }
 SINGLE_THREAD_XLA = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
-LOST_AFTER_S = 10.0  # how long to wait for the records of a chunk that returned
 
 
 class BackendError(ValueError):
@@ -62,31 +61,14 @@ def compile_cache_dir() -> str | None:
     return str(Path(base) / "vbgs" / "jax")
 
 
-_RESULTS = None  # in a local worker: the queue its records go back through
-
-
-def _pin(slot, cpus: list[int]) -> None:
-    """Pin this process to the next CPU of ``cpus`` (slot: a shared counter)."""
-    if slot is None or not cpus or not hasattr(os, "sched_setaffinity"):
-        return
-    with slot.get_lock():
-        index = slot.value
-        slot.value += 1
-    try:
-        os.sched_setaffinity(0, {cpus[index % len(cpus)]})
-    except OSError:  # a CPU that went away, a container refusing: run unpinned
-        pass
-
-
-def single_thread_worker(results=None, cache_dir: str | None = None, slot=None,
-                         cpus: list[int] | None = None) -> None:
-    """Pool initializer: one compute thread per worker process (thread-count variables
-    and a CPU of its own), and the compilation cache. Runs before any task is
-    unpickled, hence before JAX is imported here (XLA sizes its pools by the CPUs it
-    may use)."""
-    global _RESULTS
-    _RESULTS = results
-    _pin(slot, cpus or [])
+def single_thread_worker(cache_dir: str | None = None, cpu: int | None = None) -> None:
+    """Hold this (fresh) process to one core and point JAX at the compilation cache.
+    Must run before JAX is imported here: XLA sizes its thread pools at start-up."""
+    if cpu is not None and hasattr(os, "sched_setaffinity"):
+        try:
+            os.sched_setaffinity(0, {cpu})
+        except OSError:  # a CPU that went away, a container refusing: run unpinned
+            pass
     os.environ.update(SINGLE_THREAD_ENV)
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_cpu_multi_thread_eigen" not in flags:
@@ -94,21 +76,33 @@ def single_thread_worker(results=None, cache_dir: str | None = None, slot=None,
     if cache_dir:
         os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", cache_dir)
         os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
-    if "jax" in sys.modules:  # too late for the flags to take effect; say so
+    if "jax" in sys.modules:  # too late for the limits to take effect; say so
         print("sweep worker: jax was imported before the thread limits were set",
               file=sys.stderr)
 
 
-def _run_chunk(cells: list[tuple[str, dict]]) -> int:
-    """In a local worker: run cells one after another, sending each record back."""
-    for key, settings in cells:
-        _RESULTS.put(execute_cell(key, settings))
-    return len(cells)
+def _worker(tasks, results, cache_dir: str | None, cpu: int | None, parent: int) -> None:
+    """A local worker: take chunks until the ``None`` sentinel; report each cell's start
+    and record. Stops before a cell when the sweep process is gone."""
+    single_thread_worker(cache_dir, cpu)
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())  # not tqdm's default process-shared lock, which a
+    # worker stopped by Ctrl-C would leave behind as a "leaked semaphore"
+    try:
+        while (chunk := tasks.get()) is not None:
+            for key, settings in chunk:
+                if os.getppid() != parent:
+                    return
+                results.put(("start", os.getpid(), key))
+                results.put(("done", os.getpid(), execute_cell(key, settings)))
+    except KeyboardInterrupt:  # Ctrl-C reaches the workers too; the sweep reports it
+        return
 
 
-def _crashed(cell: Cell, err: BaseException) -> dict:
-    return failed_record(cell.key, cell.as_dict(), f"worker failed: {type(err).__name__}: {err}",
-                         "".join(traceback.format_exception(err)))
+def _crashed(cell: Cell, why: str, err: BaseException | None = None) -> dict:
+    tb = "".join(traceback.format_exception(err)) if err is not None else ""
+    return failed_record(cell.key, cell.as_dict(), why, tb)
 
 
 def affinity_chunks(cells: list[Cell], workers: int) -> list[list[Cell]]:
@@ -128,42 +122,58 @@ def run_serial(cells: Iterable[Cell]) -> Iterator[dict]:
 
 
 def run_local(cells: list[Cell], workers: int) -> Iterator[dict]:
-    """A spawn process pool of ``workers`` processes running shape-affine chunks."""
+    """``workers`` spawned processes (at most one per chunk) running shape-affine chunks."""
     if not cells:
         return
     chunks = affinity_chunks(cells, workers)
+    n = max(1, min(workers, len(chunks)))
     ctx = multiprocessing.get_context("spawn")
-    results = ctx.Queue()
+    tasks, results = ctx.Queue(), ctx.Queue()
+    for chunk in chunks:
+        tasks.put([(c.key, c.as_dict()) for c in chunk])
+    for _ in range(n):
+        tasks.put(None)
     cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
-    pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(chunks))), mp_context=ctx,
-                               initializer=single_thread_worker,
-                               initargs=(results, compile_cache_dir(), ctx.Value("i", 0), cpus))
+    procs = [ctx.Process(target=_worker, name=f"sweep-worker-{i}", daemon=True,
+                         args=(tasks, results, compile_cache_dir(),
+                               cpus[i % len(cpus)] if cpus else None, os.getpid()))
+             for i in range(n)]
+    for p in procs:
+        p.start()
+    by_key = {c.key: c for c in cells}
+    running: dict[int, str] = {}  # worker pid -> key of the cell it is running
     reported: set[str] = set()
     try:
-        futures = {pool.submit(_run_chunk, [(c.key, c.as_dict()) for c in chunk]): chunk
-                   for chunk in chunks}
-        quiet_since = None
         while len(reported) < len(cells):
             try:
-                record = results.get(timeout=0.5)
+                kind, pid, payload = results.get(timeout=0.5)
             except queue.Empty:
-                all_done = all(f.done() for f in futures)
-                quiet_since = (quiet_since or time.monotonic()) if all_done else None
-                for future, chunk in futures.items():
-                    broken = future.done() and future.exception() is not None
-                    lost = quiet_since and time.monotonic() - quiet_since > LOST_AFTER_S
-                    if broken or lost:
-                        err = future.exception() or RuntimeError("the record never came back")
-                        for cell in chunk:
-                            if cell.key not in reported:
-                                reported.add(cell.key)
-                                yield _crashed(cell, err)
+                for p in procs:  # a worker that died takes its cell in flight with it
+                    if p.exitcode not in (0, None) and p.pid in running:
+                        key = running.pop(p.pid)
+                        reported.add(key)
+                        yield _crashed(by_key[key], f"worker process {p.pid} died (exit code "
+                                       f"{p.exitcode}): killed, or out of memory?")
+                if not any(p.is_alive() for p in procs):  # the rest of its chunk: not run
+                    for key in by_key.keys() - reported:
+                        reported.add(key)
+                        yield _crashed(by_key[key], "not run: its worker process died")
                 continue
-            if record["key"] not in reported:
-                reported.add(record["key"])
-                yield record
+            if kind == "start":
+                running[pid] = payload
+            elif payload["key"] not in reported:
+                running.pop(pid, None)
+                reported.add(payload["key"])
+                yield payload
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+        for p in procs:
+            p.join(timeout=5)
+        for q in (tasks, results):
+            q.close()
+            q.cancel_join_thread()
 
 
 def dask_client(scheduler: str | None):

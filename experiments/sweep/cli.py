@@ -91,9 +91,41 @@ def _write_plan(out: Path, config, plan, version: str) -> None:
     write_text_atomic(out / "config.toml", Path(config.source).read_text())
 
 
+def _run(records, pending: list, labels: list[str], out: Path, log: SweepLog,
+         name: str) -> dict:
+    """Store and log each record as it arrives; returns the ok/failed counts."""
+    from experiments.sweep.cells import store_record
+
+    by_key = {c.key: c for c in pending}
+    counts = {"ok": 0, "failed": 0}
+    bar = tqdm(total=len(pending), unit="cell", desc=f"sweep {name}",
+               disable=not sys.stderr.isatty() or not pending)
+    try:
+        for i, record in enumerate(records, 1):
+            record = store_record(out, record)
+            counts["ok" if record["status"] == "ok" else "failed"] += 1
+            wall = record.get("wall_seconds")
+            log.write(f"{record['status']:<8} | {i}/{len(pending)} | {record['key']} | "
+                      f"{by_key[record['key']].label(labels)} | {_metrics(record)} | "
+                      + (f"{wall:.1f} s | " if wall is not None else "")
+                      + f"pid {record.get('pid', '?')}@{record.get('host', '?')}")
+            if record["status"] != "ok":
+                tqdm.write(f"cell {record['key']} failed: {_metrics(record)}", file=sys.stderr)
+            bar.update()
+            bar.set_postfix(failed=counts["failed"], refresh=False)
+    except KeyboardInterrupt:
+        bar.close()
+        log.write(f"interrupted after {counts['ok'] + counts['failed']} cells")
+        print(f"\ninterrupted: {counts['ok'] + counts['failed']} cells stored in {out}/cells; "
+              "run the same command again to finish the rest", file=sys.stderr)
+        raise SystemExit(130) from None
+    bar.close()
+    return counts
+
+
 def run_sweep(args) -> dict:
     from experiments.sweep.backends import run_cells
-    from experiments.sweep.cells import expand, is_done, package_version, store_record
+    from experiments.sweep.cells import expand, is_done, package_version
     from experiments.sweep.config import ConfigError, load_config
     from experiments.sweep.report import write_report
 
@@ -105,39 +137,23 @@ def run_sweep(args) -> dict:
         raise ConfigError(f"{config.source}: the grids make no cells; every combination was "
                           f"skipped: {'; '.join(reasons[:3])}")
     out = Path(args.out or Path("results") / config.name)
-    out.mkdir(parents=True, exist_ok=True)
-    _write_plan(out, config, plan, package_version())
-    log = SweepLog(out / "sweep.log")
     workers = args.workers or os.cpu_count() or 1
     done = [] if args.force else [c for c in plan.cells if is_done(out, c.key)]
     finished = {c.key for c in done}
     todo = [c for c in plan.cells if c.key not in finished]
     pending = todo[:args.max_cells] if args.max_cells else todo
+    # the backend is checked (Dask: connected) before anything is written
+    records = run_cells(pending, args.backend, workers=workers, scheduler=args.scheduler)
+    out.mkdir(parents=True, exist_ok=True)
+    _write_plan(out, config, plan, package_version())
+    log = SweepLog(out / "sweep.log")
     log.write(f"sweep {config.name} from {config.source}: {len(plan.cells)} cells, "
               f"{len(done)} already finished, {len(pending)} to run, "
               f"{len(plan.skipped)} combinations skipped; backend {args.backend}"
               + (f" ({workers} workers)" if args.backend == "local" else ""))
     for s in plan.skipped:
         log.write(f"skipped  | grid {s.grid} | {dict(s.settings)} | {s.reason}")
-    records = run_cells(pending, args.backend, workers=workers, scheduler=args.scheduler)
-    labels = plan.varying()
-    by_key = {c.key: c for c in pending}
-    counts = {"ok": 0, "failed": 0}
-    bar = tqdm(total=len(pending), unit="cell", desc=f"sweep {config.name}",
-               disable=not sys.stderr.isatty() or not pending)
-    for i, record in enumerate(records, 1):
-        record = store_record(out, record)
-        counts[record["status"] if record["status"] in counts else "failed"] += 1
-        wall = record.get("wall_seconds")
-        log.write(f"{record['status']:<8} | {i}/{len(pending)} | {record['key']} | "
-                  f"{by_key[record['key']].label(labels)} | {_metrics(record)} | "
-                  + (f"{wall:.1f} s | " if wall is not None else "")
-                  + f"pid {record.get('pid', '?')}@{record.get('host', '?')}")
-        if record["status"] != "ok":
-            tqdm.write(f"cell {record['key']} failed: {_metrics(record)}", file=sys.stderr)
-        bar.update()
-        bar.set_postfix(failed=counts["failed"], refresh=False)
-    bar.close()
+    counts = _run(records, pending, plan.varying(), out, log, config.name)
     try:
         report = ({"tables": None, "csv": None, "figures": []} if args.no_report
                   else write_report(out))

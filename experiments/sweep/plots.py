@@ -8,7 +8,6 @@ import itertools
 from pathlib import Path
 
 import matplotlib
-import numpy as np
 import pandas as pd
 
 matplotlib.use("Agg")
@@ -107,14 +106,14 @@ def plot_psnr_vs_seconds(df: pd.DataFrame, style: list[str], path: Path):
     panels = list(df.groupby("task", sort=True))
     fig, axes = _panels(len(panels), width=6.5)
     for ax, (task, part) in zip(axes, panels, strict=False):
-        cold = part["cold"].fillna(False).astype(bool) if "cold" in part else False
+        cold = part["cold"].eq(True) if "cold" in part else pd.Series(False, part.index)
         for label, points in part[~cold].groupby("_label", sort=True):
             ax.scatter(points["seconds"], points["psnr"], s=28, alpha=0.75,
                        marker=markers[label], color=colours[label], label=label)
         for label, points in part[cold].groupby("_label", sort=True):
             ax.scatter(points["seconds"], points["psnr"], s=28, alpha=0.75,
                        marker=markers[label], facecolors="none", edgecolors=colours[label])
-        if np.any(cold):
+        if cold.any():
             ax.scatter([], [], marker="o", facecolors="none", edgecolors="grey",
                        label="hollow: a worker's first cell of its shape (includes compilation)")
         ax.set_xscale("log")

@@ -132,10 +132,10 @@ def summary_table(df: pd.DataFrame, settings: list[str]) -> tuple[str, dict]:
         values = values if isinstance(values, tuple) else (values,)
         row = {c: _cell(v) for c, v in zip(group, values, strict=True)}
         row.update({label: _mean_std(part[m]) for m, label in metrics})
-        if "seconds" in part and "cold" in part and (~part["cold"].fillna(False)).any():
-            row["fit s"] = _mean_std(part.loc[~part["cold"].fillna(False), "seconds"])
-        elif "seconds" in part and "cold" in part:
-            row["fit s"] = row["fit s"] + " †"
+        if "seconds" in part and "cold" in part:
+            warm = ~part["cold"].eq(True)
+            row["fit s"] = (_mean_std(part.loc[warm, "seconds"]) if warm.any()
+                            else row["fit s"] + " †")
         row["n"] = len(part)
         rows.append(row)
     return pd.DataFrame(rows).to_markdown(index=False), fixed

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from experiments.run import main
+from experiments.sweep.cells import failed_record, store_record
 from experiments.sweep.tasks import TASKS
 
 FIGURES = ("psnr_vs_components.png", "psnr_vs_seconds.png", "renders.png")
@@ -73,10 +74,14 @@ def test_report_on_a_results_folder(tmp_path, capsys):
                  "--backend", "serial"]) == 0
     for name in ("cells.csv", "tables.md", *FIGURES):
         (out / name).unlink()
+    # one cell as a worker that died leaves it: no result, no timing, no worker fields
+    key, record = sorted(_records(out).items())[0]
+    store_record(out, failed_record(key, record["settings"], "worker process 7 died", ""))
     capsys.readouterr()
     assert main(["report", str(out), "--json"]) == 0
     result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert result["cells"] == 2 and result["ok"] == 2
+    assert result["cells"] == 2 and result["ok"] == 1 and result["failed"] == 1
+    assert "worker process 7 died" in (out / "tables.md").read_text()
     assert any("forgetting" in note for note in result["notes"])
     for name in ("cells.csv", "tables.md", *FIGURES):
         assert (out / name).is_file(), name
@@ -207,6 +212,7 @@ def test_dask_backend_needs_a_scheduler(tmp_path, capsys):
     assert main(["sweep", "--config", str(config), "--out", str(tmp_path / "res"),
                  "--backend", "dask"]) == 2
     assert "--backend dask needs --scheduler" in capsys.readouterr().err
+    assert not (tmp_path / "res").exists()
 
 
 FAKE_SCENE = '''
