@@ -108,7 +108,7 @@ def expand(config: SweepConfig) -> Plan:
                 continue
             key = cell_key(verdict.settings, version)
             if key in cells:
-                why = f"same cell as {key}" + (f": {verdict.reason}" if verdict.reason else "")
+                why = f"same cell as {key}: {verdict.reason or 'the same settings twice'}"
                 skipped.append(Skipped(tuple(sorted(raw.items())), g, why))
                 continue
             cells[key] = Cell(key, tuple(sorted(verdict.settings.items())), g)

@@ -18,7 +18,16 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
-DEFAULT_CONFIG = "experiments/configs/quick.toml"
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"  # the bundled configs
+
+
+def _config_path(text: str) -> Path:
+    """A config file path, or the name of a bundled config (``quick``, ``paper``)."""
+    path = Path(text)
+    bundled = CONFIGS / f"{text}.toml"
+    if not path.exists() and path.suffix == "" and bundled.is_file():
+        return bundled
+    return path
 
 
 def _positive(text: str) -> int:
@@ -36,7 +45,10 @@ def add_sweep(sub) -> None:
 
     p = sub.add_parser("sweep", help="run a grid of cells from a TOML config (resumable), "
                        "then write tables and plots")
-    p.add_argument("--config", default=DEFAULT_CONFIG, help="sweep config (TOML)")
+    p.add_argument("--config", default="quick", type=_config_path,
+                   help="sweep config: a TOML file, or a bundled config's name "
+                        f"({', '.join(sorted(c.stem for c in CONFIGS.glob('*.toml')))}); "
+                        "default: quick")
     p.add_argument("--out", help="results folder (default: results/<config name>)")
     p.add_argument("--backend", choices=BACKENDS, default="local",
                    help="local: process pool on this machine; serial: in this process; "

@@ -151,3 +151,12 @@ def test_grids_that_make_no_cells_are_refused(tmp_path, capsys):
     assert main(["sweep", "--config", str(config), "--out", str(tmp_path / "res")]) == 2
     err = capsys.readouterr().err
     assert "the grids make no cells" in err and "the image task is VBGS only" in err
+
+
+def test_bundled_configs_by_name(tmp_path):
+    from experiments.sweep.cli import _config_path
+
+    assert _config_path("quick") == CONFIGS / "quick.toml"
+    assert _config_path("paper") == CONFIGS / "paper.toml"
+    own = tmp_path / "mine.toml"
+    assert _config_path(str(own)) == own
