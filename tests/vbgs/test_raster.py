@@ -7,7 +7,14 @@ import pytest
 
 from vbgs import raster
 from vbgs.camera import Camera, from_fov, look_at
-from vbgs.raster import ALPHA_MIN, BLUR_VARIANCE, check_dropped, rasterize, render_reference
+from vbgs.raster import (
+    ALPHA_MIN,
+    BLUR_VARIANCE,
+    check_dropped,
+    rasterize,
+    render_reference,
+    required_capacity,
+)
 from vbgs.splats import Splats, covs_from_scale_rotation
 
 TOL = 1e-4  # fast vs reference, float32
@@ -60,6 +67,8 @@ def test_dropped_counts_and_keeps_nearest():
     assert int(out.dropped) == k - capacity
     with pytest.raises(RuntimeError, match="6 splat-tile overlaps were dropped"):
         check_dropped(out)
+    assert required_capacity(splats, cam) == k
+    assert int(check_dropped(rasterize(splats, cam, capacity=k)).dropped) == 0
     # What was rendered is exactly the `capacity` nearest: the farthest have opacity 0.
     nearest = splats._replace(opacities=splats.opacities.at[: k - capacity].set(0.0))
     diffs = max_diff(out, render_reference(nearest, cam))
