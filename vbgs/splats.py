@@ -100,6 +100,7 @@ def prune(splats: Splats, keep_mask: np.ndarray) -> Splats:
 # --------------------------------------------------------------------------- #
 
 
+@jax.jit
 def rotations_from_quaternions(quats: jax.Array) -> jax.Array:
     """Rotation matrices ``[k, 3, 3]`` from quaternions ``[k, 4]`` (w, x, y, z).
 
@@ -116,6 +117,7 @@ def rotations_from_quaternions(quats: jax.Array) -> jax.Array:
     return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
 
 
+@jax.jit
 def covs_from_scale_rotation(scales: jax.Array, quats: jax.Array) -> jax.Array:
     """World covariances ``Σ = R diag(s²) Rᵀ``, ``[k, 3, 3]``.
 

@@ -68,7 +68,6 @@ def test_dropped_counts_and_keeps_nearest():
     with pytest.raises(RuntimeError, match="6 splat-tile overlaps were dropped"):
         check_dropped(out)
     assert required_capacity(splats, cam) == k
-    assert int(check_dropped(rasterize(splats, cam, capacity=k)).dropped) == 0
     # What was rendered is exactly the `capacity` nearest: the farthest have opacity 0.
     nearest = splats._replace(opacities=splats.opacities.at[: k - capacity].set(0.0))
     diffs = max_diff(out, render_reference(nearest, cam))
