@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs.data.images import pixel_centres
-from vbgs.model import Mixture, _features, chunk_size, log_joint_weights
+from vbgs.model import Mixture, _features, bucket_size, chunk_size, log_joint_weights
 
 
 @partial(jax.jit, static_argnames=("chunk",))
@@ -33,8 +33,9 @@ def expected_colour(q: Mixture, xy) -> jnp.ndarray:
     E-step's responsibilities with the colour left out."""
     x = jnp.asarray(xy, q.alpha.dtype) - q.origin
     n = x.shape[0]
-    chunk = chunk_size(n, q.n_components)
-    x = jnp.pad(x, ((0, -n % chunk), (0, 0)))
+    size = bucket_size(n)
+    x = jnp.pad(x, ((0, size - n), (0, 0)))
+    chunk = chunk_size(size, q.n_components)
     return _expected_colour(q, x, chunk)[:n]
 
 
