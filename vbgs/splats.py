@@ -245,3 +245,38 @@ def load_ply(path) -> Splats:
     )
     check_splats(splats)
     return splats
+
+
+# VBGS posteriors become splats with a fixed opacity and their expected covariance,
+# optionally scaled (the rasterizer composites; the mixture does not model occlusion).
+VBGS_OPACITY = 0.9
+VBGS_COV_SCALE = 1.0
+
+
+def from_posterior(posterior, prior, *, opacity: float = VBGS_OPACITY,
+                   cov_scale: float = VBGS_COV_SCALE, min_count: float = 0.5,
+                   drop_unused: bool = True) -> Splats:
+    """Splats from a fitted 3-D VBGS mixture (``vbgs.model.Mixture``).
+
+    means: ``E[mu_k]`` in world units; covs: ``cov_scale^2 E[Sigma_k] =
+    cov_scale^2 Psi_k / (nu_k - 4)``; colours: ``E[mu_c,k]`` clipped to [0, 1];
+    opacities: the constant ``opacity``. Components that received less than
+    ``min_count`` points' worth of data (``alpha_k - alpha0_k``) never saw the scene:
+    they are pruned, or with ``drop_unused=False`` kept with opacity 0 (the
+    rasterizer skips them), so that the splat count, and with it the compiled
+    renderer, stays the same while a stream is learned.
+    """
+    from vbgs import expfam  # local: splats stays importable without the model
+
+    if posterior.dim != 3:
+        raise ValueError(f"splats need a 3-D mixture, got a {posterior.dim}-D one")
+    if not (0.0 < opacity <= 1.0) or cov_scale <= 0:
+        raise ValueError(f"opacity must be in (0, 1] and cov_scale > 0, got {opacity}, {cov_scale}")
+    used = (posterior.alpha - prior.alpha) >= min_count
+    splats = Splats(
+        means=posterior.space.mean + posterior.origin,
+        covs=cov_scale**2 * expfam.niw_expected_covariance(posterior.space),
+        colours=jnp.clip(posterior.colour.mean, 0.0, 1.0),
+        opacities=jnp.where(used, opacity, 0.0).astype(posterior.alpha.dtype),
+    )
+    return prune(splats, np.asarray(used)) if drop_unused else splats
