@@ -34,7 +34,7 @@ that ellipse, ``(u, v) ± m_max (sqrt Σ'_uu, sqrt Σ'_vv)``, is tested against 
 tile. Unlike a fixed 3-sigma box this bound is exact, so the tiled renderer
 equals :func:`render_reference` whenever nothing is dropped. Each tile keeps the
 ``capacity`` nearest overlapping splats; the rest (the farthest) are *dropped*
-and counted in ``RenderOutput.dropped``. Check it, e.g.
+and counted in ``RenderOutput.dropped`` (once per splat and tile). Check it, e.g.
 ``assert int(out.dropped) == 0`` or call :func:`check_dropped`, and raise
 ``capacity`` (or lower ``tile``) if it is not zero; :func:`required_capacity`
 gives the smallest capacity that drops nothing for a given view.
@@ -76,7 +76,7 @@ class RenderOutput(NamedTuple):
     rgb: jax.Array  # [h, w, 3]
     depth: jax.Array  # [h, w] expected depth Σ z_i α_i T_i (not normalised)
     alpha: jax.Array  # [h, w] 1 - T_final
-    dropped: jax.Array  # [] int32, overlapping splats beyond `capacity`, summed over tiles
+    dropped: jax.Array  # [] int32 (splat, tile) overlaps left out for lack of capacity; 0: exact
 
 
 class Projected(NamedTuple):
