@@ -12,7 +12,12 @@ import pandas as pd
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
-from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter  # noqa: E402
+from matplotlib.ticker import (  # noqa: E402
+    FormatStrFormatter,
+    LogLocator,
+    MaxNLocator,
+    NullFormatter,
+)
 
 # Settings that tell lines apart (when they vary); the others are averaged over.
 LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth")
@@ -150,6 +155,7 @@ def plot_forgetting(records: list[dict], path: Path):
             ax.fill_between(stats.index, stats["mean"] - stats["std"].fillna(0),
                             stats["mean"] + stats["std"].fillna(0), alpha=0.2,
                             color=colours[label])
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("frames seen (count)")
         ax.set_ylabel("held-out PSNR of the early views (dB)")
         ax.set_title(f"{task}: {dataset}")
