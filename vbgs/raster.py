@@ -304,8 +304,12 @@ def rasterize(
     splats than ``capacity`` and its farthest ones were left out: see
     :func:`check_dropped`. The camera's ``width``/``height`` must be Python ints
     (close over the camera when wrapping this in ``jax.jit``).
+
+    background: RGB (or grey scalar) composited with T_final; tile: tile side (px);
+    capacity: splats kept per tile; near: near-plane depth for culling; blur: the
+    low-pass dilation variance (px²) added to every projected covariance.
     """
-    width, height, background = _check_inputs(splats, camera, background, tile, capacity)
+    width, height, background = _check_inputs(splats, camera, background, tile, capacity, blur)
     if splats.count == 0:
         return _empty(width, height, background)
     return _rasterize(
@@ -331,7 +335,7 @@ def required_capacity(
 ) -> int:
     """The largest number of splats overlapping one tile: the ``capacity`` at which
     :func:`rasterize` drops nothing for this view. Cheap (O(k + tiles)); not traceable."""
-    width, height, _ = _check_inputs(splats, camera, 0.0, tile, 1)
+    width, height, _ = _check_inputs(splats, camera, 0.0, tile, 1, blur)
     if splats.count == 0:
         return 0
     counts = _tile_counts(splats, camera.fx, camera.fy, camera.cx, camera.cy, camera.pose, near,
@@ -369,7 +373,7 @@ def render_reference(
     plain running product ``T <- T (1 - α_i)``. Memory and time are O(h · w · k):
     for tests only.
     """
-    width, height, background = _check_inputs(splats, camera, background, 1, 1)
+    width, height, background = _check_inputs(splats, camera, background, 1, 1, blur)
     return _render_reference(
         splats, camera.fx, camera.fy, camera.cx, camera.cy, camera.pose, background, near,
         width=width, height=height, blur=float(blur),
@@ -402,7 +406,7 @@ def _render_reference(splats, fx, fy, cx, cy, pose, background, near, *, width, 
     )
 
 
-def _check_inputs(splats, camera, background, tile, capacity):
+def _check_inputs(splats, camera, background, tile, capacity, blur=BLUR_VARIANCE):
     """Validate arguments; return static (width, height) and background as a [3] array."""
     check_splats(splats)
     if not isinstance(camera, Camera):
@@ -420,6 +424,8 @@ def _check_inputs(splats, camera, background, tile, capacity):
         raise ValueError(f"camera.pose must be [4, 4], got shape {np.shape(camera.pose)}")
     if int(tile) <= 0 or int(capacity) <= 0:
         raise ValueError(f"tile and capacity must be positive, got {tile} and {capacity}")
+    if not float(blur) >= 0:
+        raise ValueError(f"blur is a variance in px² and must be >= 0, got {blur}")
     background = jnp.asarray(background, splats.means.dtype)
     if background.shape not in ((), (3,)):
         raise ValueError(f"background must be a scalar or an RGB triple, got shape {background.shape}")
