@@ -132,6 +132,26 @@ def jsonable(value):
     return str(value)
 
 
+MAX_VIEWS = 4  # views of a multi-view image (a scene's test views) kept in its PNG
+
+
+def as_picture(image) -> np.ndarray:
+    """One image for a PNG: ``[h, w, 3]`` or ``[h, w]`` as is; a list or stack of views
+    (``[n, h, w, 3]``, ``[n, h, w]``) as its first MAX_VIEWS side by side."""
+    if isinstance(image, (list, tuple)):
+        views = [np.asarray(v, dtype=np.float32) for v in image[:MAX_VIEWS]]
+    else:
+        img = np.asarray(image, dtype=np.float32)
+        if img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (3, 4)):
+            return img
+        views = list(img[:MAX_VIEWS])
+    h = max(v.shape[0] for v in views)
+    pad = [np.pad(v, [(0, h - v.shape[0])] + [(0, 0)] * (v.ndim - 1), constant_values=1.0)
+           for v in views]
+    gap = np.ones((h, max(1, h // 16), *views[0].shape[2:]), np.float32)
+    return np.concatenate([x for v in pad for x in (v, gap)][:-1], axis=1)
+
+
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
 
@@ -165,7 +185,7 @@ def execute_cell(key: str, settings: dict) -> dict:
         images = result.pop("images", None) or {}
         record = {"key": key, "status": "ok", "settings": settings,
                   "version": package_version(), **where, "result": jsonable(result),
-                  "images": {k: np.asarray(v) for k, v in images.items()}}
+                  "images": {k: as_picture(v) for k, v in images.items()}}
     record["finished"] = _now()
     record["wall_seconds"] = time.perf_counter() - t0
     return record

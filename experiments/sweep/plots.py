@@ -191,7 +191,10 @@ def plot_renders(df: pd.DataFrame, style: list[str], out: Path, path: Path):
         return None, "no cell saved a render"
     rows = rows[:MAX_RENDER_ROWS]
     ncols = 1 + max(len(picked) for _, _, picked in rows)
-    fig, axes = plt.subplots(len(rows), ncols, figsize=(2.9 * ncols, 3.9 * len(rows)),
+    aspect = max(r.shape[1] / r.shape[0] for _, _, picked in rows for _, r in picked)
+    width = 2.9 * min(max(aspect, 1.0), 4.0)  # multi-view strips are wide
+    row_height = width / max(aspect, 1e-3) + 1.0  # the image, and room for its titles
+    fig, axes = plt.subplots(len(rows), ncols, figsize=(width * ncols, row_height * len(rows)),
                              squeeze=False)
     for (name, target, picked), axrow in zip(rows, axes, strict=True):
         for ax in axrow:
