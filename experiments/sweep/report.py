@@ -4,8 +4,10 @@
 setting, every scalar the task returned, and where and how long it ran. Lists such as
 the ELBO trace or the forgetting curve stay in ``cells/<key>.json``.
 
-``tables.md`` gives PSNR / SSIM / depth L1 as mean ± std over seeds (n = number of
-seeds), one table per task, one row per combination of the other settings. A setting a
+``tables.md`` gives PSNR / SSIM / depth L1 (and, where cells report them, forgetting =
+PSNR of the early views when seen minus at the end, seconds per frame, peak memory and
+replay-buffer size) as mean ± std over seeds (n = number of seeds), one table per task,
+one row per combination of the other settings. A setting a
 cell does not have (``assign`` for a batch fit, say) shows as "—".
 """
 
@@ -31,7 +33,9 @@ from experiments.sweep.tasks import TASKS
 GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
                "replay", "estep", "depth")
 METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("depth_l1", "depth L1"),
-           ("seconds", "fit s"), ("components_used", "used"))
+           ("forgetting_db", "forgetting (dB)"), ("seconds", "fit s"),
+           ("seconds_per_frame", "s/frame"), ("peak_memory_mb", "peak MB"),
+           ("replay_mb", "replay MB"), ("components_used", "used"))
 NOT_GROUPED = ("seed", "depth_model")  # seeds are averaged; depth_model shows as `depth`
 
 
@@ -70,6 +74,11 @@ def _row(record: dict, setting_names: set[str]) -> dict:
             continue
         if value is None or isinstance(value, (str, bool, int, float)):
             row[name] = value
+    if isinstance(row.get("early_psnr_when_seen"), (int, float)) and isinstance(
+            row.get("early_psnr_at_end"), (int, float)):
+        row["forgetting_db"] = row["early_psnr_when_seen"] - row["early_psnr_at_end"]
+    if isinstance(row.get("replay_bytes"), (int, float)):
+        row["replay_mb"] = row["replay_bytes"] / 2**20
     row["error"] = record.get("error")
     for name in ("wall_seconds", "cold", "pid", "host", "started", "finished", "version"):
         row[name] = record.get(name)
