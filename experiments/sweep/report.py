@@ -141,7 +141,7 @@ def summary_table(df: pd.DataFrame, settings: list[str]) -> tuple[str, dict]:
         values = values if isinstance(values, tuple) else (values,)
         row = {c: _cell(v) for c, v in zip(group, values, strict=True)}
         row.update({label: _mean_std(part[m]) for m, label in metrics})
-        if "seconds" in part and "cold" in part:
+        if "fit s" in row and "cold" in part:
             warm = ~part["cold"].eq(True)
             row["fit s"] = (_mean_std(part.loc[warm, "seconds"]) if warm.any()
                             else row["fit s"] + " †")
