@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import jax
+import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
@@ -71,3 +72,44 @@ def write_table(rows: list[dict], out_dir: str | Path, name: str) -> list[Path]:
     frame.assign(machine=machine()).to_csv(csv, index=False)
     md.write_text(f"Measured on: {machine()}\n\n{frame.to_markdown(index=False, floatfmt='.4g')}\n")
     return [csv, md]
+
+
+def _time_stream(prior, points, estep: str, repeats: int = 2) -> float:
+    """Median seconds per streamed frame (prior assignment) after a warm-up pass that
+    compiles every padded batch size."""
+    times = []
+    for rep in range(repeats + 1):
+        state = model.start(prior)
+        for xyz, rgb in points:
+            t0 = time.perf_counter()
+            state, _ = model.update(state, xyz, rgb, assign="prior", estep=estep)
+            _block(state.stats.count)
+            if rep:
+                times.append(time.perf_counter() - t0)
+    return float(sorted(times)[len(times) // 2])
+
+
+def bench_estep(components, *, size: int = 128, frames: int = 60, timing_frames: int = 6,
+                progress: bool = False) -> list[dict]:
+    """Dense against sparse E-step on the object scene: seconds per frame (warm) and
+    the held-out PSNR of the full stream (data init, prior assignment)."""
+    from experiments.scene_task import SceneTask, VbgsLearner, frame_points, run_scene
+    from vbgs.data.synthetic import object_scene
+
+    scene = object_scene(size=size, n_train=frames, n_test=8, seed=0)
+    points = [frame_points(f) for f in scene.train[:timing_frames]]
+    rows = []
+    for k in tqdm(components, desc="bench estep", disable=not progress):
+        task = SceneTask(components=k, size=size, frames=frames, init="data")
+        prior = VbgsLearner(task, scene).prior
+        row = {"size": size, "components": k,
+               "points_per_frame": int(np.mean([len(p[0]) for p in points]))}
+        for estep in ("dense", "sparse"):
+            row[f"{estep}_s_per_frame"] = _time_stream(prior, points, estep)
+            result = run_scene(SceneTask(components=k, size=size, frames=frames, init="data",
+                                         estep=estep))
+            row[f"{estep}_psnr"] = result["psnr"]
+        row["speedup"] = row["dense_s_per_frame"] / row["sparse_s_per_frame"]
+        row["psnr_gap_db"] = row["sparse_psnr"] - row["dense_psnr"]
+        rows.append(row)
+    return rows

@@ -33,6 +33,8 @@ class ImageTask:
     assign: str = "prior"
     patch: int = 8
     reassign: bool = True  # batch fits re-seed unused components (streams: opt-in)
+    method: str = "vbgs"  # vbgs | gradient
+    steps: int = 2000  # gradient baseline only: optimiser steps
     prior: model.PriorConfig = model.PriorConfig()
 
     def __post_init__(self):
@@ -42,11 +44,17 @@ class ImageTask:
             raise ValueError(f"components must be a positive integer, got {self.components!r}")
         if not isinstance(self.iters, int) or self.iters < 1:
             raise ValueError(f"iters must be a positive integer, got {self.iters!r}")
+        if self.method not in ("vbgs", "gradient"):
+            raise ValueError(f"unknown method {self.method!r}: use 'vbgs' or 'gradient'")
 
 
 def run_image(task: ImageTask, *, progress: bool = False) -> dict:
     """Fit, render and score; returns the metrics, the settings, the ELBO trace and
     (under ``"images"``) the target and render for plotting."""
+    if task.method == "gradient":
+        from experiments.gradient_task import run_gradient_image
+
+        return run_gradient_image(task, progress=progress, steps=task.steps)
     img = load_image(task.image, task.size)
     h, w, _ = img.shape
     uv, rgb = image_to_points(img)
