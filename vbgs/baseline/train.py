@@ -1,0 +1,245 @@
+"""Optimiser, jitted training step and training loop of the gradient 3DGS baseline.
+
+Adam (``eps = 1e-15`` as in 3DGS) followed by a per-parameter learning rate, the 3DGS
+defaults:
+
+    means        1.6e-4 · extent, decaying exponentially to 1.6e-6 · extent:
+                 lr(t) = lr_0 (lr_1 / lr_0)^(min(t, T) / T),  T = lr_decay_steps
+    colours      2.5e-3 (3DGS's feature rate, here on colour logits, see params.py)
+    opacities    5e-2 (on logits)
+    scales       5e-3 (on log-scales)
+    rotations    1e-3 (on quaternions)
+
+``extent`` is the scene size that makes the position rate unit-free; for scenes use
+:func:`camera_extent` (3DGS: 1.1 × the largest distance of a camera centre from their
+mean). 3DGS decays over 30k steps; a short CPU run should set ``lr_decay_steps`` to the
+number of steps it will take, so the schedule keeps its shape.
+
+The step takes the frame and its camera as arrays (``rgb, depth, fx, fy, cx, cy,
+pose``): only the image size is static, so one compiled step serves every frame of a
+scene (check with ``step._cache_size()``).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from vbgs.baseline.densify import DensifyConfig, relocate
+from vbgs.baseline.loss import SSIM_LAMBDA, frame_loss
+from vbgs.baseline.params import Params, to_splats, trainable
+from vbgs.camera import Camera
+from vbgs.raster import DEFAULT_CAPACITY, DEFAULT_TILE, rasterize
+
+CAMERA_EXTENT_MARGIN = 1.1  # 3DGS enlarges the camera radius by 10%
+ADAM_EPS = 1e-15  # 3DGS's Adam epsilon
+STEP_CACHE_SIZE = 8  # compiled steps kept for reuse by later trainers
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Hyperparameters of the baseline trainer (3DGS defaults; see the module docstring)."""
+
+    lr_means: float = 1.6e-4  # × extent
+    lr_means_final: float = 1.6e-6  # × extent
+    lr_decay_steps: int = 30_000
+    lr_colours: float = 2.5e-3
+    lr_opacity: float = 5e-2
+    lr_scales: float = 5e-3
+    lr_rotations: float = 1e-3
+    adam_eps: float = ADAM_EPS
+    ssim_weight: float = SSIM_LAMBDA
+    depth_weight: float = 0.0  # weight of the masked depth L1 (0: RGB only, as 3DGS)
+    densify: DensifyConfig | None = field(default_factory=DensifyConfig)  # None: off
+    tile: int = DEFAULT_TILE
+    raster_capacity: int = DEFAULT_CAPACITY
+
+    def __post_init__(self):
+        if self.lr_decay_steps < 1:
+            raise ValueError(f"lr_decay_steps must be >= 1, got {self.lr_decay_steps}")
+
+
+def camera_extent(positions) -> float:
+    """3DGS's scene extent: 1.1 × max distance of camera centres ``[n, 3]`` from their mean
+    (1.1 when there is a single camera)."""
+    pos = np.asarray(positions, np.float64).reshape(-1, 3)
+    radius = float(np.linalg.norm(pos - pos.mean(0), axis=1).max(initial=0.0))
+    return CAMERA_EXTENT_MARGIN * (radius if radius > 0 else 1.0)
+
+
+def learning_rates(config: TrainConfig, extent: float) -> Params:
+    """Per-parameter learning rates (schedules of the step count), shaped like Params."""
+    means = optax.exponential_decay(
+        init_value=config.lr_means * extent, transition_steps=config.lr_decay_steps,
+        decay_rate=config.lr_means_final / config.lr_means,
+        end_value=config.lr_means_final * extent,
+    )
+    return Params(means, config.lr_scales, config.lr_rotations, config.lr_opacity,
+                  config.lr_colours, None)
+
+
+class LearningRateState(NamedTuple):
+    count: jax.Array  # [] int32 steps taken
+
+
+def scale_by_learning_rates(rates: Params) -> optax.GradientTransformation:
+    """``u_leaf <- -lr_leaf(t) · u_leaf`` with a float or schedule per Params field."""
+
+    def init(_params):
+        return LearningRateState(jnp.zeros((), jnp.int32))
+
+    def update(updates, state, params=None):
+        del params
+
+        def scale(u, lr):
+            return -(lr(state.count) if callable(lr) else lr) * u
+
+        return jax.tree.map(scale, updates, rates), LearningRateState(state.count + 1)
+
+    return optax.GradientTransformation(init, update)
+
+
+def make_optimizer(config: TrainConfig, extent: float) -> optax.GradientTransformation:
+    """Adam with the per-parameter 3DGS learning rates, over :func:`trainable` params."""
+    return optax.chain(optax.scale_by_adam(eps=config.adam_eps),
+                       scale_by_learning_rates(learning_rates(config, extent)))
+
+
+def reset_moments(opt_state, rows: jax.Array):
+    """Zero Adam's first and second moments of the rows ``rows [K]`` (bool)."""
+    adam, rest = opt_state[0], opt_state[1:]
+
+    def zero(x):
+        return jnp.where(rows.reshape((-1,) + (1,) * (x.ndim - 1)), 0.0, x)
+
+    adam = adam._replace(mu=jax.tree.map(zero, adam.mu), nu=jax.tree.map(zero, adam.nu))
+    return (adam, *rest)
+
+
+def gradient_score(opt_state) -> jax.Array:
+    """``sqrt(Σ_d ν_means)`` per row ``[K]``: Adam's running RMS of the position gradient."""
+    return jnp.sqrt(jnp.sum(opt_state[0].nu.means, axis=-1))
+
+
+class FrameArrays(NamedTuple):
+    """A frame as the step consumes it: arrays only, float32."""
+
+    rgb: jax.Array  # [h, w, 3]
+    depth: jax.Array  # [h, w] 0 = invalid
+    fx: jax.Array  # []
+    fy: jax.Array
+    cx: jax.Array
+    cy: jax.Array
+    pose: jax.Array  # [4, 4] camera-to-world
+
+
+def frame_arrays(frame) -> FrameArrays:
+    """A :class:`vbgs.data.scene.Frame` (rgb, depth, camera) as :class:`FrameArrays`."""
+    cam = frame.camera
+    f32 = jnp.float32
+    return FrameArrays(jnp.asarray(frame.rgb, f32), jnp.asarray(frame.depth, f32),
+                       *(jnp.asarray(v, f32) for v in (cam.fx, cam.fy, cam.cx, cam.cy)),
+                       jnp.asarray(cam.pose, f32))
+
+
+def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, background,
+              *, on_trace=None):
+    """The jitted ``step(params, opt_state, rgb, depth, fx, fy, cx, cy, pose) ->
+    (params, opt_state, loss)``: render, :func:`vbgs.baseline.loss.frame_loss`, one
+    optimiser update. ``on_trace()`` (optional) is called each time it is traced."""
+    background = jnp.broadcast_to(jnp.asarray(background, jnp.float32), (3,))
+
+    def loss_fn(theta: Params, active, rgb, depth, camera: Camera):
+        out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
+                        tile=config.tile, capacity=config.raster_capacity)
+        return frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
+                          depth_weight=config.depth_weight)
+
+    @jax.jit
+    def step(params: Params, opt_state, rgb, depth, fx, fy, cx, cy, pose):
+        if on_trace is not None:
+            on_trace()
+        height, width = rgb.shape[:2]  # static: one compile per image size
+        camera = Camera(fx, fy, cx, cy, int(width), int(height), pose)
+        theta = trainable(params)
+        loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera)
+        updates, opt_state = optimizer.update(grads, opt_state, theta)
+        theta = optax.apply_updates(theta, updates)
+        return theta._replace(active=params.active), opt_state, loss
+
+    return step
+
+
+@functools.lru_cache(maxsize=STEP_CACHE_SIZE)
+def _optimizer_and_step(config, extent, background, make_step_fn):
+    """Optimiser and jitted step, shared by trainers with equal settings so that a new
+    trainer (a new sweep cell, a new learner) reuses the compiled step."""
+    optimizer = make_optimizer(config, extent)
+    return optimizer, make_step_fn(config, optimizer, background)
+
+
+class TrainState(NamedTuple):
+    """What the training loop carries."""
+
+    params: Params
+    opt_state: optax.OptState
+    step: int  # steps taken (host int: it schedules densification)
+    key: jax.Array
+
+
+class Trainer:
+    """The baseline's training loop: draws frames, steps, densifies on schedule.
+
+    ``state = trainer.init(params, key=key)``; ``state, losses = trainer.train(state,
+    frames, n_steps)`` with each step's frame drawn uniformly from ``frames``.
+    ``make_step_fn(config, optimizer, background)`` builds the step (default
+    :func:`make_step`; the 2-D image trainer passes its own).
+    """
+
+    def __init__(self, config: TrainConfig, *, extent: float, background=None,
+                 make_step_fn=make_step):
+        self.config = config
+        if background is not None:
+            background = tuple(float(b) for b in np.broadcast_to(background, (3,)))
+        self.optimizer, self.step_fn = _optimizer_and_step(config, float(extent), background,
+                                                           make_step_fn)
+
+    def init(self, params: Params, *, key: jax.Array) -> TrainState:
+        return TrainState(params, self.optimizer.init(trainable(params)), 0, key)
+
+    def densify(self, state: TrainState) -> TrainState:
+        """One relocation round (:func:`vbgs.baseline.densify.relocate`), moments reset."""
+        dcfg = self.config.densify
+        key, sub = jax.random.split(state.key)
+        score = gradient_score(state.opt_state) if dcfg.sample_by == "gradient" else None
+        params, changed = relocate(state.params, sub, score, config=dcfg)
+        return state._replace(params=params, opt_state=reset_moments(state.opt_state, changed),
+                              key=key)
+
+    def train(self, state: TrainState, frames: list, n_steps: int) -> tuple[TrainState, np.ndarray]:
+        """``n_steps`` steps, each on a frame drawn uniformly from ``frames`` (Frames, or
+        tuples of arrays such as FrameArrays, passed to the step as ``*args``); returns
+        the new state and the losses ``[n_steps]``."""
+        if not frames:
+            raise ValueError("no frames to train on")
+        arrays = [f if isinstance(f, tuple) and not hasattr(f, "camera") else frame_arrays(f)
+                  for f in frames]
+        key, sub = jax.random.split(state.key)
+        picks = np.asarray(jax.random.randint(sub, (n_steps,), 0, len(arrays)))
+        state = state._replace(key=key)
+        losses = []
+        params, opt_state = state.params, state.opt_state
+        for i in picks:
+            params, opt_state, loss = self.step_fn(params, opt_state, *arrays[int(i)])
+            losses.append(loss)
+            state = state._replace(params=params, opt_state=opt_state, step=state.step + 1)
+            if self.config.densify is not None and self.config.densify.due(state.step):
+                state = self.densify(state)
+                params, opt_state = state.params, state.opt_state
+        return state, np.asarray(jnp.stack(losses)) if losses else np.zeros(0, np.float32)
