@@ -1,5 +1,8 @@
 """Small ONNX graphs built with ``onnx.helper`` for testing the depth adapter.
 
+Needs the ``onnx`` package (the ``test`` extra); this module is imported only by the
+tests and by the RGB-only study (``python -m experiments.run depth-study``).
+
 Every builder returns an ``onnx.ModelProto``; pass ``model.SerializeToString()`` to
 ``depth.OnnxDepth`` or ``onnx.save(model, path)`` for the CLI.
 

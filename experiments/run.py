@@ -5,7 +5,8 @@ Commands:
   fit-scene   learn a 3-D splat from a stream of RGB-D frames, score held-out views
   sweep       run a grid of cells from a TOML config (resumable), then report
   report      tables and plots from a sweep's results folder
-  bench       benchmarks: image, estep, raster, update, depth
+  depth-study sensor depth against estimated depth (RGB-only path), per method
+  bench       benchmarks: image, estep, raster, depth
 """
 
 from __future__ import annotations
@@ -107,6 +108,30 @@ def _fit_scene(args) -> dict:
     return result
 
 
+def _add_depth_study(sub):
+    p = sub.add_parser("depth-study", help="sensor vs estimated depth (ONNX test model)")
+    p.add_argument("--scene", default="object")
+    p.add_argument("--components", type=int, default=20000)
+    p.add_argument("--frames", type=int, default=60)
+    p.add_argument("--size", type=int, default=128)
+    p.add_argument("--methods", nargs="+", choices=["vbgs", "gradient"],
+                   default=["vbgs", "gradient"])
+    p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
+    p.add_argument("--out", default="results/depth_study")
+    p.add_argument("--json", action="store_true")
+
+
+def _depth_study(args) -> dict:
+    from experiments.bench import write_table
+    from experiments.depth_study import run_depth_study
+
+    rows = run_depth_study(args.out, methods=args.methods, progress=sys.stderr.isatty(),
+                           scene=args.scene, components=args.components, frames=args.frames,
+                           size=args.size, init="data", steps_per_frame=args.steps_per_frame)
+    paths = write_table(rows, args.out, "depth_study")
+    return {"rows": rows, "files": [str(p) for p in paths]}
+
+
 def _add_bench(sub):
     p = sub.add_parser("bench", help="benchmarks; figures are printed and written as CSV/markdown")
     p.add_argument("target", choices=["image", "estep", "raster", "depth"],
@@ -146,7 +171,7 @@ def _bench(args) -> dict:
 
 
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
-            "bench": (_add_bench, _bench),
+            "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "sweep": (add_sweep, run_sweep), "report": (add_report, run_report)}
 
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from depth import Alignment, OnnxDepth, align, apply, median_scale, scale_shift
-from tests.depth.onnx_models import depth_lookup_model, distorted_depth
+from depth.testing import depth_lookup_model, distorted_depth
 
 H, W = 96, 128
 FRACTION = 0.01  # of the pixels carry reference depth

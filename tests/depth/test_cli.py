@@ -7,7 +7,7 @@ import pytest
 from skimage import io as skio
 
 from depth.cli import PREVIEW_NAME, main
-from tests.depth.onnx_models import depth_lookup_model
+from depth.testing import depth_lookup_model
 from vbgs.data.depth_png import read_depth_png, write_depth_png
 
 N_FRAMES, H, W = 3, 24, 32
