@@ -113,7 +113,8 @@ def init_params(
     opacity: float = INIT_OPACITY,
 ) -> Params:
     """Params for ``n`` splats at ``means [n, d]`` with ``colours [n, 3]`` in [0, 1] and
-    isotropic standard deviations ``scales [n]`` (or per axis ``[n, d]``).
+    standard deviations ``scales``: one for all (scalar), isotropic ``[n]`` or per axis
+    ``[n, d]``.
 
     capacity: rows K >= n (default n); rows past n are copies of row 0 marked
     inactive. active: ``[n]`` bool (default all True). Rotations start at the identity.
@@ -125,7 +126,8 @@ def init_params(
     capacity = n if capacity is None else int(capacity)
     if capacity < n:
         raise ValueError(f"capacity {capacity} is smaller than the {n} splats given")
-    scales = jnp.broadcast_to(jnp.asarray(scales, jnp.float32).reshape(n, -1), (n, d))
+    scales = jnp.asarray(scales, jnp.float32)
+    scales = jnp.broadcast_to(scales[:, None] if scales.ndim == 1 else scales, (n, d))
     cols = jnp.clip(jnp.asarray(colours, jnp.float32), COLOUR_EPS, 1.0 - COLOUR_EPS)
     if cols.shape != (n, 3):
         raise ValueError(f"colours must be [{n}, 3], got {cols.shape}")

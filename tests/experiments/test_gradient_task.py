@@ -1,0 +1,80 @@
+"""The gradient baseline on the scene and image tasks: result keys, replay bytes, init."""
+
+import math
+
+import numpy as np
+import pytest
+
+from experiments.gradient_task import GradientLearner, run_gradient_image, run_gradient_scene
+from experiments.image_task import ImageTask
+from experiments.scene_task import SceneTask, VbgsLearner, prepare_scene, task_settings
+
+# What stream_protocol adds to the settings (the keys run_scene returns for VBGS).
+PROTOCOL_KEYS = {
+    "psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "peak_memory_mb",
+    "components_used", "replay_bytes", "early_views", "early_psnr_when_seen",
+    "early_psnr_at_end", "forgetting_curve", "dropped", "images",
+}
+NUMBERS = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "peak_memory_mb")
+FRAME_BYTES = 32 * 32 * (3 + 1) * 4  # rgb + depth, float32
+
+
+def tiny_task(**kw) -> SceneTask:
+    settings = dict(method="gradient", size=32, frames=6, n_test=2, components=300,
+                    steps_per_frame=5, init="data")
+    return SceneTask(**{**settings, **kw})
+
+
+def check_keys(result, task):
+    expected = PROTOCOL_KEYS | set(task_settings(task)) | {"depth_source"}
+    assert expected <= set(result), expected - set(result)
+    for name in NUMBERS:
+        assert math.isfinite(result[name]), (name, result[name])
+    assert len(result["images"]["render"]) == task.n_test
+
+
+@pytest.mark.parametrize("replay, frames_held", [("none", 0), ("full", 6)])
+def test_continual_run_returns_every_key(replay, frames_held):
+    task = tiny_task(replay=replay)
+    result = run_gradient_scene(task)
+    check_keys(result, task)
+    assert result["replay_bytes"] == frames_held * FRAME_BYTES
+    assert math.isfinite(result["early_psnr_when_seen"]) and math.isfinite(
+        result["early_psnr_at_end"])
+    assert len(result["forgetting_curve"]) >= 2
+    assert result["steps_total"] == 6 * 5 and 0 < result["components_used"] <= 300
+
+
+def test_static_run_has_no_forgetting_metrics():
+    task = tiny_task(protocol="static", steps=30)
+    result = run_gradient_scene(task)
+    check_keys(result, task)
+    assert result["early_psnr_when_seen"] is None and result["forgetting_curve"] is None
+    assert result["steps_total"] == 30 and result["replay_bytes"] == 0
+
+
+def test_gradient_learner_starts_where_vbgs_starts():
+    task = tiny_task()
+    scene, _ = prepare_scene(task)
+    vbgs_prior = VbgsLearner(task, scene).prior
+    params = GradientLearner(task, scene).state.params
+    np.testing.assert_allclose(params.means, vbgs_prior.space.mean + vbgs_prior.origin,
+                               rtol=1e-6)
+
+
+@pytest.mark.parametrize("change, match", [
+    (dict(protocol="batch"), "unknown protocol"), (dict(replay="fifo"), "needs a size"),
+])
+def test_bad_settings_fail_before_any_work(change, match):
+    with pytest.raises(ValueError, match=match):
+        run_gradient_scene(tiny_task(**change))
+
+
+def test_image_run_has_the_image_task_keys():
+    task = ImageTask(size=16, components=60)
+    result = run_gradient_image(task, steps=30)
+    for key in ("psnr", "ssim", "seconds", "components_used", "elbo", "images", "height",
+                "width", "loss"):
+        assert key in result
+    assert result["elbo"] == [] and len(result["loss"]) == 30
+    assert math.isfinite(result["psnr"]) and result["images"]["render"].shape == (16, 16, 3)
