@@ -45,8 +45,8 @@ def _streamed_image(s: dict) -> bool:
 
 RULES: tuple[Rule, ...] = (
     # setting       when                                    effect  reason
-    Rule("method", lambda s: s["task"] == "image" and _gradient(s), SKIP,
-         "the image task is VBGS only (no gradient baseline for photos)"),
+    Rule("method", lambda s: _streamed_image(s) and _gradient(s), SKIP,
+         "patch streams are VBGS only (the gradient image baseline fits all pixels at once)"),
     Rule("replay", lambda s: not _gradient(s) and s.get("replay", "none") != "none", SKIP,
          "replay buffers belong to the gradient baseline; VBGS streams without one"),
     Rule("dataset", lambda s: not TASKS[s["task"]].dataset_exists(s["dataset"]), SKIP,
@@ -65,6 +65,11 @@ RULES: tuple[Rule, ...] = (
     Rule("assign", _batch_image, DROP, "a batch image fit iterates CAVI on all pixels"),
     Rule("patch", _batch_image, DROP, "patches exist only in patch streams"),
     Rule("iters", _streamed_image, DROP, "a patch stream makes one pass over the patches"),
+    Rule("iters", lambda s: s["task"] == "image" and _gradient(s), DROP,
+         "the gradient image baseline runs `steps` optimiser steps, not CAVI iterations"),
+    Rule("steps_per_frame", lambda s: s["task"] == "image", DROP,
+         "an image has no frames"),
+    Rule("protocol", lambda s: s["task"] == "image", DROP, "an image has no frame stream"),
 )
 
 

@@ -18,18 +18,22 @@ def _config(**grid):
 
 
 def test_quick_config_parses_and_expands():
+    """The default sweep covers what the README promises: both tasks, both methods, two
+    component counts, both inits, three stream orders, both assignment modes, two seeds."""
     config = load_config(CONFIGS / "quick.toml")
-    assert config.name == "quick" and len(config.grids) == 2
+    assert config.name == "quick"
     plan = expand(config)
     cells = [c.as_dict() for c in plan.cells]
-    assert len(cells) == 112 and not plan.skipped
-    values = {k: {c[k] for c in cells if k in c} for k in ("init", "components", "order",
-                                                          "assign", "seed", "dataset")}
+    assert not plan.skipped
+    values = {k: {c[k] for c in cells if k in c} for k in ("task", "init", "components",
+                                                          "order", "assign", "seed", "dataset")}
+    assert values["task"] == {"image", "scene"}
+    assert {c.get("method", "vbgs") for c in cells} == {"vbgs", "gradient"}
     assert values["init"] == {"random", "data"} and len(values["components"]) >= 2
     assert values["order"] == {"sequential", "shuffled", "reversed"}
     assert values["assign"] == {"prior", "posterior"} and values["seed"] == {0, 1}
-    assert len(values["dataset"]) >= 2
-    assert all(c["stream"] == "patches" for c in cells if "order" in c)
+    assert len(values["dataset"]) >= 3
+    assert all(c["stream"] == "patches" for c in cells if c["task"] == "image" and "order" in c)
 
 
 @pytest.mark.skipif(importlib.util.find_spec("experiments.scene_task") is None,
@@ -127,12 +131,11 @@ def test_rules_skip_invalid_and_collapse_settings_that_do_not_apply():
     cells = [c.as_dict() for c in plan.cells]
     batch = [c for c in cells if c["stream"] == "none"]
     stream = [c for c in cells if c["stream"] == "patches"]
-    assert len(batch) == 1 and "order" not in batch[0] and "assign" not in batch[0]
-    assert batch[0]["method"] == "vbgs"
+    assert len(batch) == 2 and all("order" not in c and "assign" not in c for c in batch)
+    assert {c["method"] for c in batch} == {"vbgs", "gradient"}
     assert len(stream) == 4 and all("iters" not in c for c in stream)
     reasons = [s.reason for s in plan.skipped]
-    assert sum("image task is VBGS only" in r for r in reasons) == 6
-    assert sum(r.startswith("same cell as") and "order dropped" in r for r in reasons) == 5
+    assert sum(r.startswith("same cell as") and "order dropped" in r for r in reasons) == 10
     assert sum("iters dropped" in r for r in reasons) == 4
     assert len(cells) + len(plan.skipped) == 6 * 2 + 2 * 2 * 2
 
@@ -147,10 +150,10 @@ def test_cell_key_is_stable_and_depends_on_settings_and_version():
 def test_grids_that_make_no_cells_are_refused(tmp_path, capsys):
     config = tmp_path / "none.toml"
     config.write_text('name = "none"\n[[grid]]\ntask = "image"\ndataset = "astronaut"\n'
-                      'method = "gradient"\n')
+                      'method = "gradient"\nstream = "patches"\n')
     assert main(["sweep", "--config", str(config), "--out", str(tmp_path / "res")]) == 2
     err = capsys.readouterr().err
-    assert "the grids make no cells" in err and "the image task is VBGS only" in err
+    assert "the grids make no cells" in err and "patch streams are VBGS only" in err
 
 
 def test_bundled_configs_by_name(tmp_path):
