@@ -56,7 +56,7 @@ def bench_image(sizes, components, *, iters: int = 3, image: str = "astronaut",
             _block(state)
         per_iter = (time.perf_counter() - t0) / iters
         rows.append({
-            "size": size, "pixels": size * size, "components": k,
+            "size": size, "components": k,
             "seconds_per_iter": per_iter, "first_call_s": compile_s,
             f"psnr_after_{iters + 1}_iters": psnr(render_image(state.posterior, size, size), img),
         })
