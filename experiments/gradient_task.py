@@ -15,7 +15,8 @@ with Adam on rendered frames:
   training time divided by the number of training frames).
 
 The learning-rate decay spans the whole run (``frames · steps_per_frame`` or
-``steps``), so a short CPU run keeps the 3DGS schedule's shape.
+``steps``), so a short CPU run keeps the 3DGS schedule's shape. Scenes add the depth
+L1 term (weight SCENE_DEPTH_WEIGHT) to 3DGS's photometric loss.
 
 Images. :func:`run_gradient_image` fits 2-D Gaussians to a photo with the same
 trainer (normalised render as VBGS's, see :mod:`vbgs.baseline.image`).
@@ -63,7 +64,11 @@ from vbgs.splats import Splats, prune, save_ply
 PROTOCOLS = ("continual", "static")
 TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
 PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates
-DEFAULT_CONFIG = TrainConfig()  # 3DGS defaults; lr_decay_steps is set per run
+# The depth L1 term is on for scenes: the baseline sees the depth VBGS sees. Measured on
+# the object scene (64 px, 5k splats, 30 frames, 600 static steps): weight 0.1 vs 0 gave
+# PSNR 21.44 vs 21.32 and depth L1 0.077 vs 0.093.
+SCENE_DEPTH_WEIGHT = 0.1
+DEFAULT_CONFIG = TrainConfig(depth_weight=SCENE_DEPTH_WEIGHT)  # lr_decay_steps set per run
 
 
 def total_steps(task, scene: Scene) -> int:
@@ -192,7 +197,7 @@ def run_gradient_image(task: ImageTask, *, steps: int = IMAGE_STEPS, progress: b
     prior = model.init(uv, rgb, task.components, key=k_init, scheme=task.init, config=task.prior)
     bar = tqdm(total=steps, desc="Adam", unit="step", disable=not progress, leave=False)
     start = time.perf_counter()
-    config = replace(config or DEFAULT_CONFIG, lr_decay_steps=steps)
+    config = replace(config or TrainConfig(), lr_decay_steps=steps)  # images have no depth
     params, losses = fit_image(params_from_prior(prior), img, steps=steps, config=config,
                                key=k_fit, callback=lambda n: bar.update(n - bar.n))
     render = np.clip(np.asarray(render_image_params(params, h, w)), 0.0, 1.0)

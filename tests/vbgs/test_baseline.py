@@ -122,7 +122,8 @@ def test_loss_decreases_and_the_step_compiles_once(tiny):
     so a test session compiles this step once for both files.)
     """
     scene, _, params, extent = tiny
-    trainer = Trainer(TrainConfig(lr_decay_steps=30), extent=extent, background=scene.background)
+    cfg = TrainConfig(lr_decay_steps=30, depth_weight=0.1)
+    trainer = Trainer(cfg, extent=extent, background=scene.background)
     state = trainer.init(params, key=jax.random.key(1))
     before = _mean_loss(state.params, scene.train, scene.background)
     state, first = trainer.train(state, scene.train, 15)

@@ -79,6 +79,8 @@ def relocate(params: Params, key: jax.Array, score: jax.Array | None = None, *,
     score: ``[K]`` non-negative sampling weights for ``sample_by="gradient"``.
     With no live splat nothing changes.
     """
+    if config.sample_by == "gradient" and score is None:
+        raise ValueError("sample_by='gradient' needs a score [K] (e.g. train.gradient_score)")
     k_src, k_noise = jax.random.split(key)
     opac = jax.nn.sigmoid(params.opacity_logits)  # [K]
     live = params.active & (opac >= config.dead_opacity)
