@@ -97,17 +97,22 @@ def load_session(model, providers=None, session_options=None):
         raise ValueError(f"onnxruntime could not load the model {where}: {err}") from err
 
 
+def _by_name(args, name: str, kind: str):
+    """The model input or output (``kind``) called ``name``, or a clear error."""
+    named = [a for a in args if a.name == name]
+    if not named:
+        raise ValueError(
+            f"{kind}_name={name!r} is not an {kind} of the model; {kind}s: "
+            f"{[a.name for a in args]}"
+        )
+    return named[0]
+
+
 def _pick_image_input(inputs, input_name: str | None):
     if not inputs:
         raise ValueError("the ONNX model has no inputs; a depth model must take an image batch")
     if input_name is not None:
-        named = [a for a in inputs if a.name == input_name]
-        if not named:
-            raise ValueError(
-                f"input_name={input_name!r} is not an input of the model; inputs: "
-                f"{[a.name for a in inputs]}"
-            )
-        return named[0]
+        return _by_name(inputs, input_name, "input")
     floats = [a for a in inputs if a.type in FLOAT_TYPES]
     if not floats:
         raise ValueError(
@@ -159,13 +164,7 @@ def _pick_output(outputs, output_name: str | None):
         raise ValueError("the ONNX model has no outputs")
     if output_name is None:
         return outputs[0]
-    named = [a for a in outputs if a.name == output_name]
-    if not named:
-        raise ValueError(
-            f"output_name={output_name!r} is not an output of the model; outputs: "
-            f"{[a.name for a in outputs]}"
-        )
-    return named[0]
+    return _by_name(outputs, output_name, "output")
 
 
 def _output_squeeze_axis(arg) -> int | None:
