@@ -174,7 +174,8 @@ def stream_protocol(task, scene: Scene, learner, *, progress: bool = False,
     ``replay_bytes``; the same protocol serves VBGS and the gradient baseline.
     """
     order = stream_order(len(scene.train), task.order, seed=task.seed)
-    early = [scene.test[i] for i in early_views(scene, order)]
+    early_idx = early_views(scene, order)
+    early = [scene.test[i] for i in early_idx]
     n_early = max(1, int(round(EARLY_FRACTION * len(order))))
     checkpoints = set(np.linspace(n_early, len(order), CURVE_POINTS).round().astype(int))
     curve, frame_seconds = [], []
@@ -198,7 +199,7 @@ def stream_protocol(task, scene: Scene, learner, *, progress: bool = False,
         "peak_memory_mb": peak_memory_mb(),
         "components_used": kept.count,
         "replay_bytes": int(learner.replay_bytes),
-        "early_views": early_views(scene, order),
+        "early_views": early_idx,
         "early_psnr_when_seen": curve[0][1],
         "early_psnr_at_end": curve[-1][1],
         "forgetting_curve": curve,
