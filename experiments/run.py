@@ -6,6 +6,7 @@ Commands:
   sweep       run a grid of cells from a TOML config (resumable), then report
   report      tables and plots from a sweep's results folder
   depth-study sensor depth against estimated depth (RGB-only path), per method
+  oracle      render splats built from a view's ground truth: is the renderer right here?
   bench       benchmarks: image, estep, raster, depth
 """
 
@@ -132,6 +133,29 @@ def _depth_study(args) -> dict:
     return {"rows": rows, "files": [str(p) for p in paths]}
 
 
+def _add_oracle(sub):
+    p = sub.add_parser("oracle", help="splats from a view's ground truth, rendered back (the "
+                                      "renderer's check, apart from any learner)")
+    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    p.add_argument("--format", choices=["blender", "replica", "tum"], default=None)
+    p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
+    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    p.add_argument("--view", type=int, default=0, help="source training frame")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _oracle(args) -> dict:
+    from dataclasses import asdict
+
+    from experiments.oracle import oracle_score
+    from experiments.scene_task import SceneTask, load_task_scene
+
+    task = SceneTask(scene=args.scene, format=args.format, frames=args.frames, n_test=1,
+                     size=args.size, seed=args.seed)
+    return {"scene": args.scene, **asdict(oracle_score(load_task_scene(task), args.view))}
+
+
 def _add_bench(sub):
     p = sub.add_parser("bench", help="benchmarks; figures are printed and written as CSV/markdown")
     p.add_argument("target", choices=["image", "estep", "raster", "depth"],
@@ -172,6 +196,7 @@ def _bench(args) -> dict:
 
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
+            "oracle": (_add_oracle, _oracle),
             "sweep": (add_sweep, run_sweep), "report": (add_report, run_report)}
 
 

@@ -11,7 +11,25 @@ mean ``t = W μ + b`` (depth ``z = t_z``). Its image is the 2-D Gaussian with me
 
 J being the Jacobian of the perspective projection at t; the added
 ``BLUR_VARIANCE`` (px²) is the usual low-pass dilation that keeps every splat at
-least about a pixel wide. Splats with ``z <= near`` are culled.
+least about a pixel wide.
+
+Where splats may be (the camera inside a room sees splats beside and behind it):
+
+* **near plane**: splats with ``z <= near`` (default ``NEAR`` = 0.2 scene units,
+  as 3DGS) are culled; close to the camera the linearisation behind J breaks down.
+* **clamped Jacobian**: J is evaluated at ``t_x / z, t_y / z`` clamped to
+  ``FRUSTUM_CLAMP`` (1.3) times the frustum's extent on each side of the optical
+  axis (``-cx / fx .. (w - cx) / fx`` in x, likewise in y), as 3DGS does. Without
+  it the ``-fx t_x / z²`` column grows without bound for splats far off-axis, and
+  a small splat beside the camera gets a footprint that covers the whole image.
+  The mean ``(u, v)`` itself is projected exactly.
+* **frustum culling with a guard band**: splats whose mean lies beyond
+  ``FRUSTUM_CULL`` (2) times that extent are culled; the band between 1.3 and 2
+  keeps splats just outside the view that still reach into it.
+* **bounded footprint**: a splat whose projected standard deviation exceeds
+  ``MAX_FOOTPRINT`` (1) image sizes (the longer side) is culled: no single
+  Gaussian is meant to paint the whole picture, and one that would is almost
+  always a splat grazing the near plane.
 
 Compositing. At pixel centre p, splat i (in increasing depth) has
 
@@ -32,7 +50,7 @@ pixels where ``o exp(-½ m²) >= ALPHA_MIN``, i.e. within Mahalanobis radius
 ``m_max = sqrt(2 ln(o / ALPHA_MIN))`` (<= 3.33 for o <= 1); the axis-aligned box of
 that ellipse, ``(u, v) ± m_max (sqrt Σ'_uu, sqrt Σ'_vv)``, is tested against each
 tile. Unlike a fixed 3-sigma box this bound is exact, so the tiled renderer
-equals :func:`render_reference` whenever nothing is dropped. Each tile keeps the
+equals :func:`vbgs.raster_reference.render_reference` whenever nothing is dropped. Each tile keeps the
 ``capacity`` nearest overlapping splats; the rest (the farthest) are *dropped*
 and counted in ``RenderOutput.dropped`` (once per splat and tile). Check it, e.g.
 ``assert int(out.dropped) == 0`` or call :func:`check_dropped`, and raise
@@ -66,7 +84,10 @@ POWER_FLOOR = float(np.log(ALPHA_MIN)) - 1.0  # exponent floor; exp(it) < ALPHA_
 LOG_T_MIN = -60.0  # transmittance is floored at e^-60 ≈ 9e-27 (see `transmittance`)
 DEFAULT_TILE = 16  # tile side in pixels (measured best of 8/16/32 on a 2-core CPU)
 DEFAULT_CAPACITY = 2048  # splats kept per tile, nearest first (8 per pixel at tile 16)
-NEAR = 0.01  # default near plane (scene units, camera z)
+NEAR = 0.2  # default near plane (scene units, camera z), as 3DGS
+FRUSTUM_CLAMP = 1.3  # J is evaluated with x/z, y/z clamped to 1.3x the frustum extent (3DGS)
+FRUSTUM_CULL = 2.0  # means beyond 2x the frustum extent are culled (guard band beyond the clamp)
+MAX_FOOTPRINT = 1.0  # splats whose projected sigma exceeds 1 image size (longer side) are culled
 DEPTH_CHUNK = 64  # splats composited per step; steps past a tile's count are skipped
 
 
@@ -90,18 +111,32 @@ class Projected(NamedTuple):
     visible: jax.Array  # [k] bool: in front of the near plane and not too faint
 
 
+def frustum_tangents(fx, fy, cx, cy, width, height):
+    """The view's extent on each side of the optical axis as tangents ``x/z``, ``y/z``:
+    ``(lo [2], hi [2])`` with ``lo = -(cx, cy) / (fx, fy)``, ``hi = ((w, h) - (cx, cy)) / (fx, fy)``."""
+    f = jnp.stack([jnp.asarray(fx), jnp.asarray(fy)])
+    c = jnp.stack([jnp.asarray(cx), jnp.asarray(cy)])
+    return -c / f, (jnp.array([width, height], f.dtype) - c) / f
+
+
 def project(
-    splats: Splats, fx, fy, cx, cy, pose, near=NEAR, blur=BLUR_VARIANCE
+    splats: Splats, fx, fy, cx, cy, pose, near=NEAR, blur=BLUR_VARIANCE, *, width: int,
+    height: int,
 ) -> Projected:
-    """EWA projection of every splat (see the module docstring). ``pose``: [4, 4] camera-to-world."""
+    """EWA projection of every splat with culling and a clamped Jacobian (see the module
+    docstring). ``pose``: [4, 4] camera-to-world; ``width``/``height``: the image size (px)."""
     pose = jnp.asarray(pose, splats.means.dtype)
     rot_wc = pose[:3, :3].T  # W, world -> camera
     t_cam = (splats.means - pose[:3, 3]) @ rot_wc.T  # [k, 3]
     z = t_cam[:, 2]
-    visible = (z > near) & (splats.opacities >= ALPHA_MIN)
-    z_safe = jnp.where(visible, z, 1.0)  # keeps culled rows finite (and their gradients)
-    x_over_z, y_over_z = t_cam[:, 0] / z_safe, t_cam[:, 1] / z_safe
-    uv = jnp.stack([fx * x_over_z + cx, fy * y_over_z + cy], axis=-1)
+    in_front = z > near
+    z_safe = jnp.where(in_front, z, 1.0)  # keeps culled rows finite (and their gradients)
+    tan_xy = t_cam[:, :2] / z_safe[:, None]  # [k, 2] x/z, y/z
+    lo, hi = frustum_tangents(fx, fy, cx, cy, width, height)
+    in_band = jnp.all((tan_xy >= FRUSTUM_CULL * lo) & (tan_xy <= FRUSTUM_CULL * hi), axis=1)
+    focal = jnp.stack([fx, fy]).astype(z.dtype)
+    uv = focal * tan_xy + jnp.stack([cx, cy]).astype(z.dtype)
+    x_over_z, y_over_z = jnp.clip(tan_xy, FRUSTUM_CLAMP * lo, FRUSTUM_CLAMP * hi).T
     zero = jnp.zeros_like(z)
     jac = jnp.stack([fx / z_safe, zero, -fx * x_over_z / z_safe,
                      zero, fy / z_safe, -fy * y_over_z / z_safe], -1).reshape(-1, 2, 3)
@@ -110,6 +145,8 @@ def project(
     a, b, c = cov2[:, 0, 0] + blur, cov2[:, 0, 1], cov2[:, 1, 1] + blur
     det = a * c - b * b
     conic = jnp.stack([c / det, -b / det, a / det], axis=-1)
+    bounded = jnp.maximum(a, c) <= (MAX_FOOTPRINT * max(width, height)) ** 2
+    visible = in_front & in_band & bounded & (splats.opacities >= ALPHA_MIN)
     # Mahalanobis radius beyond which o exp(-m²/2) < ALPHA_MIN (non-differentiable).
     opac = jax.lax.stop_gradient(splats.opacities)
     m2_max = 2.0 * jnp.log(jnp.maximum(opac, ALPHA_MIN) / ALPHA_MIN)
@@ -226,7 +263,7 @@ def tile_lists(lo, hi, visible, *, n_tiles_x, n_tiles_y, tile, capacity) -> Tile
 def _rasterize(splats, fx, fy, cx, cy, pose, background, near, *, width, height, tile, capacity,
                blur):
     """The jitted body of :func:`rasterize` (image size, tile, capacity and blur static)."""
-    proj = project(splats, fx, fy, cx, cy, pose, near, blur)
+    proj = project(splats, fx, fy, cx, cy, pose, near, blur, width=width, height=height)
     order = jnp.argsort(jnp.where(proj.visible, proj.depth, jnp.inf))  # [k] front to back
     n_tiles_x, n_tiles_y = -(-width // tile), -(-height // tile)
     n_tiles = n_tiles_x * n_tiles_y
@@ -346,7 +383,7 @@ def required_capacity(
 @functools.partial(jax.jit, static_argnames=("width", "height", "tile", "blur"))
 def _tile_counts(splats, fx, fy, cx, cy, pose, near, *, width, height, tile, blur):
     """Overlapping splats per tile [ty, tx], by a 2-D difference array and two cumsums."""
-    proj = project(splats, fx, fy, cx, cy, pose, near, blur)
+    proj = project(splats, fx, fy, cx, cy, pose, near, blur, width=width, height=height)
     n_tiles_x, n_tiles_y = -(-width // tile), -(-height // tile)
     first, span = _tile_ranges(proj.uv - proj.extent, proj.uv + proj.extent, n_tiles_x,
                                n_tiles_y, tile)
@@ -357,53 +394,6 @@ def _tile_counts(splats, fx, fy, cx, cy, pose, near, *, width, height, tile, blu
                        (end[:, 1], first[:, 0], -1), (end[:, 1], end[:, 0], 1)):
         diff = diff.at[y, x].add(sign * weight)
     return jnp.cumsum(jnp.cumsum(diff, axis=0), axis=1)[:n_tiles_y, :n_tiles_x]
-
-
-def render_reference(
-    splats: Splats,
-    camera: Camera,
-    *,
-    background=(0.0, 0.0, 0.0),
-    near: float = NEAR,
-    blur: float = BLUR_VARIANCE,
-) -> RenderOutput:
-    """Slow, obvious renderer: every pixel composites every splat, globally sorted by depth.
-
-    Same projection, constants and formulas as :func:`rasterize`, but no tiles and a
-    plain running product ``T <- T (1 - α_i)``. Memory and time are O(h · w · k):
-    for tests only.
-    """
-    width, height, background = _check_inputs(splats, camera, background, 1, 1, blur)
-    return _render_reference(
-        splats, camera.fx, camera.fy, camera.cx, camera.cy, camera.pose, background, near,
-        width=width, height=height, blur=float(blur),
-    )
-
-
-@functools.partial(jax.jit, static_argnames=("width", "height", "blur"))
-def _render_reference(splats, fx, fy, cx, cy, pose, background, near, *, width, height, blur):
-    proj = project(splats, fx, fy, cx, cy, pose, near, blur)
-    order = jnp.argsort(jnp.where(proj.visible, proj.depth, jnp.inf))
-    v, u = jnp.mgrid[0:height, 0:width] + 0.5
-    pixels = jnp.stack([u.ravel(), v.ravel()], -1)  # [p, 2]
-    alpha = splat_alpha(pixels, proj.uv[order], proj.conic[order], proj.opacity[order])  # [p, k]
-
-    def step(carry, xs):
-        trans, rgb, dep = carry
-        a, colour, z = xs  # [p], [3], []
-        weight = a * trans
-        return (trans * (1.0 - a), rgb + weight[:, None] * colour, dep + weight * z), None
-
-    p = height * width
-    init = (jnp.ones(p), jnp.zeros((p, 3)), jnp.zeros(p))
-    (trans, rgb, dep), _ = jax.lax.scan(
-        step, init, (alpha.T, splats.colours[order], proj.depth[order])
-    )
-    rgb = rgb + trans[:, None] * background
-    return RenderOutput(
-        rgb.reshape(height, width, 3), dep.reshape(height, width),
-        1.0 - trans.reshape(height, width), jnp.zeros((), jnp.int32),
-    )
 
 
 def _check_inputs(splats, camera, background, tile, capacity, blur=BLUR_VARIANCE):

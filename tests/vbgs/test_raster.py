@@ -10,11 +10,13 @@ from vbgs.camera import Camera, from_fov, look_at
 from vbgs.raster import (
     ALPHA_MIN,
     BLUR_VARIANCE,
+    FRUSTUM_CLAMP,
+    NEAR,
     check_dropped,
     rasterize,
-    render_reference,
     required_capacity,
 )
+from vbgs.raster_reference import render_reference
 from vbgs.splats import Splats, covs_from_scale_rotation
 
 TOL = 1e-4  # fast vs reference, float32
@@ -51,6 +53,63 @@ def test_tiled_equals_reference(seed, tile, background):
     assert float(fast.alpha.max()) > 0.5  # the scene is really in view
     diffs = max_diff(fast, ref)
     assert all(d < TOL for d in diffs.values()), diffs
+
+
+def around_the_camera(seed, k=160, width=40, height=32):
+    """Splats all around a camera at the origin looking along +y (a room seen from inside):
+    beside and behind it, grazing the near plane, just outside the view (between the clamp
+    and the cull band) and far outside it, some strongly anisotropic, some off-centre."""
+    rng = np.random.default_rng(seed)
+    direction = rng.normal(size=(k, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    distance = rng.uniform(0.15, 3.0, k)
+    distance[: k // 8] = rng.uniform(NEAR * 0.9, NEAR * 1.5, k // 8)  # around the near plane
+    means = direction * distance[:, None]
+    scales = 0.06 * np.exp(rng.normal(0, 0.5, (k, 3)))
+    scales[: k // 4, 0] *= 8.0  # needles and sheets
+    covs = covs_from_scale_rotation(jnp.asarray(scales), jnp.asarray(rng.normal(size=(k, 4))))
+    splats = Splats(
+        jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
+        jnp.asarray(rng.uniform(0, 1, (k, 3)), jnp.float32),
+        jnp.asarray(rng.uniform(0.2, 0.95, k), jnp.float32),
+    )
+    cam = from_fov(width, height, np.deg2rad(75), look_at((0, 0, 0), (0, 1, 0)))
+    return splats, cam._replace(cx=0.4 * width)  # off-centre principal point
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_tiled_equals_independent_reference_around_the_camera(seed):
+    splats, cam = around_the_camera(seed)
+    w2c = np.asarray(cam.world_to_camera)
+    t = np.asarray(splats.means) @ w2c[:3, :3].T + w2c[:3, 3]
+    tangent_x = t[:, 0] / np.where(t[:, 2] > 0, t[:, 2], np.inf)
+    hi_x = (cam.width - cam.cx) / cam.fx
+    # The cases are really there: behind, near the near plane, and where the clamp binds.
+    assert np.sum(t[:, 2] < 0) > 20 and np.sum(np.abs(t[:, 2] - NEAR) < 0.05) > 3
+    assert np.sum((tangent_x > FRUSTUM_CLAMP * hi_x) & (t[:, 2] > NEAR)) > 3
+    fast = rasterize(splats, cam, tile=8, capacity=256, background=(0.3, 0.6, 0.9))
+    ref = render_reference(splats, cam, background=(0.3, 0.6, 0.9))
+    assert int(fast.dropped) == 0 and float(fast.alpha.max()) > 0.5
+    diffs = max_diff(fast, ref)
+    assert all(d < TOL for d in diffs.values()), diffs
+
+
+def test_splat_beside_the_camera_stays_small():
+    """A small splat just outside the view, level with the camera: with the Jacobian
+    evaluated at its true x/z it would smear across the image; clamped, it cannot."""
+    cam = from_fov(32, 32, np.deg2rad(60), np.eye(4))
+    hi = (cam.width - cam.cx) / cam.fx
+    for tangent in (1.5 * hi, 1.9 * hi):  # between the clamp and the cull band
+        z = 0.5
+        splat = Splats(jnp.asarray([[tangent * z, 0.0, z]], jnp.float32),
+                       jnp.asarray([0.05**2 * np.eye(3)], jnp.float32),
+                       jnp.ones((1, 3)), jnp.asarray([0.9]))
+        out = rasterize(splat, cam, tile=8)
+        assert float(out.alpha[:, : cam.width // 2].max()) == 0.0, tangent
+        np.testing.assert_allclose(out.alpha, render_reference(splat, cam).alpha, atol=1e-5)
+    far_off = Splats(jnp.asarray([[30.0, 0.0, 1.0]]), jnp.asarray([0.1 * np.eye(3)]),
+                     jnp.ones((1, 3)), jnp.asarray([0.9]))
+    assert float(rasterize(far_off, cam, tile=8).alpha.max()) == 0.0  # culled
 
 
 def test_dropped_counts_and_keeps_nearest():

@@ -126,14 +126,8 @@ def _orbit_pose(azimuth: float, elevation: float) -> np.ndarray:
     return look_at(np.asarray(ORBIT_TARGET) + ORBIT_RADIUS * direction, ORBIT_TARGET)
 
 
-def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> Scene:
-    """Object-centric scene seen from an orbit (see module docstring).
-
-    size: image side in pixels (or ``(width, height)``); horizontal field of view
-    ``OBJECT_FOV_X``. Training views go once around the object, azimuth advancing
-    uniformly while elevation oscillates twice between the ``ORBIT_ELEVATION``
-    limits; test views sit at random azimuths and elevations on the same sphere.
-    """
+def object_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
+    """Camera-to-world poses ``(train, test)`` of the ``"object"`` scene (see :func:`object_scene`)."""
     rng = np.random.default_rng([seed, 1])
     lo, hi = ORBIT_ELEVATION
     phase = rng.uniform(0.0, 2 * np.pi)
@@ -148,6 +142,18 @@ def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) ->
         _orbit_pose(a, e)
         for a, e in zip(rng.uniform(0, 2 * np.pi, n_test), rng.uniform(lo, hi, n_test), strict=True)
     ]
+    return train, test
+
+
+def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> Scene:
+    """Object-centric scene seen from an orbit (see module docstring).
+
+    size: image side in pixels (or ``(width, height)``); horizontal field of view
+    ``OBJECT_FOV_X``. Training views go once around the object, azimuth advancing
+    uniformly while elevation oscillates twice between the ``ORBIT_ELEVATION``
+    limits; test views sit at random azimuths and elevations on the same sphere.
+    """
+    train, test = object_poses(n_train, n_test, seed)
     prims = object_primitives(seed)
     return Scene(
         name="object",
@@ -175,14 +181,8 @@ def _walk_pose(phi: float, radius_scale: float, height: float, yaw: float) -> np
     return look_at(eye, eye + turned)
 
 
-def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> Scene:
-    """Room walkthrough (see module docstring); every pixel has valid depth.
-
-    Training views walk once around the ellipse ``WALK_RADII`` at about
-    ``WALK_HEIGHT``, gaze swinging up to +-34 degrees left and right of the room
-    centre; test views are at 0.85x the radius, eye heights 1.2 or 1.7 and
-    random gaze offsets up to +-45 degrees.
-    """
+def room_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
+    """Camera-to-world poses ``(train, test)`` of the ``"room"`` scene (see :func:`room_scene`)."""
     rng = np.random.default_rng([seed, 2])
     phase = rng.uniform(0.0, 2 * np.pi)
     phis = phase + 2 * np.pi * np.arange(n_train) / max(n_train, 1)  # [n_train]
@@ -198,6 +198,18 @@ def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> S
             strict=True,
         )
     ]
+    return train, test
+
+
+def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> Scene:
+    """Room walkthrough (see module docstring); every pixel has valid depth.
+
+    Training views walk once around the ellipse ``WALK_RADII`` at about
+    ``WALK_HEIGHT``, gaze swinging up to +-34 degrees left and right of the room
+    centre; test views are at 0.85x the radius, eye heights 1.2 or 1.7 and
+    random gaze offsets up to +-45 degrees.
+    """
+    train, test = room_poses(n_train, n_test, seed)
     prims = room_primitives(seed)
     lo, hi = bounds_of(prims)
     return Scene(
@@ -206,6 +218,13 @@ def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> S
         test=_frames(prims, test, size, ROOM_FOV_X, (0.0, 0.0, 0.0)),
         bounds=(lo, hi),
     )
+
+
+def render_views(name: str, poses, size=128, seed: int = 0) -> list[Frame]:
+    """Frames of synthetic scene ``name`` seen from the given camera-to-world ``poses``."""
+    fov, background = {"object": (OBJECT_FOV_X, OBJECT_BACKGROUND),
+                       "room": (ROOM_FOV_X, (0.0, 0.0, 0.0))}[name]
+    return _frames(scene_primitives(name, seed), poses, size, fov, background)
 
 
 SCENES = {"object": object_scene, "room": room_scene}
