@@ -91,7 +91,7 @@ def _metrics(record: dict) -> str:
 
 def _write_plan(out: Path, config, plan, version: str) -> None:
     from experiments.bench import machine
-    from experiments.sweep.cells import write_text_atomic
+    from vbgs.io_atomic import write_text_atomic
 
     doc = {"name": config.name, "description": config.description, "config": config.source,
            "version": version, "machine": machine(),
