@@ -73,8 +73,8 @@ def read_image_file(path: str | Path) -> np.ndarray:
             return np.asarray(skio.imread(path))
     except Exception as err:  # PIL/imageio raise OSError, SyntaxError, ValueError, ...
         raise ValueError(
-            f"could not read image file {path}: {err} (truncated or not an image? "
-            "replace or re-export the file)"
+            f"could not read image file {path} ({err}); it may be truncated or not an image: "
+            "replace or re-export it"
         ) from err
 
 
