@@ -47,7 +47,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
 
 def write_atomic(path: str | Path, write: Callable[[Path], object]) -> Path:
-    """Call ``write(tmp)`` to write a temporary file, then move it onto ``path``; return ``path``."""
+    """Call ``write(tmp)`` to write a temporary file, then move it onto ``path``.
+
+    Returns ``path``.
+    """
     with atomic_path(path) as tmp:
         write(tmp)
     return Path(path)

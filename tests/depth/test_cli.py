@@ -170,3 +170,14 @@ def test_ctrl_c_leaves_only_complete_pngs_and_one_line(scene, capsys, monkeypatc
     assert sorted(p.name for p in out.iterdir()) == ["frame_00.png"]
     np.testing.assert_array_equal(read_depth_png(out / "frame_00.png"),
                                   np.round(depth[0] * MM) / MM)
+
+
+def test_8bit_reference_depth_is_refused_naming_the_file(scene, capsys):
+    tmp, frames, rgb, depth = scene
+    model = _save(depth_lookup_model(rgb, depth, 2.0, 0.5), tmp / "inv.onnx")
+    ref = tmp / "ref8.png"
+    skio.imsave(ref, np.full((H, W), 200, np.uint8), check_contrast=False)
+    assert main(["--model", model, "--input", str(frames), "--output", str(tmp / "out"),
+                 "--kind", "inverse", "--reference", str(ref), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"error: reference depth: {ref}: depth PNGs must be 16-bit" in err and "8-bit" in err

@@ -110,12 +110,13 @@ def _camera(intr: dict, width: int, height: int, ref_size, pose_gl: np.ndarray) 
 def _reference_size(intr: dict, width: int, height: int, first, what: str):
     """The size pixel intrinsics refer to when the file gives no ``w``/``h``: the split's
     first image, so a frame of another size is refused (its scale is unknown)."""
-    if "w" in intr and "h" in intr or not any(k in intr for k in PIXEL_KEYS):
+    if ("w" in intr and "h" in intr) or not any(k in intr for k in PIXEL_KEYS):
         return first or (width, height)
     if first is not None and first != (width, height):
+        given = ", ".join(k for k in PIXEL_KEYS if k in intr)
         raise ValueError(
             f"{what}: image is {width}x{height} but the split's first image is "
-            f"{first[0]}x{first[1]}, and the intrinsics ({', '.join(k for k in PIXEL_KEYS if k in intr)}) "
+            f"{first[0]}x{first[1]}, and the intrinsics ({given}) "
             f"are in pixels without 'w' and 'h'; add \"w\" and \"h\" (the image size they "
             f"refer to) to the transforms file, or give every image the same size"
         )

@@ -138,6 +138,6 @@ def test_nan_in_a_pose_is_named(tmp_path):
     meta = json.loads((folder / "transforms_train.json").read_text())
     meta["frames"][1]["transform_matrix"][0][3] = float("nan")
     (folder / "transforms_train.json").write_text(json.dumps(meta))
-    with pytest.raises(ValueError, match=r"transforms_train.json frame 1: transform_matrix has 1 NaN/inf "
-                                         r"entries"):
+    with pytest.raises(ValueError, match=r"transforms_train.json frame 1: transform_matrix has "
+                                         r"1 NaN/inf entries"):
         load_blender(folder)
