@@ -196,13 +196,13 @@ COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_sc
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.run", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True)
-    for add, _ in COMMANDS.values():
-        add(sub)
-    args = parser.parse_args(argv)
-    try:
+    try:  # building the parser imports modules: Ctrl-C there ends cleanly too
+        parser = argparse.ArgumentParser(prog="python -m experiments.run", description=__doc__,
+                                         formatter_class=argparse.RawDescriptionHelpFormatter)
+        sub = parser.add_subparsers(dest="command", required=True)
+        for add, _ in COMMANDS.values():
+            add(sub)
+        args = parser.parse_args(argv)
         result = COMMANDS[args.command][1](args)
     except (ValueError, TypeError, OSError) as err:  # OSError: a file that cannot be written
         return fail(err)
