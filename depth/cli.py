@@ -12,6 +12,7 @@ or a folder matched by file stem); one alignment for the whole sequence by defau
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -94,10 +95,16 @@ def read_rgb(path: Path) -> np.ndarray:
 
 
 def check_output_folder(folder: Path) -> None:
-    """Refuse an output path that is an existing file (before any work is done)."""
+    """Refuse, before any work, an output path that is a file, lies under a file, or
+    cannot be written. The folder itself is created by the first write."""
     if folder.exists() and not folder.is_dir():
         raise CliError(f"--output {folder} is a file, not a folder; give a folder for the "
                        "depth PNGs (it is created if missing)")
+    ancestor = next(a for a in (folder, *folder.parents) if a.exists())
+    if not ancestor.is_dir():
+        raise CliError(f"--output {folder}: {ancestor} is a file, not a folder")
+    if not os.access(ancestor, os.W_OK):
+        raise CliError(f"--output {folder}: no permission to write in {ancestor}")
 
 
 def valid_pixels(depth: np.ndarray, max_depth: float) -> np.ndarray:
@@ -219,10 +226,6 @@ def run(args) -> dict:
     max_depth = UINT16_MAX / args.depth_scale
     show = set(preview_indices(len(frames)))
     shown, out_of_range, written, kept, total, sparse = [], 0, 0, 0, 0, []
-    try:
-        args.output.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise CliError(f"cannot create --output folder {args.output}: {err}") from err
     start = time.perf_counter()
     try:
         with tqdm(total=len(frames), unit="frame", disable=args.no_progress) as bar:
