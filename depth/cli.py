@@ -12,9 +12,9 @@ or a folder matched by file stem); one alignment for the whole sequence by defau
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,11 +24,13 @@ from depth.onnx_depth import DEFAULT_BATCH_SIZE, OnnxDepth
 from depth.presets import KINDS, PRESETS
 from depth.preview import preview_indices, save_preview
 from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
+from vbgs.data.images import read_image_file
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 PREVIEW_NAME = "_preview.png"
 UINT16_MAX = float(np.iinfo(np.uint16).max)
 SCOPES = ("global", "per-frame")
+MIN_KEPT_FRACTION = 0.5  # a frame keeping fewer valid depth pixels than this is warned about
 DESCRIPTION = "RGB frames -> 16-bit millimetre depth PNGs with a user-supplied ONNX depth model."
 
 
@@ -77,14 +79,10 @@ def list_frames(folder: Path) -> list[Path]:
 
 def read_rgb(path: Path) -> np.ndarray:
     """An image file as float32 RGB ``[h, w, 3]`` in [0, 1] (grey repeated, alpha dropped)."""
-    from skimage import io as skio
-
     try:
-        with warnings.catch_warnings():  # imageio's plugin deprecation notes on a bad file
-            warnings.simplefilter("ignore", DeprecationWarning)
-            img = np.asarray(skio.imread(path))
-    except Exception as err:  # imageio/PIL raise many types for a bad file
-        raise CliError(f"cannot read image {path}: {err}") from err
+        img = read_image_file(path)
+    except ValueError as err:
+        raise CliError(str(err)) from err
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=-1)
     elif img.ndim == 3 and img.shape[-1] in (2, 4):
@@ -94,6 +92,39 @@ def read_rgb(path: Path) -> np.ndarray:
     if np.issubdtype(img.dtype, np.integer):
         return (img / float(np.iinfo(img.dtype).max)).astype(np.float32)
     return np.clip(img, 0.0, 1.0).astype(np.float32)
+
+
+def check_output_folder(folder: Path) -> None:
+    """Refuse, before any work, an output path that is a file, lies under a file, or
+    cannot be written. The folder itself is created by the first write."""
+    if folder.exists() and not folder.is_dir():
+        raise CliError(f"--output {folder} is a file, not a folder; give a folder for the "
+                       "depth PNGs (it is created if missing)")
+    ancestor = next(a for a in (folder, *folder.parents) if a.exists())
+    if not ancestor.is_dir():
+        raise CliError(f"--output {folder}: {ancestor} is a file, not a folder")
+    if not os.access(ancestor, os.W_OK):
+        raise CliError(f"--output {folder}: no permission to write in {ancestor}")
+
+
+def valid_pixels(depth: np.ndarray, max_depth: float) -> np.ndarray:
+    """Pixels a depth PNG can store: finite, > 0 and at most ``max_depth`` (bool ``[h, w]``)."""
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(depth) & (depth > 0) & (depth <= max_depth)
+
+
+def _nothing_valid(name: str, pred: np.ndarray, max_depth: float, args) -> CliError:
+    """The refusal of a first frame without one storable depth pixel; ``pred`` is the raw
+    model output, whose range shows what went wrong."""
+    pred = np.asarray(pred)
+    finite = pred[np.isfinite(pred)]
+    spans = (f"the model's output spans {finite.min():.4g} to {finite.max():.4g}" if finite.size
+             else "the model's output is all NaN/inf")
+    return CliError(
+        f"{name}: no pixel has valid depth (0 of {pred.size} kept: <= 0, NaN or beyond "
+        f"{max_depth:.6g} at --depth-scale {args.depth_scale:g}; {spans}); check --kind "
+        f"(inverse and relative models need --reference and --align) and --depth-scale; "
+        f"nothing was written")
 
 
 def reference_paths(reference: Path, frames: list[Path]) -> dict[str, Path]:
@@ -139,7 +170,10 @@ def fit_alignments(model: OnnxDepth, frames: list[Path], refs: dict[str, Path], 
         if path.stem not in refs:
             continue
         rgb = read_rgb(path)
-        ref = read_depth_png(refs[path.stem], scale=args.reference_scale)
+        try:
+            ref = read_depth_png(refs[path.stem], scale=args.reference_scale)
+        except (ValueError, FileNotFoundError) as err:
+            raise CliError(f"reference depth: {err}") from err
         if ref.shape != rgb.shape[:2]:
             raise CliError(
                 f"reference {refs[path.stem]} is {ref.shape}, frame {path} is {rgb.shape[:2]}; "
@@ -178,6 +212,7 @@ def run(args) -> dict:
                        "download a depth model to .onnx and pass its path)")
     if not 0.0 < args.reference_fraction <= 1.0:
         raise CliError(f"--reference-fraction must be in (0, 1], got {args.reference_fraction}")
+    check_output_folder(args.output)
     frames = list_frames(args.input)
     try:
         model = OnnxDepth(args.model, kind=args.kind, preset=args.preset,
@@ -190,30 +225,43 @@ def run(args) -> dict:
     fit, per_frame = fit_alignments(model, frames, refs, method, args) if refs else (IDENTITY, {})
     max_depth = UINT16_MAX / args.depth_scale
     show = set(preview_indices(len(frames)))
-    shown, out_of_range, written = [], 0, 0
-    args.output.mkdir(parents=True, exist_ok=True)
+    shown, out_of_range, written, kept, total, sparse = [], 0, 0, 0, 0, []
     start = time.perf_counter()
-    with tqdm(total=len(frames), unit="frame", disable=args.no_progress) as bar:
-        for chunk in _batches(list(enumerate(frames)), model.batch_size):
-            rgbs = [read_rgb(path) for _, path in chunk]
-            same = len({r.shape for r in rgbs}) == 1
-            preds = model.predict(rgbs) if same else [model.predict(r) for r in rgbs]
-            for (i, path), rgb, pred in zip(chunk, rgbs, preds, strict=True):
-                depth = apply(per_frame.get(path.stem, fit), pred)
-                too_far = depth > max_depth
-                out_of_range += int(too_far.sum())
-                depth[too_far] = 0.0  # stored as missing rather than wrapped
-                write_depth_png(args.output / f"{path.stem}.png", depth, scale=args.depth_scale)
-                written += 1
-                if i in show:
-                    shown.append((rgb, depth, path.name))
-                bar.update(1)
+    try:
+        with tqdm(total=len(frames), unit="frame", disable=args.no_progress) as bar:
+            for chunk in _batches(list(enumerate(frames)), model.batch_size):
+                rgbs = [read_rgb(path) for _, path in chunk]
+                same = len({r.shape for r in rgbs}) == 1
+                preds = model.predict(rgbs) if same else [model.predict(r) for r in rgbs]
+                for (i, path), rgb, pred in zip(chunk, rgbs, preds, strict=True):
+                    depth = apply(per_frame.get(path.stem, fit), pred)
+                    ok = valid_pixels(depth, max_depth)
+                    if i == 0 and not ok.any():  # refused before anything is written
+                        raise _nothing_valid(path.name, pred, max_depth, args)
+                    with np.errstate(invalid="ignore"):
+                        too_far = depth > max_depth
+                    out_of_range += int(too_far.sum())
+                    depth = np.where(ok, depth, 0.0)  # stored as missing, never wrapped
+                    kept, total = kept + int(ok.sum()), total + ok.size
+                    if ok.sum() < MIN_KEPT_FRACTION * ok.size:
+                        sparse.append((path.name, int(ok.sum()), ok.size))
+                    write_depth_png(args.output / f"{path.stem}.png", depth,
+                                    scale=args.depth_scale)
+                    written += 1
+                    if i in show:
+                        shown.append((rgb, depth, path.name))
+                    bar.update(1)
+    except KeyboardInterrupt:
+        raise KeyboardInterrupt(f"{written} of {len(frames)} depth PNGs written to "
+                                f"{args.output}, each complete") from None
     elapsed = time.perf_counter() - start
     preview = save_preview(args.output / PREVIEW_NAME, *map(list, zip(*shown, strict=True)))
     return {"frames": written, "seconds": elapsed, "fps": written / max(elapsed, 1e-9),
             "method": method, "scope": args.align_scope, "alignment": fit,
             "per_frame": per_frame, "reference_frames": len(refs),
-            "out_of_range_pixels": out_of_range, "output": args.output, "preview": preview}
+            "out_of_range_pixels": out_of_range, "output": args.output, "preview": preview,
+            "kept_pixels": kept, "pixels": total, "sparse_frames": sparse,
+            "max_depth": max_depth}
 
 
 def format_summary(s: dict) -> str:
@@ -227,18 +275,41 @@ def format_summary(s: dict) -> str:
             f"alignment: {s['method']} ({s['scope']}, {s['reference_frames']} reference frame(s), "
             f"{a.n_points} px): scale={a.scale:.6g} shift={a.shift:.6g} space={a.space} "
             f"residual={100 * a.residual:.2f}% inliers={100 * a.inlier_fraction:.1f}%")
+    lines.append(f"valid depth: {s['kept_pixels']} of {s['pixels']} pixels kept "
+                 f"({100 * s['kept_pixels'] / max(s['pixels'], 1):.1f}%)")
     if s["out_of_range_pixels"]:
         lines.append(f"out of 16-bit range: {s['out_of_range_pixels']} pixels stored as missing")
     lines.append(f"preview: {s['preview']}")
     return "\n".join(lines)
 
 
+def sparse_warning(s: dict) -> str | None:
+    """One line when some frames kept under MIN_KEPT_FRACTION of their pixels, else None."""
+    if not s["sparse_frames"]:
+        return None
+    name, kept, size = min(s["sparse_frames"], key=lambda f: f[1] / f[2])
+    return (f"warning: {len(s['sparse_frames'])} of {s['frames']} frames kept valid depth at "
+            f"under {100 * MIN_KEPT_FRACTION:.0f}% of their pixels (worst {name}: {kept} of "
+            f"{size}); the model gave depth <= 0, NaN or beyond {s['max_depth']:.6g} there, "
+            f"stored as missing: check --kind, --align and --depth-scale")
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Exit status: 0 done, 2 refused (one ``error:`` line), 130 interrupted (one line)."""
     try:
+        args = build_parser().parse_args(argv)
         summary = run(args)
     except CliError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # a write that failed (disk full, permissions): name the file
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as err:
+        print(f"interrupted{f': {err}' if str(err) else ''}", file=sys.stderr)
+        return 130
     print(format_summary(summary))
+    warning = sparse_warning(summary)
+    if warning:
+        print(warning, file=sys.stderr)
     return 0

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vbgs.io_atomic import write_atomic
+
 PREVIEW_FRAMES = 4  # at most this many columns
 PANEL_INCHES = 3.0
 DPI = 100
@@ -52,7 +54,4 @@ def save_preview(path: str | Path, frames: list[np.ndarray], depths: list[np.nda
         for ax in axes[:, c]:
             ax.set_axis_off()
     fig.colorbar(image, ax=axes[1, :].tolist(), label="depth (m)", shrink=0.9)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    return path
+    return write_atomic(path, fig.savefig)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
+from pathlib import Path
 
 from tabulate import tabulate
 
@@ -16,6 +18,60 @@ def fail(err: Exception) -> int:
     """A user-facing error: one line on stderr, exit status 2, no traceback."""
     print(f"error: {err}", file=sys.stderr)
     return 2
+
+
+INTERRUPTED = 130  # exit status after Ctrl-C (128 + SIGINT), as shells report it
+
+
+def interrupted(err: KeyboardInterrupt | None = None) -> int:
+    """Ctrl-C: one line on stderr (what was kept, when known), exit status 130."""
+    detail = str(err) if err is not None else ""
+    print(f"interrupted{f': {detail}' if detail else ''}", file=sys.stderr)
+    return INTERRUPTED
+
+
+def check_output_file(path: str | None, flag: str, suffix: str) -> Path | None:
+    """Check an output file path before any work starts; create its folder.
+
+    Refuses a path that is a folder, one whose name does not end in ``suffix`` (a
+    writer would add its own and write somewhere else), and one under a file or in a
+    folder that cannot be written. Returns the path (None when not given).
+    """
+    if path is None:
+        return None
+    out = Path(path)
+    if out.is_dir():
+        raise ValueError(f"{flag} {path} is a folder; give a file name ending in {suffix}")
+    if out.suffix.lower() != suffix:
+        raise ValueError(f"{flag} {path}: the file name must end in {suffix}")
+    parent = out.parent
+    ancestor = next(a for a in (parent, *parent.parents) if a.exists())
+    if not ancestor.is_dir():
+        raise ValueError(f"{flag} {path}: {ancestor} is a file, not a folder")
+    parent.mkdir(parents=True, exist_ok=True)
+    if not os.access(parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise ValueError(f"{flag} {path}: no permission to write there")
+    return out
+
+
+def check_fewer_components(components: int, points: int, what: str, fix: str) -> None:
+    """Refuse at least as many components as data points: each point could get its own
+    component, so the fit is trivially exact and its score says nothing about the model."""
+    if components >= points:
+        raise ValueError(
+            f"--components {components} is not fewer than the {points} pixels to fit "
+            f"({what}): each pixel could get its own component, so the score would mean "
+            f"nothing; {fix}"
+        )
+
+
+def meaningless_score_warning(result: dict) -> str | None:
+    """A warning line when a result's score means nothing (no component was used)."""
+    if result.get("components_used") == 0:
+        return ("warning: components_used is 0 (no component explains any pixel), so the "
+                "PSNR/SSIM above measure the background, not a fit; check the input size "
+                "and --components")
+    return None
 
 
 def _short(value):

@@ -15,7 +15,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from experiments.cli_common import fail, print_result
+from experiments.cli_common import (
+    check_fewer_components,
+    check_output_file,
+    fail,
+    interrupted,
+    meaningless_score_warning,
+    print_result,
+)
 from experiments.sweep.cli import add_report, add_sweep, run_report, run_sweep
 
 
@@ -41,12 +48,17 @@ def _add_fit_image(sub):
 
 def _fit_image(args) -> dict:
     from experiments.image_task import ImageTask, run_image, save_comparison
+    from vbgs.data.images import load_image
 
     reassign = {"on": True, "off": False, "auto": args.stream == "none"}[args.reassign]
     task = ImageTask(image=args.image, size=args.size or None, components=args.components,
                      iters=args.iters, init=args.init, seed=args.seed, stream=args.stream,
                      order=args.order, assign=args.assign, patch=args.patch, reassign=reassign,
                      method=args.method, steps=args.steps)
+    check_output_file(args.save, "--save", ".png")  # output paths and sizes before the fit
+    h, w, _ = load_image(args.image, args.size or None).shape
+    check_fewer_components(args.components, h * w, f"{w}x{h} image",
+                           "use fewer --components or a larger --size")
     result = run_image(task, progress=sys.stderr.isatty())
     images = result.pop("images")
     if args.save:
@@ -101,6 +113,14 @@ def _fit_scene(args) -> dict:
                      protocol=args.protocol, depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
                      depth_align=args.depth_align, **render)
+    if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
+        raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
+                         f"held-out views), got {args.test_views}")
+    check_output_file(args.save, "--save", ".png")
+    check_output_file(args.ply, "--ply", ".ply")
+    check_fewer_components(args.components, args.frames * args.size**2,
+                           f"at most {args.frames} frames x {args.size}x{args.size}",
+                           "use fewer --components, a larger --size or more --frames")
     result = run_scene(task, progress=sys.stderr.isatty(), ply=args.ply)
     images = result.pop("images")
     if args.save:
@@ -201,17 +221,24 @@ COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_sc
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.run", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True)
-    for add, _ in COMMANDS.values():
-        add(sub)
-    args = parser.parse_args(argv)
-    try:
+    try:  # building the parser imports modules: Ctrl-C there ends cleanly too
+        parser = argparse.ArgumentParser(prog="python -m experiments.run", description=__doc__,
+                                         formatter_class=argparse.RawDescriptionHelpFormatter)
+        sub = parser.add_subparsers(dest="command", required=True)
+        for add, _ in COMMANDS.values():
+            add(sub)
+        args = parser.parse_args(argv)
         result = COMMANDS[args.command][1](args)
-    except (ValueError, TypeError, FileNotFoundError) as err:
+    except (ValueError, TypeError, OSError) as err:  # OSError: a file that cannot be written
         return fail(err)
+    except KeyboardInterrupt as err:  # Ctrl-C: one line, status 130, no traceback
+        return interrupted(err)
+    warning = meaningless_score_warning(result)
+    if warning:
+        result["warning"] = warning
     print_result(args.command, result, as_json=getattr(args, "json", False))
+    if warning:
+        print(warning, file=sys.stderr)
     return 0
 
 

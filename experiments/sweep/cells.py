@@ -3,7 +3,7 @@
 A cell's key hashes its sorted settings and the installed ``vbgs`` version, so the
 same settings under the same code version find their earlier result. Results live in
 the sweep's folder as ``cells/<key>.json`` (written through a temporary file and
-``os.replace``, so a file that exists is complete) and its images as
+``os.replace``, :mod:`vbgs.io_atomic`, so a file that exists is complete) and its images as
 ``renders/<key>.png`` (the render) and ``renders/<key>.<name>.png`` (the target, ...).
 The JSON is written last: it marks the cell finished.
 """
@@ -27,6 +27,7 @@ import numpy as np
 
 from experiments.sweep.config import SweepConfig
 from experiments.sweep.rules import apply_rules
+from vbgs.io_atomic import write_atomic, write_text_atomic
 
 
 def package_version() -> str:
@@ -200,28 +201,14 @@ def render_path(out: Path, key: str, name: str = "render") -> Path:
     return Path(out) / "renders" / f"{key}{suffix}.png"
 
 
-def _atomic(path: Path, write) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    _atomic(Path(path), lambda tmp: tmp.write_text(text))
-
-
 def _write_png(path: Path, image: np.ndarray) -> None:
     from matplotlib.image import imsave
 
     img = np.asarray(image, dtype=np.float32)
     if img.ndim == 3:
-        _atomic(path, lambda tmp: imsave(tmp, np.clip(img, 0, 1), format="png"))
+        write_atomic(path, lambda tmp: imsave(tmp, np.clip(img, 0, 1), format="png"))
     else:  # a depth map or error image: colour-mapped over its own range
-        _atomic(path, lambda tmp: imsave(tmp, img, format="png", cmap="viridis"))
+        write_atomic(path, lambda tmp: imsave(tmp, img, format="png", cmap="viridis"))
 
 
 def store_record(out: Path, record: dict) -> dict:

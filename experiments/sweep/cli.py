@@ -56,7 +56,9 @@ def add_sweep(sub) -> None:
     p.add_argument("--scheduler", help="Dask scheduler address for --backend dask")
     p.add_argument("--workers", type=_positive,
                    help=f"local worker processes (default: all {os.cpu_count()} cores)")
-    p.add_argument("--force", action="store_true", help="re-run cells that already finished")
+    p.add_argument("--force", action="store_true",
+                   help="re-run cells that already finished; also run into an --out that "
+                        "holds another config's cells")
     p.add_argument("--max-cells", type=_positive, help="run at most this many pending cells")
     p.add_argument("--no-report", action="store_true",
                    help="skip the tables and figures at the end (run `report` later)")
@@ -91,7 +93,7 @@ def _metrics(record: dict) -> str:
 
 def _write_plan(out: Path, config, plan, version: str) -> None:
     from experiments.bench import machine
-    from experiments.sweep.cells import write_text_atomic
+    from vbgs.io_atomic import write_text_atomic
 
     doc = {"name": config.name, "description": config.description, "config": config.source,
            "version": version, "machine": machine(),
@@ -128,18 +130,52 @@ def _run(records, pending: list, labels: list[str], out: Path, log: SweepLog,
     except KeyboardInterrupt:
         bar.close()
         log.write(f"interrupted after {counts['ok'] + counts['failed']} cells")
-        print(f"\ninterrupted: {counts['ok'] + counts['failed']} cells stored in {out}/cells; "
+        print(f"interrupted: {counts['ok'] + counts['failed']} cells stored in {out}/cells; "
               "run the same command again to finish the rest", file=sys.stderr)
         raise SystemExit(130) from None
     bar.close()
     return counts
 
 
+def stored_keys(out: Path) -> set[str]:
+    """Keys of the cell files in ``out/cells`` (temporary ``.*`` files left out)."""
+    return {p.stem for p in (out / "cells").glob("*.json") if not p.name.startswith(".")}
+
+
+def check_out(out: Path, config, plan, force: bool) -> list[str]:
+    """Check the results folder before anything runs; return the stored cells this plan
+    leaves out (the caller says so).
+
+    Refuses a path that is a file, and (unless ``force``) a folder holding cells of a
+    config with another name (or of an unknown one: no ``plan.json``) that this plan
+    does not have: the new config.toml, cells.csv and tables.md would replace the old
+    ones and orphan those cells without a word.
+    """
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out} is a file; give a folder for the results")
+    if not out.is_dir():
+        return []
+    orphans = sorted(stored_keys(out) - {c.key for c in plan.cells})
+    if not orphans:
+        return []
+    try:
+        previous = json.loads((out / "plan.json").read_text()).get("name")
+    except (OSError, ValueError, AttributeError):
+        previous = None
+    if previous != config.name and not force:
+        which = f"config {previous!r}" if previous else "an unknown config (no plan.json)"
+        raise ValueError(
+            f"--out {out} holds {len(orphans)} cells of {which} that config {config.name!r} "
+            f"does not plan; running here would replace its config.toml, cells.csv and "
+            f"tables.md and leave them out. Use another --out, or pass --force to run here "
+            f"anyway")
+    return orphans
+
+
 def run_sweep(args) -> dict:
     from experiments.sweep.backends import run_cells
     from experiments.sweep.cells import expand, is_done, package_version
     from experiments.sweep.config import ConfigError, load_config
-    from experiments.sweep.report import write_report
 
     t0 = time.perf_counter()
     config = load_config(args.config)
@@ -149,6 +185,7 @@ def run_sweep(args) -> dict:
         raise ConfigError(f"{config.source}: the grids make no cells; every combination was "
                           f"skipped: {'; '.join(reasons[:3])}")
     out = Path(args.out or Path("results") / config.name)
+    orphans = check_out(out, config, plan, args.force)
     workers = args.workers or os.cpu_count() or 1
     done = [] if args.force else [c for c in plan.cells if is_done(out, c.key)]
     finished = {c.key for c in done}
@@ -165,10 +202,15 @@ def run_sweep(args) -> dict:
               + (f" ({workers} workers)" if args.backend == "local" else ""))
     for s in plan.skipped:
         log.write(f"skipped  | grid {s.grid} | {dict(s.settings)} | {s.reason}")
+    if orphans:
+        note = (f"note: {len(orphans)} cells in {out}/cells are not in this config's plan; "
+                "they stay on disk but leave the tables")
+        log.write(note)
+        print(note, file=sys.stderr)
     counts = _run(records, pending, plan.varying(), out, log, config.name)
     try:
         report = ({"tables": None, "csv": None, "figures": []} if args.no_report
-                  else write_report(out))
+                  else _report(out))
     except Exception as err:  # the cells are stored; a report bug must not hide that
         log.write(f"report failed: {type(err).__name__}: {err}")
         tqdm.write(f"report failed ({type(err).__name__}: {err}); the cells are stored in "
@@ -192,12 +234,23 @@ def run_sweep(args) -> dict:
         summary["workers"] = min(workers, max(len(pending), 1))
     if report.get("error"):
         summary["report_error"] = report["error"]
+    if report.get("unreadable"):
+        summary["unreadable"] = report["unreadable"]
     if counts["failed"]:
         summary["note"] = "failed cells keep their traceback in cells/<key>.json and rerun next time"
     return summary
 
 
-def run_report(args) -> dict:
-    from experiments.sweep.report import write_report
+def _report(out: Path) -> dict:
+    """Write the report; name on stderr any cell file it had to leave out."""
+    from experiments.sweep.report import unreadable_note, write_report
 
-    return write_report(Path(args.results_dir))
+    report = write_report(out)
+    if report.get("unreadable"):
+        print(f"warning: {unreadable_note([Path(p) for p in report['unreadable']])}",
+              file=sys.stderr)
+    return report
+
+
+def run_report(args) -> dict:
+    return _report(Path(args.results_dir))

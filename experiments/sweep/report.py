@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.sweep.cells import load_record
+from experiments.sweep.cells import cell_path, load_record
 from experiments.sweep.plots import (
     plot_forgetting,
     plot_psnr_vs_components,
@@ -28,6 +28,7 @@ from experiments.sweep.plots import (
 )
 from experiments.sweep.rules import apply_rules
 from experiments.sweep.tasks import TASKS
+from vbgs.io_atomic import write_atomic, write_text_atomic
 
 # Grouping columns in this order first; any other varying setting follows.
 GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
@@ -39,22 +40,42 @@ METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("depth_l1", "depth L1"),
 NOT_GROUPED = ("seed", "depth_model")  # seeds are averaged; depth_model shows as `depth`
 
 
-def load_records(out: Path) -> tuple[list[dict], dict]:
+def load_records(out: Path) -> tuple[list[dict], dict, list[Path]]:
     """The stored records of the cells the last sweep planned (all cells without a plan),
-    and the plan (``{}`` when there is none)."""
+    the plan (``{}`` when there is none), and the cell files that exist but cannot be
+    read (corrupt or truncated JSON, no permission): they are left out, never silently."""
     out = Path(out)
     if not out.is_dir():
         raise FileNotFoundError(f"results folder {str(out)!r} does not exist")
     plan_file = out / "plan.json"
-    plan = json.loads(plan_file.read_text()) if plan_file.is_file() else {}
+    try:
+        plan = json.loads(plan_file.read_text()) if plan_file.is_file() else {}
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{plan_file} cannot be read ({err}); delete it to report every "
+                         f"cell in {out}/cells, or run the sweep again") from err
     if plan:
         keys = [c["key"] for c in plan["cells"]]
-    else:
-        keys = sorted(p.stem for p in (out / "cells").glob("*.json"))
-    records = [r for r in (load_record(out, k) for k in keys) if r is not None]
+    else:  # names starting with a dot are temporary files of writes in progress
+        keys = sorted(p.stem for p in (out / "cells").glob("*.json") if not p.name.startswith("."))
+    records, unreadable = [], []
+    for key in keys:
+        record = load_record(out, key)
+        if record is not None:
+            records.append(record)
+        elif cell_path(out, key).exists():
+            unreadable.append(cell_path(out, key))
     if not records:
-        raise FileNotFoundError(f"no finished cells in {out}/cells; run a sweep into it first")
-    return records, plan
+        bad = f" ({len(unreadable)} cell files could not be read)" if unreadable else ""
+        raise FileNotFoundError(f"no finished cells in {out}/cells{bad}; run a sweep into it first")
+    return records, plan, unreadable
+
+
+def unreadable_note(paths: list[Path]) -> str:
+    """One line naming the cell files that could not be read (at most 3 by name)."""
+    names = ", ".join(str(p) for p in paths[:3]) + (f" and {len(paths) - 3} more"
+                                                    if len(paths) > 3 else "")
+    return (f"{len(paths)} cell file(s) could not be read and are left out of the report: "
+            f"{names}; delete them and run the sweep again to recompute those cells")
 
 
 def _row(record: dict, setting_names: set[str]) -> dict:
@@ -151,7 +172,7 @@ def summary_table(df: pd.DataFrame, settings: list[str]) -> tuple[str, dict]:
 
 
 def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dict,
-                 path: Path) -> Path:
+                 path: Path, unreadable: list[Path] = ()) -> Path:
     settings = setting_columns(records)
     ok = df[df.status == "ok"]
     lines = [f"# Sweep results: {plan.get('name', Path(path).parent.name)}", ""]
@@ -160,7 +181,9 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
     lines += [f"{len(df)} cells: {len(ok)} ok, {int((df.status != 'ok').sum())} failed; "
               f"{len(plan.get('skipped', []))} grid combinations skipped. "
               f"Code version {plan.get('version', '?')}.", ""]
-    missing = len(plan.get("cells", [])) - len(df)
+    if unreadable:
+        lines += [f"**{unreadable_note(list(unreadable))}**", ""]
+    missing = len(plan.get("cells", [])) - len(df) - len(unreadable)
     if missing > 0:
         lines += [f"**{missing} planned cells have no result yet** (interrupted, or "
                   "`--max-cells`): run the sweep again to finish them.", ""]
@@ -194,16 +217,15 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
     lines += ["## Figures", ""]
     for name, (file, note) in figures.items():
         lines.append(f"- {name}: " + (f"![{name}]({file.name})" if file else note))
-    Path(path).write_text("\n".join(lines) + "\n")
-    return Path(path)
+    return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
 def write_report(out: Path) -> dict:
     """Write cells.csv, tables.md and the figures into the sweep folder ``out``."""
     out = Path(out)
-    records, plan = load_records(out)
+    records, plan, unreadable = load_records(out)
     df = cells_frame(records)
-    df.to_csv(out / "cells.csv", index=False)
+    write_atomic(out / "cells.csv", lambda tmp: df.to_csv(tmp, index=False))
     ok = df[df.status == "ok"].copy()
     style = [c for c in setting_columns(records) if c in ok]
     for column in ("psnr", "ssim", "seconds", "components"):
@@ -217,9 +239,10 @@ def write_report(out: Path) -> dict:
         "forgetting curves": plot_forgetting(records, out / "forgetting.png"),
         "renders": plot_renders(ok, style, out, out / "renders.png"),
     }
-    tables = write_tables(df, records, plan, figures, out / "tables.md")
+    tables = write_tables(df, records, plan, figures, out / "tables.md", unreadable)
     files = [out / "cells.csv", tables] + [f for f, _ in figures.values() if f]
     return {"results": str(out), "cells": len(df), "ok": int((df.status == "ok").sum()),
             "failed": int((df.status != "ok").sum()), "tables": str(tables),
             "csv": str(out / "cells.csv"), "figures": [str(f) for f in files[2:]],
-            "notes": [note for f, note in figures.values() if not f]}
+            "notes": [note for f, note in figures.values() if not f],
+            "unreadable": [str(p) for p in unreadable]}

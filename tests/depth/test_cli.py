@@ -70,7 +70,7 @@ def test_inverse_model_aligned_to_first_frame_reference(scene, capsys):
 @pytest.mark.parametrize("problem, message", [
     ("missing-model", "ONNX model not found"),
     ("empty-input", "no images"),
-    ("unreadable", "cannot read image"),
+    ("unreadable", "could not read image file"),
     ("inverse-without-reference", "not metric depth; pass --reference"),
     ("bad-reference-size", "must have the same size"),
 ])
@@ -101,3 +101,83 @@ def test_module_entry_point_reports_missing_model(tmp_path):
         capture_output=True, text=True, timeout=120,
     )
     assert done.returncode == 2 and "ONNX model not found" in done.stderr
+
+
+# issue 13: bad input never gives a silently wrong number ---------------------------------
+
+
+def _args(model, frames, out, *extra):
+    return ["--model", model, "--input", str(frames), "--output", str(out), "--kind", "metric",
+            "--no-progress", *extra]
+
+
+def test_negative_depth_model_is_refused_before_writing(scene, capsys):
+    tmp, frames, rgb, depth = scene
+    model = _save(depth_lookup_model(rgb, depth, -1.0, 0.0, space="depth"), tmp / "neg.onnx")
+    out = tmp / "out"
+    assert main(_args(model, frames, out)) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert (f"frame_00.png: no pixel has valid depth (0 of {H * W} kept" in err
+            and "nothing was written" in err and "output spans -3.9" in err)
+    assert not out.exists()  # not even the folder
+
+
+def test_mostly_invalid_frames_are_warned_with_pixel_counts(scene, capsys):
+    tmp, frames, rgb, depth = scene
+    depth = depth.copy()
+    depth[1] = 0.0  # the model gives no depth for frame 1
+    depth[2, : H // 2 + 2] = 0.0  # and for just over half of frame 2
+    model = _save(depth_lookup_model(rgb, depth, 1.0, 0.0, space="depth"), tmp / "m.onnx")
+    assert main(_args(model, frames, tmp / "out")) == 0
+    captured = capsys.readouterr()
+    kept = int((depth > 0).sum())
+    assert f"valid depth: {kept} of {N_FRAMES * H * W} pixels kept" in captured.out
+    assert (f"warning: 2 of 3 frames kept valid depth at under 50% of their pixels "
+            f"(worst frame_01.png: 0 of {H * W})") in captured.err
+    assert (read_depth_png(tmp / "out" / "frame_01.png") == 0).all()
+
+
+def test_output_that_is_a_file_is_refused_before_work(scene, capsys):
+    tmp, frames, rgb, depth = scene
+    model = _save(depth_lookup_model(rgb, depth, 1.0, 0.0, space="depth"), tmp / "m.onnx")
+    existing = tmp / "depth.txt"
+    existing.write_text("keep me")
+    assert main(_args(model, frames, existing)) == 2
+    assert f"--output {existing} is a file, not a folder" in capsys.readouterr().err
+    assert existing.read_text() == "keep me"
+
+
+def test_ctrl_c_leaves_only_complete_pngs_and_one_line(scene, capsys, monkeypatch):
+    tmp, frames, rgb, depth = scene
+    model = _save(depth_lookup_model(rgb, depth, 1.0, 0.0, space="depth"), tmp / "m.onnx")
+    import vbgs.data.depth_png as depth_png
+
+    real_imsave, calls = depth_png.skio.imsave, []
+
+    def imsave_then_interrupt(path, *a, **k):  # Ctrl-C halfway through the second file
+        calls.append(path)
+        if len(calls) == 2:
+            path.write_bytes(b"\x89PNG\r\n\x1a\n truncated")
+            raise KeyboardInterrupt
+        return real_imsave(path, *a, **k)
+
+    monkeypatch.setattr(depth_png.skio, "imsave", imsave_then_interrupt)
+    out = tmp / "out"
+    assert main(_args(model, frames, out)) == 130
+    err = capsys.readouterr().err
+    assert err == f"interrupted: 1 of 3 depth PNGs written to {out}, each complete\n"
+    assert sorted(p.name for p in out.iterdir()) == ["frame_00.png"]
+    np.testing.assert_array_equal(read_depth_png(out / "frame_00.png"),
+                                  np.round(depth[0] * MM) / MM)
+
+
+def test_8bit_reference_depth_is_refused_naming_the_file(scene, capsys):
+    tmp, frames, rgb, depth = scene
+    model = _save(depth_lookup_model(rgb, depth, 2.0, 0.5), tmp / "inv.onnx")
+    ref = tmp / "ref8.png"
+    skio.imsave(ref, np.full((H, W), 200, np.uint8), check_contrast=False)
+    assert main(["--model", model, "--input", str(frames), "--output", str(tmp / "out"),
+                 "--kind", "inverse", "--reference", str(ref), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"error: reference depth: {ref}: depth PNGs must be 16-bit" in err and "8-bit" in err

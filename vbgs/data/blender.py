@@ -11,6 +11,13 @@ the test split, ``transforms_val.json``), each with
 * ``frames[].transform_matrix``: 4x4 camera-to-world in OpenGL/Blender camera
   axes (x right, y up, z backward), converted to OpenCV axes on loading.
 
+Intrinsics in pixels refer to a ``w x h`` image (keys ``w``, ``h``); a frame may
+override any intrinsic key (as nerfstudio writes them). Each frame's camera is
+scaled from ``w x h`` to its own image size, so frames of different sizes in one
+split get consistent intrinsics; without ``w``/``h``, pixel intrinsics refer to the
+split's first image and a frame of another size is refused (its scale is unknown).
+Angles need no size: ``f = 0.5 * width / tan(0.5 * camera_angle_x)``.
+
 RGBA images are composited onto ``background`` (white by default, as for
 NeRF-synthetic). Depth sits beside each image, named after it: for
 ``train/r_0.png`` either ``train/r_0_depth.png`` (16-bit, millimetres, 0 =
@@ -34,10 +41,12 @@ from vbgs.data.scene import (
     Scene,
     bounds_from_frames,
     read_rgb,
+    require_some_depth,
     resize_frame,
     select,
     validate_frame,
 )
+from vbgs.io_atomic import write_atomic, write_text_atomic
 
 BLENDER_BACKGROUND = (1.0, 1.0, 1.0)
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -61,18 +70,57 @@ def _depth_beside(image: Path, depth_scale: float, require: bool, shape) -> np.n
     return np.zeros(shape, np.float32)
 
 
-def _camera(meta: dict, width: int, height: int, pose_gl: np.ndarray) -> Camera:
-    fx = meta.get("fl_x") or 0.5 * width / np.tan(0.5 * meta["camera_angle_x"])
-    if meta.get("fl_y"):
-        fy = meta["fl_y"]
-    elif "camera_angle_y" in meta:
-        fy = 0.5 * height / np.tan(0.5 * meta["camera_angle_y"])
+INTRINSIC_KEYS = ("camera_angle_x", "camera_angle_y", "fl_x", "fl_y", "cx", "cy", "w", "h")
+PIXEL_KEYS = ("fl_x", "fl_y", "cx", "cy")  # in pixels of a w x h image
+
+
+def _intrinsics(meta: dict, entry: dict) -> dict:
+    """The intrinsics of one frame: the file's, overridden by the frame's own (nerfstudio)."""
+    return {k: entry.get(k, meta.get(k)) for k in INTRINSIC_KEYS if entry.get(k, meta.get(k))
+            is not None}
+
+
+def _camera(intr: dict, width: int, height: int, ref_size, pose_gl: np.ndarray) -> Camera:
+    """Camera for a ``width x height`` image.
+
+    Angles give ``f = 0.5 * side / tan(0.5 * angle)`` at the image's own size. Pixel
+    intrinsics refer to a ``w x h`` image (``ref_size`` when the file has no ``w``,
+    ``h``) and are scaled per axis to this image: ``fx, cx`` by ``width / w``, ``fy, cy``
+    by ``height / h`` (pixel edges scale exactly; centres sit at ``col + 0.5``).
+    """
+    ref_w, ref_h = intr.get("w", ref_size[0]), intr.get("h", ref_size[1])
+    sx, sy = width / float(ref_w), height / float(ref_h)
+    if intr.get("fl_x"):
+        fx = intr["fl_x"] * sx
     else:
-        fy = fx
-    cx, cy = meta.get("cx", width / 2.0), meta.get("cy", height / 2.0)
+        fx = 0.5 * width / np.tan(0.5 * intr["camera_angle_x"])
+    if intr.get("fl_y"):
+        fy = intr["fl_y"] * sy
+    elif "camera_angle_y" in intr:
+        fy = 0.5 * height / np.tan(0.5 * intr["camera_angle_y"])
+    else:
+        fy = intr["fl_x"] * sy if intr.get("fl_x") else fx
+    cx = intr["cx"] * sx if "cx" in intr else width / 2.0
+    cy = intr["cy"] * sy if "cy" in intr else height / 2.0
     return Camera(
         float(fx), float(fy), float(cx), float(cy), width, height, opengl_to_opencv(pose_gl)
     )
+
+
+def _reference_size(intr: dict, width: int, height: int, first, what: str):
+    """The size pixel intrinsics refer to when the file gives no ``w``/``h``: the split's
+    first image, so a frame of another size is refused (its scale is unknown)."""
+    if ("w" in intr and "h" in intr) or not any(k in intr for k in PIXEL_KEYS):
+        return first or (width, height)
+    if first is not None and first != (width, height):
+        given = ", ".join(k for k in PIXEL_KEYS if k in intr)
+        raise ValueError(
+            f"{what}: image is {width}x{height} but the split's first image is "
+            f"{first[0]}x{first[1]}, and the intrinsics ({given}) "
+            f"are in pixels without 'w' and 'h'; add \"w\" and \"h\" (the image size they "
+            f"refer to) to the transforms file, or give every image the same size"
+        )
+    return first or (width, height)
 
 
 def _load_split(path: Path, keep, size, background, depth_scale, require_depth) -> list[Frame]:
@@ -82,9 +130,7 @@ def _load_split(path: Path, keep, size, background, depth_scale, require_depth) 
         entries = list(meta["frames"])
     except (json.JSONDecodeError, KeyError, TypeError) as err:
         raise ValueError(f"{path}: not a transforms file with a 'frames' list ({err})") from err
-    if "camera_angle_x" not in meta and "fl_x" not in meta:
-        raise ValueError(f"{path}: needs 'camera_angle_x' (radians) or 'fl_x' (pixels)")
-    frames = []
+    frames, first = [], None
     for i in keep(len(entries)):
         entry, what = entries[i], f"{path.name} frame {i}"
         if (
@@ -107,9 +153,19 @@ def _load_split(path: Path, keep, size, background, depth_scale, require_depth) 
         pose_gl = np.asarray(entry["transform_matrix"], np.float64)
         if pose_gl.shape != (4, 4):
             raise ValueError(f"{what}: transform_matrix must be 4x4, got shape {pose_gl.shape}")
-        cam = _camera(meta, rgb.shape[1], rgb.shape[0], pose_gl)
+        if not np.isfinite(pose_gl).all():
+            raise ValueError(f"{what}: transform_matrix has {int((~np.isfinite(pose_gl)).sum())} "
+                             f"NaN/inf entries; fix this frame's pose in {path.name}")
+        intr = _intrinsics(meta, entry)
+        if "camera_angle_x" not in intr and "fl_x" not in intr:
+            raise ValueError(f"{path}: needs 'camera_angle_x' (radians) or 'fl_x' (pixels)")
+        height, width = rgb.shape[:2]
+        first = _reference_size(intr, width, height, first, f"{what} ({image.name})")
+        cam = _camera(intr, width, height, first, pose_gl)
         depth = _depth_beside(image, depth_scale, require_depth, rgb.shape[:2])
-        frames.append(resize_frame(validate_frame(Frame(rgb, depth, cam), str(image)), size))
+        frame = validate_frame(Frame(rgb, depth, cam), f"{what} ({image})")
+        frames.append(resize_frame(require_some_depth(frame, f"{what} ({image})")
+                                   if require_depth else frame, size))
     return frames
 
 
@@ -174,9 +230,10 @@ def write_blender(scene: Scene, folder) -> Path:
         for i, f in enumerate(frames):
             stem = f"{split}/r_{i:03d}"
             rgb8 = np.round(np.clip(f.rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
-            skio.imsave(folder / f"{stem}.png", rgb8, check_contrast=False)
+            write_atomic(folder / f"{stem}.png",
+                         lambda tmp, rgb8=rgb8: skio.imsave(tmp, rgb8, check_contrast=False))
             write_depth_png(folder / f"{stem}_depth.png", f.depth, MILLIMETRES)
             pose_gl = opengl_to_opencv(f.camera.pose)  # the axis flip is its own inverse
             meta["frames"].append({"file_path": f"./{stem}", "transform_matrix": pose_gl.tolist()})
-        (folder / f"transforms_{split}.json").write_text(json.dumps(meta, indent=2))
+        write_text_atomic(folder / f"transforms_{split}.json", json.dumps(meta, indent=2))
     return folder

@@ -45,6 +45,7 @@ from vbgs.data.scene import (
     bounds_from_frames,
     hold_out,
     read_rgb,
+    require_some_depth,
     resize_frame,
     select,
     validate_frame,
@@ -164,7 +165,8 @@ def load_replica(
         rgb = read_rgb(images[i])
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], poses[k])
         depth = read_depth_png(depths[i], depth_scale)
-        frames.append(resize_frame(validate_frame(Frame(rgb, depth, cam), str(images[i])), size))
+        frame = validate_frame(Frame(rgb, depth, cam), f"{images[i]} (depth {depths[i].name})")
+        frames.append(resize_frame(require_some_depth(frame, f"{depths[i]}"), size))
     train, test = hold_out(frames, test_every)
     return Scene(folder.name, train, test, bounds_from_frames(train))
 
@@ -255,8 +257,9 @@ def load_tum(
         rgb = read_rgb(folder / rgb_rows[i][0])
         depth = read_depth_png(folder / depth_rows[jd][0], depth_scale)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], pose)
-        what = str(folder / rgb_rows[i][0])
-        frames.append(resize_frame(validate_frame(Frame(rgb, depth, cam), what), size))
+        what = f"{folder / rgb_rows[i][0]} (depth {depth_rows[jd][0]})"
+        frame = require_some_depth(validate_frame(Frame(rgb, depth, cam), what), what)
+        frames.append(resize_frame(frame, size))
     train, test = hold_out(frames, test_every)
     return Scene(folder.name, train, test, bounds_from_frames(train))
 

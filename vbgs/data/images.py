@@ -6,6 +6,7 @@ centre, as in :mod:`vbgs.camera`) with its colour in [0, 1].
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -59,6 +60,24 @@ def as_rgb(image, *, source: str = "image") -> np.ndarray:
     return img.astype(np.float32)
 
 
+def read_image_file(path: str | Path) -> np.ndarray:
+    """The pixels of an image file as stored (dtype and channels untouched).
+
+    A file that does not decode (truncated, not an image, unsupported) raises
+    ``ValueError`` naming the file, whatever the decoder raised.
+    """
+    path = Path(path)
+    try:
+        with warnings.catch_warnings():  # imageio's plugin notes on a bad file
+            warnings.simplefilter("ignore", DeprecationWarning)
+            return np.asarray(skio.imread(path))
+    except Exception as err:  # PIL/imageio raise OSError, SyntaxError, ValueError, ...
+        raise ValueError(
+            f"could not read image file {path} ({err}); it may be truncated or not an image: "
+            "replace or re-export it"
+        ) from err
+
+
 def load_image(name_or_path: str | Path, size: int | tuple[int, int] | None = None) -> np.ndarray:
     """A bundled photo by name (see ``BUNDLED``) or an image file by path, as float32
     RGB ``[h, w, 3]`` in [0, 1], optionally resized (anti-aliased) to ``size`` (an int
@@ -73,11 +92,7 @@ def load_image(name_or_path: str | Path, size: int | tuple[int, int] | None = No
                 f"image {name!r} is neither a bundled photo ({', '.join(BUNDLED)}) nor an "
                 "existing file"
             )
-        try:
-            raw = skio.imread(path)
-        except Exception as err:  # any decoder failure: say which file
-            raise ValueError(f"could not read image file {path}: {err}") from err
-        img = as_rgb(raw, source=str(path))
+        img = as_rgb(read_image_file(path), source=str(path))
     if size is not None:
         h, w = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
         if h < 1 or w < 1:

@@ -20,10 +20,10 @@ from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
-from skimage import io as skio
 from skimage.transform import resize
 
 from vbgs.camera import Camera, unproject
+from vbgs.data.images import read_image_file
 
 
 class Frame(NamedTuple):
@@ -96,10 +96,27 @@ def validate_frame(frame: Frame, what: str = "frame") -> Frame:
             f"with 0, e.g. np.where(np.isfinite(d) & (d > 0), d, 0)"
         )
     pose = np.asarray(cam.pose)
-    if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-        raise ValueError(f"{what}: camera pose must be a finite [4, 4] matrix, got {pose.shape}")
+    if pose.shape != (4, 4):
+        raise ValueError(f"{what}: camera pose must be a [4, 4] matrix, got shape {pose.shape}")
+    n_bad = int(np.count_nonzero(~np.isfinite(pose)))
+    if n_bad:
+        raise ValueError(
+            f"{what}: camera pose has {n_bad} NaN/inf entries; fix the pose (camera-to-world "
+            f"4x4) in the dataset"
+        )
     if not (cam.fx > 0 and cam.fy > 0):
         raise ValueError(f"{what}: focal lengths must be positive, got fx={cam.fx}, fy={cam.fy}")
+    return frame
+
+
+def require_some_depth(frame: Frame, what: str = "frame") -> Frame:
+    """Refuse a frame whose depth is 0 (missing) at every pixel: it gives no 3-D point
+    to learn from. Return it unchanged otherwise."""
+    if not np.any(frame.depth > 0):
+        raise ValueError(
+            f"{what}: depth is 0 (missing) at every pixel, so the frame has no 3-D points; "
+            f"check the depth file and its scale, or estimate depth with `python -m depth`"
+        )
     return frame
 
 
@@ -161,7 +178,7 @@ def read_rgb(path: str | Path, background=(1.0, 1.0, 1.0)) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"image not found: {path}")
-    img = np.asarray(skio.imread(path))
+    img = read_image_file(path)
     if img.dtype.kind in "ui":
         img = img / (65535.0 if img.dtype == np.uint16 else 255.0)
     if img.ndim == 2:
