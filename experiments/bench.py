@@ -93,7 +93,9 @@ def bench_estep(components, *, size: int = 128, frames: int = 60, timing_frames:
                 progress: bool = False) -> list[dict]:
     """Dense against sparse E-step on the object scene: seconds per frame (warm) and
     the held-out PSNR of the full stream (data init, prior assignment)."""
-    from experiments.scene_task import SceneTask, VbgsLearner, frame_points, run_scene
+    from experiments.learners import VbgsLearner
+    from experiments.protocol import frame_points
+    from experiments.scene_task import SceneTask, run_scene
     from vbgs.data.synthetic import object_scene
 
     scene = object_scene(size=size, n_train=frames, n_test=8, seed=0)
@@ -108,7 +110,7 @@ def bench_estep(components, *, size: int = 128, frames: int = 60, timing_frames:
             row[f"{estep}_s_per_frame"] = _time_stream(prior, points, estep)
             result = run_scene(SceneTask(components=k, size=size, frames=frames, init="data",
                                          estep=estep))
-            row[f"{estep}_psnr"] = result["psnr"]
+            row[f"{estep}_psnr"] = result.psnr
         row["speedup"] = row["dense_s_per_frame"] / row["sparse_s_per_frame"]
         row["psnr_gap_db"] = row["sparse_psnr"] - row["dense_psnr"]
         rows.append(row)

@@ -51,11 +51,11 @@ def run_depth_study(out_dir: str | Path, *, methods=("vbgs", "gradient"), progre
                                 "depth_kind": "inverse"})
             result = run_scene(task, progress=progress)
             rows.append({
-                "method": method, "depth": source, "psnr": result["psnr"],
-                "ssim": result["ssim"], "depth_l1": result["depth_l1"],
-                "train_depth_abs_rel": result.get("depth_abs_rel", 0.0),
-                "align_scale": result.get("depth_align_scale", float("nan")),
-                "align_shift": result.get("depth_align_shift", float("nan")),
-                "seconds": result["seconds"],
+                "method": method, "depth": source, "psnr": result.psnr,
+                "ssim": result.ssim, "depth_l1": result.depth_l1,
+                "train_depth_abs_rel": result.depth.get("depth_abs_rel", 0.0),
+                "align_scale": result.depth.get("depth_align_scale", float("nan")),
+                "align_shift": result.depth.get("depth_align_shift", float("nan")),
+                "seconds": result.seconds,
             })
     return rows

@@ -1,9 +1,16 @@
-"""The image task: fit one photo with VBGS (batch CAVI or a patch stream) and score it."""
+"""The image task: fit one photo with VBGS (batch CAVI or a patch stream) or with the
+gradient baseline, and score it.
+
+The gradient baseline (:func:`run_gradient_image`) fits 2-D Gaussians to the photo
+with the 3DGS trainer (normalised render as VBGS's, see :mod:`vbgs.baseline.image`).
+It has no CAVI iterations: ``task.iters`` is ignored and ``steps`` (default
+``IMAGE_STEPS`` = 2000) is a keyword.
+"""
 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import jax
@@ -11,6 +18,9 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from vbgs import model
+from vbgs.baseline import TrainConfig, count_live, params_from_prior
+from vbgs.baseline.densify import DEAD_OPACITY
+from vbgs.baseline.image import IMAGE_STEPS, fit_image, render_image_params
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.fit import fit, stream
 from vbgs.metrics import psnr, ssim
@@ -52,8 +62,6 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
     """Fit, render and score; returns the metrics, the settings, the ELBO trace and
     (under ``"images"``) the target and render for plotting."""
     if task.method == "gradient":
-        from experiments.gradient_task import run_gradient_image
-
         return run_gradient_image(task, progress=progress, steps=task.steps)
     img = load_image(task.image, task.size)
     h, w, _ = img.shape
@@ -89,6 +97,44 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
         "seconds": seconds,
         "components_used": int((np.asarray(counts) >= MIN_COUNT).sum()),
         "elbo": [float(e) for e in elbo],
+        "images": {"target": img, "render": render},
+    }
+
+
+def run_gradient_image(task: ImageTask, *, steps: int = IMAGE_STEPS, progress: bool = False,
+                       config: TrainConfig | None = None) -> dict:
+    """Fit 2-D Gaussians to the task's image with Adam for ``steps`` steps (``task.iters``
+    is ignored); same keys as :func:`experiments.image_task.run_image`, with the loss
+    trace under ``"loss"`` and ``"elbo": []``."""
+    if not isinstance(steps, int) or steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    img = load_image(task.image, task.size)
+    h, w, _ = img.shape
+    uv, rgb = image_to_points(img)
+    k_init, k_fit = jax.random.split(jax.random.key(task.seed))  # as run_image splits
+    prior = model.init(uv, rgb, task.components, key=k_init, scheme=task.init, config=task.prior)
+    bar = tqdm(total=steps, desc="Adam", unit="step", disable=not progress, leave=False)
+    start = time.perf_counter()
+    config = replace(config or TrainConfig(), lr_decay_steps=steps)  # images have no depth
+    params, losses = fit_image(params_from_prior(prior), img, steps=steps, config=config,
+                               key=k_fit, callback=lambda n: bar.update(n - bar.n))
+    render = np.clip(np.asarray(render_image_params(params, h, w)), 0.0, 1.0)
+    seconds = time.perf_counter() - start
+    bar.close()
+    settings = asdict(task)
+    settings.pop("prior")
+    return {
+        **settings,
+        "method": "gradient",
+        "steps": steps,
+        "height": h,
+        "width": w,
+        "psnr": psnr(render, img),
+        "ssim": ssim(render, img),
+        "seconds": seconds,
+        "components_used": count_live(params, DEAD_OPACITY),
+        "elbo": [],
+        "loss": [float(x) for x in losses],
         "images": {"target": img, "render": render},
     }
 

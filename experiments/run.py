@@ -122,11 +122,10 @@ def _fit_scene(args) -> dict:
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
     result = run_scene(task, progress=sys.stderr.isatty(), ply=args.ply)
-    images = result.pop("images")
     if args.save:
-        save_views(args.save, images["target"], images["render"],
-                   f"{args.scene}, {args.method}: {result['psnr']:.2f} dB held-out")
-    return result
+        save_views(args.save, result.images["target"], result.images["render"],
+                   f"{args.scene}, {args.method}: {result.psnr:.2f} dB held-out")
+    return result.to_dict(images=False)
 
 
 def _add_depth_study(sub):

@@ -127,6 +127,8 @@ def build_task(settings: dict):
 
 
 def run_task(settings: dict) -> dict:
-    """Build and run one cell's task; returns the task's result dict."""
+    """Build and run one cell's task; returns the task's result as a dict (a typed
+    result, such as :class:`experiments.protocol.SceneResult`, through ``to_dict``)."""
     _, run = TASKS[settings["task"]].load()
-    return run(build_task(settings), progress=False)
+    result = run(build_task(settings), progress=False)
+    return result.to_dict() if hasattr(result, "to_dict") else result

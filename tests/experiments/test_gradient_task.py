@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from experiments.gradient_task import GradientLearner, run_gradient_image, run_gradient_scene
-from experiments.image_task import ImageTask
-from experiments.scene_task import SceneTask, VbgsLearner, prepare_scene, task_settings
+from experiments.image_task import ImageTask, run_gradient_image
+from experiments.learners import GradientLearner, VbgsLearner
+from experiments.protocol import task_settings
+from experiments.scene_task import SceneTask, prepare_scene, run_scene
 
 # What stream_protocol adds to the settings (the keys run_scene returns for VBGS).
 PROTOCOL_KEYS = {
@@ -23,6 +24,11 @@ def tiny_task(**kw) -> SceneTask:
     settings = dict(method="gradient", size=32, frames=6, n_test=2, components=300,
                     steps_per_frame=5, init="data")
     return SceneTask(**{**settings, **kw})
+
+
+def run_gradient_scene(task):
+    """The scene run's flat record (what the CLI and the sweep store)."""
+    return run_scene(task).to_dict()
 
 
 def check_keys(result, task):

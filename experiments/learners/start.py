@@ -1,0 +1,27 @@
+"""Where a scene learner starts: the :func:`vbgs.model.init` prior both learners share.
+
+``task.init`` picks the scheme; the key is ``jax.random.key(task.seed)`` for both
+learners, so VBGS and the gradient baseline start from the same components.
+"""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+
+from experiments.protocol import frame_points
+from vbgs import model
+from vbgs.data.scene import Scene
+
+
+def init_key(task) -> jax.Array:
+    """The key every learner initialises with."""
+    return jax.random.key(task.seed)
+
+
+def scene_prior(task, scene: Scene) -> model.Mixture:
+    """The starting prior from the points of every training frame (data or random
+    scheme) in the scene's bounds."""
+    xyz, rgb = (np.concatenate(a) for a in zip(*map(frame_points, scene.train), strict=True))
+    return model.init(xyz, rgb, task.components, key=init_key(task), scheme=task.init,
+                      config=task.prior, bounds=scene.bounds)

@@ -1,0 +1,42 @@
+"""VBGS as a continual scene learner: each arriving frame is one :func:`vbgs.model.update`."""
+
+from __future__ import annotations
+
+import jax
+
+from experiments.learners.start import scene_prior
+from experiments.protocol import SceneResult, frame_points
+from vbgs import model
+from vbgs.data.scene import Frame, Scene
+from vbgs.splats import Splats, from_posterior
+
+
+class VbgsLearner:
+    """A :class:`experiments.protocol.Learner`: conjugate updates, no replay."""
+
+    PROTOCOLS = ("continual",)  # VBGS always streams
+    replay_bytes = 0
+
+    def __init__(self, task, scene: Scene):
+        self.task = task
+        self.prior = scene_prior(task, scene)
+        self.state = model.start(self.prior)
+
+    @staticmethod
+    def check(task) -> None:
+        """Nothing to check beyond the task's own validation."""
+
+    def learn(self, frame: Frame) -> None:
+        xyz, rgb = frame_points(frame)
+        t = self.task
+        self.state, _ = model.update(self.state, xyz, rgb, assign=t.assign, config=t.prior,
+                                     estep=t.estep, n_candidates=t.candidates)
+        jax.block_until_ready(self.state.stats.count)
+
+    def splats(self, drop_unused: bool = False) -> Splats:
+        return from_posterior(self.state.posterior, self.prior, opacity=self.task.opacity,
+                              cov_scale=self.task.splat_scale, drop_unused=drop_unused)
+
+    def details(self, result: SceneResult) -> dict:
+        """Learner-specific numbers for the run's record (none yet)."""
+        return {}

@@ -1,0 +1,213 @@
+"""One protocol for every scene learner: what a learner is, how it sees the stream,
+how it is scored, and the typed record of a run.
+
+* :class:`Learner`: ``learn(frame)``, ``splats(drop_unused=False)`` and
+  ``replay_bytes``; VBGS and the gradient baseline both are one
+  (:mod:`experiments.learners`).
+* :func:`stream_protocol` (continual): training frames arrive one at a time in the
+  task's ``order``; nothing is replayed unless the learner has a replay buffer.
+  **Early views** are the held-out test views nearest (camera centre) to the first
+  EARLY_FRACTION of the streamed frames; their mean PSNR is measured right after
+  those frames were learned (``early_psnr_when_seen``), at the end
+  (``early_psnr_at_end``) and along the stream (``forgetting_curve``): the forgetting
+  they suffer.
+* :func:`static_protocol`: a learner that can ``train(frames, n_steps)`` takes
+  ``task.steps`` steps on all training frames, then is scored (no forgetting metrics).
+* Final metrics are over all test views: PSNR, SSIM, depth L1 (where the ground truth
+  has depth; rendered depth is the alpha-normalised expected depth).
+
+This module imports only :mod:`vbgs`: tasks and learners import it, never the reverse.
+"""
+
+from __future__ import annotations
+
+import resource
+import time
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from vbgs.camera import unproject
+from vbgs.data.scene import Frame, Scene
+from vbgs.data.streams import stream_order
+from vbgs.metrics import depth_l1, psnr, ssim
+from vbgs.raster import rasterize
+from vbgs.splats import Splats, save_ply
+
+EARLY_FRACTION = 0.1  # the first 10% of the stream defines the "early" views
+CURVE_POINTS = 10  # evaluations of the early views along the stream
+ALPHA_FOR_DEPTH = 0.5  # rendered depth counts only where the splats cover the pixel
+COMPILE_FRAMES = 2  # the first frames' times include compilation: left out of the mean
+
+
+@runtime_checkable
+class Learner(Protocol):
+    """A continual scene learner: sees each frame once, shows its splats at any time."""
+
+    replay_bytes: int  # bytes of frames it holds for replay (0: none)
+
+    def learn(self, frame: Frame) -> None: ...
+
+    def splats(self, drop_unused: bool = False) -> Splats: ...
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Mean scores over a set of views, and the renders ``[h, w, 3]`` per view."""
+
+    psnr: float
+    ssim: float
+    depth_l1: float  # nan where no view has ground-truth depth
+    dropped: int  # splats the rasterizer's tiles dropped, summed over views
+    renders: list
+
+
+@dataclass(frozen=True)
+class SceneResult:
+    """The record of one scene run; :meth:`to_dict` is its flat JSON form (settings
+    first, then the depth-source report, the metrics and the learner's details)."""
+
+    settings: Mapping[str, Any]  # the task's fields (see task_settings)
+    psnr: float
+    ssim: float
+    depth_l1: float
+    seconds: float  # training time, all frames
+    seconds_per_frame: float  # steady state (compilation left out) or seconds / frames
+    peak_memory_mb: float
+    components_used: int
+    replay_bytes: int
+    early_views: list[int] | None  # None under the static protocol
+    early_psnr_when_seen: float | None
+    early_psnr_at_end: float | None
+    forgetting_curve: list[list[float]] | None  # [[frames seen, early-view PSNR], ...]
+    dropped: int
+    images: Mapping[str, list] = field(repr=False)  # "target" and "render" per test view
+    depth: Mapping[str, Any] = field(default_factory=lambda: {"depth_source": "sensor"})
+    details: Mapping[str, Any] = field(default_factory=dict)  # learner-specific numbers
+
+    METRICS = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "peak_memory_mb",
+               "components_used", "replay_bytes", "early_views", "early_psnr_when_seen",
+               "early_psnr_at_end", "forgetting_curve", "dropped", "images")
+
+    def to_dict(self, images: bool = True) -> dict:
+        """Flat dict: settings, depth report, metrics (images under ``"images"``
+        unless ``images=False``), details."""
+        metrics = {name: getattr(self, name) for name in self.METRICS}
+        if not images:
+            metrics.pop("images")
+        return {**self.settings, **self.depth, **metrics, **self.details}
+
+
+def task_settings(task) -> dict:
+    """The task's settings as a flat dict (hyperparameter objects left out)."""
+    settings = asdict(task)
+    settings.pop("prior", None)
+    return settings
+
+
+def frame_points(frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+    """Coloured world points ``xyz [n, 3]``, ``rgb [n, 3]`` of a frame's valid depth."""
+    return unproject(frame.camera, frame.rgb, frame.depth)
+
+
+def peak_memory_mb() -> float:
+    """Peak resident memory of this process so far (Linux reports KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def early_views(scene: Scene, order: np.ndarray) -> list[int]:
+    """Test views nearest (camera centre) to the first EARLY_FRACTION of the stream."""
+    n_early = max(1, int(round(EARLY_FRACTION * len(order))))
+    early_pos = np.stack([scene.train[i].camera.position for i in order[:n_early]])
+    test_pos = np.stack([f.camera.position for f in scene.test])
+    nearest = np.linalg.norm(test_pos[:, None] - early_pos[None], axis=-1).argmin(0)
+    return sorted(set(int(i) for i in nearest))
+
+
+def render_view(splats: Splats, frame: Frame, background) -> tuple[np.ndarray, np.ndarray, int]:
+    """Render one view: rgb ``[h, w, 3]``, alpha-normalised depth ``[h, w]`` (0 where
+    uncovered) and the number of splats the tiles dropped."""
+    out = rasterize(splats, frame.camera, background=background)
+    alpha = np.asarray(out.alpha)
+    depth = np.where(alpha > ALPHA_FOR_DEPTH, np.asarray(out.depth) / np.maximum(alpha, 1e-6), 0)
+    return np.clip(np.asarray(out.rgb), 0, 1), depth, int(out.dropped)
+
+
+def evaluate(splats: Splats, frames: list[Frame], background) -> Evaluation:
+    """Mean PSNR, SSIM and depth L1 over ``frames``, plus the renders."""
+    scores, renders, dropped = [], [], 0
+    for frame in frames:
+        rgb, depth, n = render_view(splats, frame, background)
+        dropped += n
+        scores.append((psnr(rgb, frame.rgb), ssim(rgb, frame.rgb), depth_l1(depth, frame.depth)))
+        renders.append(rgb)
+    psnrs, ssims, l1s = np.asarray(scores).T
+    return Evaluation(float(psnrs.mean()), float(ssims.mean()),
+                      float(np.nanmean(l1s)) if np.isfinite(l1s).any() else float("nan"),
+                      dropped, renders)
+
+
+def _final(task, scene: Scene, learner: Learner, ply: str | None) -> tuple[Evaluation, int]:
+    """Score every test view; save the used splats as PLY if asked; (scores, used)."""
+    final = evaluate(learner.splats(), scene.test, scene.background)
+    kept = learner.splats(drop_unused=True)
+    if ply:
+        save_ply(ply, kept)
+    return final, kept.count
+
+
+def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = False,
+                    ply: str | None = None) -> SceneResult:
+    """Feed the training frames to ``learner`` one at a time in the task's order,
+    tracking the early views, then score every test view (see the module docstring)."""
+    order = stream_order(len(scene.train), task.order, seed=task.seed)
+    early_idx = early_views(scene, order)
+    early = [scene.test[i] for i in early_idx]
+    n_early = max(1, int(round(EARLY_FRACTION * len(order))))
+    checkpoints = set(np.linspace(n_early, len(order), CURVE_POINTS).round().astype(int))
+    curve, frame_seconds = [], []
+    for step, i in enumerate(tqdm(order, desc="frames", disable=not progress, leave=False), 1):
+        t0 = time.perf_counter()
+        learner.learn(scene.train[i])
+        frame_seconds.append(time.perf_counter() - t0)
+        if step in checkpoints:
+            curve.append([step, evaluate(learner.splats(), early, scene.background).psnr])
+    final, used = _final(task, scene, learner, ply)
+    steady = frame_seconds[COMPILE_FRAMES:] or frame_seconds
+    return SceneResult(
+        settings=task_settings(task), psnr=final.psnr, ssim=final.ssim,
+        depth_l1=final.depth_l1, seconds=float(np.sum(frame_seconds)),
+        seconds_per_frame=float(np.mean(steady)), peak_memory_mb=peak_memory_mb(),
+        components_used=used, replay_bytes=int(learner.replay_bytes), early_views=early_idx,
+        early_psnr_when_seen=curve[0][1], early_psnr_at_end=curve[-1][1],
+        forgetting_curve=curve, dropped=final.dropped,
+        images={"target": [f.rgb for f in scene.test], "render": final.renders})
+
+
+PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates
+
+
+def static_protocol(task, scene: Scene, learner, frames: list, *, progress: bool = False,
+                    ply: str | None = None) -> SceneResult:
+    """``task.steps`` steps of ``learner.train(frames, n)`` on all training ``frames``
+    (in the learner's own form), then score the test views. No forgetting metrics;
+    ``seconds_per_frame`` is the training time over the number of training frames."""
+    bar = tqdm(total=task.steps, desc="steps", disable=not progress, leave=False)
+    start = time.perf_counter()
+    for done in range(0, task.steps, PROGRESS_BLOCK):
+        n = min(PROGRESS_BLOCK, task.steps - done)
+        learner.train(frames, n)
+        bar.update(n)
+    seconds = time.perf_counter() - start
+    bar.close()
+    final, used = _final(task, scene, learner, ply)
+    return SceneResult(
+        settings=task_settings(task), psnr=final.psnr, ssim=final.ssim,
+        depth_l1=final.depth_l1, seconds=seconds, seconds_per_frame=seconds / len(scene.train),
+        peak_memory_mb=peak_memory_mb(), components_used=used,
+        replay_bytes=int(learner.replay_bytes), early_views=None, early_psnr_when_seen=None,
+        early_psnr_at_end=None, forgetting_curve=None, dropped=final.dropped,
+        images={"target": [f.rgb for f in scene.test], "render": final.renders})
