@@ -1,9 +1,13 @@
 """One protocol for every scene learner: what a learner is, how it sees the stream,
 how it is scored, and the typed record of a run.
 
-* :class:`Learner`: ``learn(frame)``, ``splats(drop_unused=False)`` and
+* :class:`Learner`: ``learn(frame, background)``, ``splats(drop_unused=False)`` and
   ``replay_bytes``; VBGS and the gradient baseline both are one
   (:mod:`experiments.learners`).
+* **Background**: with ``task.background == "auto"`` the background colour is
+  estimated from the pixels without depth of the frames that have arrived
+  (:mod:`vbgs.background`); learners train with it and every view is rendered and
+  scored over it. ``"R,G,B"`` fixes it instead.
 * :func:`stream_protocol` (continual): training frames arrive one at a time in the
   task's ``order``; nothing is replayed unless the learner has a replay buffer.
   **Early views** are the held-out test views nearest (camera centre) to the first
@@ -30,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from tqdm.auto import tqdm
 
+from vbgs import background as bg
 from vbgs.camera import unproject
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
@@ -49,7 +54,7 @@ class Learner(Protocol):
 
     replay_bytes: int  # bytes of frames it holds for replay (0: none)
 
-    def learn(self, frame: Frame) -> None: ...
+    def learn(self, frame: Frame, background: np.ndarray) -> None: ...
 
     def splats(self, drop_unused: bool = False) -> Splats: ...
 
@@ -84,13 +89,14 @@ class SceneResult:
     early_psnr_at_end: float | None
     forgetting_curve: list[list[float]] | None  # [[frames seen, early-view PSNR], ...]
     dropped: int
+    background: list[float]  # the RGB the views were rendered and scored over
     images: Mapping[str, list] = field(repr=False)  # "target" and "render" per test view
     depth: Mapping[str, Any] = field(default_factory=lambda: {"depth_source": "sensor"})
     details: Mapping[str, Any] = field(default_factory=dict)  # learner-specific numbers
 
     METRICS = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "peak_memory_mb",
                "components_used", "replay_bytes", "early_views", "early_psnr_when_seen",
-               "early_psnr_at_end", "forgetting_curve", "dropped", "images")
+               "early_psnr_at_end", "forgetting_curve", "dropped", "background", "images")
 
     def to_dict(self, images: bool = True) -> dict:
         """Flat dict: settings, depth report, metrics (images under ``"images"``
@@ -106,6 +112,13 @@ def task_settings(task) -> dict:
     settings = asdict(task)
     settings.pop("prior", None)
     return settings
+
+
+def scene_background(task, estimate: bg.BackgroundEstimate) -> np.ndarray:
+    """The background ``[3]`` to train, render and score with: ``task.background`` if it
+    is an RGB triple, else the estimate from the frames seen so far."""
+    fixed = bg.parse_background(task.background)
+    return fixed if fixed is not None else bg.colour(estimate)
 
 
 def frame_points(frame: Frame) -> tuple[np.ndarray, np.ndarray]:
@@ -150,9 +163,10 @@ def evaluate(splats: Splats, frames: list[Frame], background) -> Evaluation:
                       dropped, renders)
 
 
-def _final(task, scene: Scene, learner: Learner, ply: str | None) -> tuple[Evaluation, int]:
+def _final(scene: Scene, learner: Learner, background, ply: str | None
+           ) -> tuple[Evaluation, int]:
     """Score every test view; save the used splats as PLY if asked; (scores, used)."""
-    final = evaluate(learner.splats(), scene.test, scene.background)
+    final = evaluate(learner.splats(), scene.test, background)
     kept = learner.splats(drop_unused=True)
     if ply:
         save_ply(ply, kept)
@@ -168,14 +182,17 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
     early = [scene.test[i] for i in early_idx]
     n_early = max(1, int(round(EARLY_FRACTION * len(order))))
     checkpoints = set(np.linspace(n_early, len(order), CURVE_POINTS).round().astype(int))
-    curve, frame_seconds = [], []
+    curve, frame_seconds, estimate = [], [], bg.empty()
     for step, i in enumerate(tqdm(order, desc="frames", disable=not progress, leave=False), 1):
+        frame = scene.train[i]
+        estimate = bg.observe(estimate, frame.rgb, frame.depth)
+        background = scene_background(task, estimate)
         t0 = time.perf_counter()
-        learner.learn(scene.train[i])
+        learner.learn(frame, background)
         frame_seconds.append(time.perf_counter() - t0)
         if step in checkpoints:
-            curve.append([step, evaluate(learner.splats(), early, scene.background).psnr])
-    final, used = _final(task, scene, learner, ply)
+            curve.append([step, evaluate(learner.splats(), early, background).psnr])
+    final, used = _final(scene, learner, background, ply)
     steady = frame_seconds[COMPILE_FRAMES:] or frame_seconds
     return SceneResult(
         settings=task_settings(task), psnr=final.psnr, ssim=final.ssim,
@@ -183,7 +200,7 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         seconds_per_frame=float(np.mean(steady)), peak_memory_mb=peak_memory_mb(),
         components_used=used, replay_bytes=int(learner.replay_bytes), early_views=early_idx,
         early_psnr_when_seen=curve[0][1], early_psnr_at_end=curve[-1][1],
-        forgetting_curve=curve, dropped=final.dropped,
+        forgetting_curve=curve, dropped=final.dropped, background=background.tolist(),
         images={"target": [f.rgb for f in scene.test], "render": final.renders})
 
 
@@ -192,22 +209,27 @@ PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates
 
 def static_protocol(task, scene: Scene, learner, frames: list, *, progress: bool = False,
                     ply: str | None = None) -> SceneResult:
-    """``task.steps`` steps of ``learner.train(frames, n)`` on all training ``frames``
-    (in the learner's own form), then score the test views. No forgetting metrics;
-    ``seconds_per_frame`` is the training time over the number of training frames."""
+    """``task.steps`` steps of ``learner.train(frames, n, background)`` on all training
+    ``frames`` (in the learner's own form; the background estimated from all of them),
+    then score the test views. No forgetting metrics; ``seconds_per_frame`` is the
+    training time over the number of training frames."""
+    estimate = bg.empty()
+    for frame in scene.train:
+        estimate = bg.observe(estimate, frame.rgb, frame.depth)
+    background = scene_background(task, estimate)
     bar = tqdm(total=task.steps, desc="steps", disable=not progress, leave=False)
     start = time.perf_counter()
     for done in range(0, task.steps, PROGRESS_BLOCK):
         n = min(PROGRESS_BLOCK, task.steps - done)
-        learner.train(frames, n)
+        learner.train(frames, n, background)
         bar.update(n)
     seconds = time.perf_counter() - start
     bar.close()
-    final, used = _final(task, scene, learner, ply)
+    final, used = _final(scene, learner, background, ply)
     return SceneResult(
         settings=task_settings(task), psnr=final.psnr, ssim=final.ssim,
         depth_l1=final.depth_l1, seconds=seconds, seconds_per_frame=seconds / len(scene.train),
         peak_memory_mb=peak_memory_mb(), components_used=used,
         replay_bytes=int(learner.replay_bytes), early_views=None, early_psnr_when_seen=None,
         early_psnr_at_end=None, forgetting_curve=None, dropped=final.dropped,
-        images={"target": [f.rgb for f in scene.test], "render": final.renders})
+        background=background.tolist(), images={"target": [f.rgb for f in scene.test], "render": final.renders})

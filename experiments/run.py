@@ -95,6 +95,9 @@ def _add_fit_scene(sub):
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
     p.add_argument("--depth-align", default="auto",
                    help="auto | none | median | scale-shift | scale-shift-inverse")
+    p.add_argument("--background", default="auto",
+                   help="auto (estimated from the pixels without depth of the frames seen) "
+                        "or R,G,B in [0, 1]")
     p.add_argument("--ply", metavar="OUT", help="save the splats as a 3DGS PLY")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
@@ -112,7 +115,7 @@ def _fit_scene(args) -> dict:
                      replay=args.replay, steps_per_frame=args.steps_per_frame, steps=args.steps,
                      protocol=args.protocol, depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
-                     depth_align=args.depth_align, **render)
+                     depth_align=args.depth_align, background=args.background, **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
                          f"held-out views), got {args.test_views}")

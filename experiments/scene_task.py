@@ -15,6 +15,7 @@ import numpy as np
 from experiments.learners import LEARNERS, METHODS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
 from vbgs import model
+from vbgs.background import parse_background
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
 from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
@@ -45,6 +46,7 @@ class SceneTask:
     depth_kind: str = "inverse"
     depth_preset: str | None = None
     depth_align: str = "auto"
+    background: str = "auto"  # auto (from pixels without depth, as frames arrive) | R,G,B
     # gradient baseline only (see experiments.learners.gradient_learner)
     replay: str = "none"
     steps_per_frame: int = 50
@@ -61,6 +63,7 @@ class SceneTask:
             raise ValueError(f"unknown method {self.method!r}: use one of {METHODS}")
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown protocol {self.protocol!r}: use one of {PROTOCOLS}")
+        parse_background(self.background)  # fails on a malformed R,G,B
 
 
 def load_task_scene(task: SceneTask) -> Scene:

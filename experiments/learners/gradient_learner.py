@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
@@ -66,7 +67,7 @@ class GradientLearner:
         prior = scene_prior(task, scene)
         config = replace(config, lr_decay_steps=total_steps(task, scene))
         extent = camera_extent([f.camera.position for f in scene.train])
-        self.trainer = Trainer(config, extent=extent, background=scene.background)
+        self.trainer = Trainer(config, extent=extent)
         self.state = self.trainer.init(params_from_prior(prior),
                                        key=jax.random.fold_in(init_key(task), TRAIN_KEY))
         self.replay = parse_replay(task.replay, seed=task.seed)
@@ -87,15 +88,17 @@ class GradientLearner:
         """Bytes of the frames (rgb + depth) the replay buffer holds."""
         return self.replay.nbytes
 
-    def train(self, frames: list, n_steps: int) -> None:
-        """``n_steps`` steps on frames drawn uniformly from ``frames``."""
-        self.state, losses = self.trainer.train(self.state, frames, n_steps)
+    def train(self, frames: list, n_steps: int, background) -> None:
+        """``n_steps`` steps on frames drawn uniformly from ``frames``, rendered over
+        ``background [3]``."""
+        self.state, losses = self.trainer.train(self.state, frames, n_steps,
+                                                jnp.asarray(background, jnp.float32))
         self.losses.append(losses)
 
-    def learn(self, frame: Frame) -> None:
+    def learn(self, frame: Frame, background) -> None:
         """Train on the arriving frame and the replay buffer, then buffer the frame."""
         arrays = frame_arrays(frame)
-        self.train([arrays, *self.replay.items], self.task.steps_per_frame)
+        self.train([arrays, *self.replay.items], self.task.steps_per_frame, background)
         self.replay = self.replay.add(arrays)
 
     def splats(self, drop_unused: bool = False) -> Splats:

@@ -26,7 +26,9 @@ class VbgsLearner:
     def check(task) -> None:
         """Nothing to check beyond the task's own validation."""
 
-    def learn(self, frame: Frame) -> None:
+    def learn(self, frame: Frame, background=None) -> None:
+        """One conjugate update with the frame's points (the background is not surface:
+        pixels without depth are not points, so it plays no part here)."""
         xyz, rgb = frame_points(frame)
         t = self.task
         self.state, _ = model.update(self.state, xyz, rgb, assign=t.assign, config=t.prior,

@@ -123,12 +123,13 @@ def test_loss_decreases_and_the_step_compiles_once(tiny):
     """
     scene, _, params, extent = tiny
     cfg = TrainConfig(lr_decay_steps=30, depth_weight=0.1)
-    trainer = Trainer(cfg, extent=extent, background=scene.background)
+    trainer = Trainer(cfg, extent=extent)
     state = trainer.init(params, key=jax.random.key(1))
     before = _mean_loss(state.params, scene.train, scene.background)
-    state, first = trainer.train(state, scene.train, 15)
+    background = np.asarray(scene.background, np.float32)
+    state, first = trainer.train(state, scene.train, 15, background)
     state = trainer.densify(state)  # new values, same shapes and dtypes
-    state, second = trainer.train(state, scene.train, 15)
+    state, second = trainer.train(state, scene.train, 15, 0.5 * background)  # no recompile
     after = _mean_loss(state.params, scene.train, scene.background)
     assert np.all(np.isfinite(np.concatenate([first, second])))
     assert after < 0.9 * before, (before, after)
@@ -142,10 +143,11 @@ def test_trace_counter_sees_a_single_trace():
     cfg = TrainConfig(densify=None)
     optimizer = make_optimizer(cfg, 1.0)
     traces = []
-    step = make_step(cfg, optimizer, scene.background, on_trace=lambda: traces.append(1))
+    step = make_step(cfg, optimizer, on_trace=lambda: traces.append(1))
     opt_state = optimizer.init(trainable(params))
-    for frame in scene.train:
-        params, opt_state, loss = step(params, opt_state, *frame_arrays(frame))
+    for i, frame in enumerate(scene.train):
+        background = np.full(3, 0.3 * i, np.float32)  # re-estimated backgrounds: no retrace
+        params, opt_state, loss = step(params, opt_state, *frame_arrays(frame), background)
     assert np.isfinite(float(loss)) and len(traces) == 1
 
 

@@ -138,7 +138,7 @@ def render_image_params(params: Params, height: int, width: int, cand=None) -> j
     return render_sparse(centred(params, height, width), xy, cand).reshape(height, width, 3)
 
 
-def make_image_step(config: TrainConfig, optimizer, _background=None):
+def make_image_step(config: TrainConfig, optimizer):
     """The jitted ``step(params, opt_state, target [h, w, 3], cand [h*w, n]) ->
     (params, opt_state, loss)``."""
 

@@ -148,27 +148,28 @@ def frame_arrays(frame) -> FrameArrays:
                        jnp.asarray(cam.pose, f32))
 
 
-def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, background,
-              *, on_trace=None):
-    """The jitted ``step(params, opt_state, rgb, depth, fx, fy, cx, cy, pose) ->
-    (params, opt_state, loss)``: render, :func:`vbgs.baseline.loss.frame_loss`, one
-    optimiser update. ``on_trace()`` (optional) is called each time it is traced."""
-    background = jnp.broadcast_to(jnp.asarray(background, jnp.float32), (3,))
+def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, on_trace=None):
+    """The jitted ``step(params, opt_state, rgb, depth, fx, fy, cx, cy, pose, background) ->
+    (params, opt_state, loss)``: render over ``background [3]`` (an argument, so a
+    background that is re-estimated as frames arrive costs no recompile),
+    :func:`vbgs.baseline.loss.frame_loss`, one optimiser update. ``on_trace()``
+    (optional) is called each time it is traced."""
 
-    def loss_fn(theta: Params, active, rgb, depth, camera: Camera):
+    def loss_fn(theta: Params, active, rgb, depth, camera: Camera, background):
         out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
                         tile=config.tile, capacity=config.raster_capacity)
         return frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
                           depth_weight=config.depth_weight)
 
     @jax.jit
-    def step(params: Params, opt_state, rgb, depth, fx, fy, cx, cy, pose):
+    def step(params: Params, opt_state, rgb, depth, fx, fy, cx, cy, pose, background):
         if on_trace is not None:
             on_trace()
         height, width = rgb.shape[:2]  # static: one compile per image size
         camera = Camera(fx, fy, cx, cy, int(width), int(height), pose)
         theta = trainable(params)
-        loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera)
+        loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
+                                                  background)
         updates, opt_state = optimizer.update(grads, opt_state, theta)
         theta = optax.apply_updates(theta, updates)
         return theta._replace(active=params.active), opt_state, loss
@@ -177,11 +178,11 @@ def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, back
 
 
 @functools.lru_cache(maxsize=STEP_CACHE_SIZE)
-def _optimizer_and_step(config, extent, background, make_step_fn):
+def _optimizer_and_step(config, extent, make_step_fn):
     """Optimiser and jitted step, shared by trainers with equal settings so that a new
     trainer (a new sweep cell, a new learner) reuses the compiled step."""
     optimizer = make_optimizer(config, extent)
-    return optimizer, make_step_fn(config, optimizer, background)
+    return optimizer, make_step_fn(config, optimizer)
 
 
 class TrainState(NamedTuple):
@@ -198,17 +199,13 @@ class Trainer:
 
     ``state = trainer.init(params, key=key)``; ``state, losses = trainer.train(state,
     frames, n_steps)`` with each step's frame drawn uniformly from ``frames``.
-    ``make_step_fn(config, optimizer, background)`` builds the step (default
-    :func:`make_step`; the 2-D image trainer passes its own).
+    ``make_step_fn(config, optimizer)`` builds the step (default :func:`make_step`;
+    the 2-D image trainer passes its own).
     """
 
-    def __init__(self, config: TrainConfig, *, extent: float, background=None,
-                 make_step_fn=make_step):
+    def __init__(self, config: TrainConfig, *, extent: float, make_step_fn=make_step):
         self.config = config
-        if background is not None:
-            background = tuple(float(b) for b in np.broadcast_to(background, (3,)))
-        self.optimizer, self.step_fn = _optimizer_and_step(config, float(extent), background,
-                                                           make_step_fn)
+        self.optimizer, self.step_fn = _optimizer_and_step(config, float(extent), make_step_fn)
 
     def init(self, params: Params, *, key: jax.Array) -> TrainState:
         return TrainState(params, self.optimizer.init(trainable(params)), 0, key)
@@ -222,10 +219,12 @@ class Trainer:
         return state._replace(params=params, opt_state=reset_moments(state.opt_state, changed),
                               key=key)
 
-    def train(self, state: TrainState, frames: list, n_steps: int) -> tuple[TrainState, np.ndarray]:
+    def train(self, state: TrainState, frames: list, n_steps: int, *shared
+              ) -> tuple[TrainState, np.ndarray]:
         """``n_steps`` steps, each on a frame drawn uniformly from ``frames`` (Frames, or
-        tuples of arrays such as FrameArrays, passed to the step as ``*args``); returns
-        the new state and the losses ``[n_steps]``."""
+        tuples of arrays such as FrameArrays, passed to the step as ``*args``, followed
+        by the ``shared`` arguments, e.g. the scene step's background); returns the new
+        state and the losses ``[n_steps]``."""
         if not frames:
             raise ValueError("no frames to train on")
         arrays = [f if isinstance(f, tuple) and not hasattr(f, "camera") else frame_arrays(f)
@@ -236,7 +235,7 @@ class Trainer:
         losses = []
         params, opt_state = state.params, state.opt_state
         for i in picks:
-            params, opt_state, loss = self.step_fn(params, opt_state, *arrays[int(i)])
+            params, opt_state, loss = self.step_fn(params, opt_state, *arrays[int(i)], *shared)
             losses.append(loss)
             state = state._replace(params=params, opt_state=opt_state, step=state.step + 1)
             if self.config.densify is not None and self.config.densify.due(state.step):
