@@ -95,6 +95,9 @@ def _add_fit_scene(sub):
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
     p.add_argument("--depth-align", default="auto",
                    help="auto | none | median | scale-shift | scale-shift-inverse")
+    p.add_argument("--opacity-rule", choices=["evidence", "constant"], default="evidence",
+                   help="VBGS splat opacity: per component from hit/pass-through rays "
+                        "(evidence) or the constant --opacity")
     p.add_argument("--background", default="auto",
                    help="auto (estimated from the pixels without depth of the frames seen) "
                         "or R,G,B in [0, 1]")
@@ -115,7 +118,8 @@ def _fit_scene(args) -> dict:
                      replay=args.replay, steps_per_frame=args.steps_per_frame, steps=args.steps,
                      protocol=args.protocol, depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
-                     depth_align=args.depth_align, background=args.background, **render)
+                     depth_align=args.depth_align, background=args.background,
+                     opacity_rule=args.opacity_rule, **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
                          f"held-out views), got {args.test_views}")

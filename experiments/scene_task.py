@@ -21,6 +21,7 @@ from vbgs.data.scene import Scene
 from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
 
 PROTOCOLS = ("continual", "static")
+OPACITY_RULES = ("evidence", "constant")
 
 
 @dataclass(frozen=True)
@@ -40,7 +41,8 @@ class SceneTask:
     candidates: int = 16
     init: str = "random"
     seed: int = 0
-    opacity: float = VBGS_OPACITY
+    opacity_rule: str = "evidence"  # evidence (per component, vbgs.opacity) | constant
+    opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
     splat_scale: float = VBGS_COV_SCALE
     depth_model: str | None = None
     depth_kind: str = "inverse"
@@ -64,6 +66,9 @@ class SceneTask:
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown protocol {self.protocol!r}: use one of {PROTOCOLS}")
         parse_background(self.background)  # fails on a malformed R,G,B
+        if self.opacity_rule not in OPACITY_RULES:
+            raise ValueError(f"unknown opacity rule {self.opacity_rule!r}: use one of "
+                             f"{OPACITY_RULES}")
 
 
 def load_task_scene(task: SceneTask) -> Scene:

@@ -255,30 +255,39 @@ VBGS_OPACITY = 0.5
 VBGS_COV_SCALE = 0.7
 
 
+def mixture_geometry(mixture) -> tuple[jax.Array, jax.Array]:
+    """World means ``E[mu_k]`` ``[k, 3]`` and expected covariances ``E[Sigma_k] =
+    Psi_k / (nu_k - 4)`` ``[k, 3, 3]`` of a 3-D mixture (prior or posterior)."""
+    from vbgs import expfam  # local: splats stays importable without the model
+
+    if mixture.dim != 3:
+        raise ValueError(f"splats need a 3-D mixture, got a {mixture.dim}-D one")
+    return mixture.space.mean + mixture.origin, expfam.niw_expected_covariance(mixture.space)
+
+
 def from_posterior(posterior, prior, *, opacity: float = VBGS_OPACITY,
                    cov_scale: float = VBGS_COV_SCALE, min_count: float = 0.5,
-                   drop_unused: bool = True) -> Splats:
+                   drop_unused: bool = True, opacities=None) -> Splats:
     """Splats from a fitted 3-D VBGS mixture (``vbgs.model.Mixture``).
 
     means: ``E[mu_k]`` in world units; covs: ``cov_scale^2 E[Sigma_k] =
     cov_scale^2 Psi_k / (nu_k - 4)``; colours: ``E[mu_c,k]`` clipped to [0, 1];
-    opacities: the constant ``opacity``. Components that received less than
-    ``min_count`` points' worth of data (``alpha_k - alpha0_k``) never saw the scene:
-    they are pruned, or with ``drop_unused=False`` kept with opacity 0 (the
+    opacities: per component ``opacities [k]`` when given (e.g. from evidence,
+    :mod:`vbgs.opacity`), else the constant ``opacity``. Components that received less
+    than ``min_count`` points' worth of data (``alpha_k - alpha0_k``) never saw the
+    scene: they are pruned, or with ``drop_unused=False`` kept with opacity 0 (the
     rasterizer skips them), so that the splat count, and with it the compiled
     renderer, stays the same while a stream is learned.
     """
-    from vbgs import expfam  # local: splats stays importable without the model
-
-    if posterior.dim != 3:
-        raise ValueError(f"splats need a 3-D mixture, got a {posterior.dim}-D one")
+    means, covs = mixture_geometry(posterior)
     if not (0.0 < opacity <= 1.0) or cov_scale <= 0:
         raise ValueError(f"opacity must be in (0, 1] and cov_scale > 0, got {opacity}, {cov_scale}")
     used = (posterior.alpha - prior.alpha) >= min_count
+    chosen = opacity if opacities is None else jnp.clip(jnp.asarray(opacities), 0.0, 1.0)
     splats = Splats(
-        means=posterior.space.mean + posterior.origin,
-        covs=cov_scale**2 * expfam.niw_expected_covariance(posterior.space),
+        means=means,
+        covs=cov_scale**2 * covs,
         colours=jnp.clip(posterior.colour.mean, 0.0, 1.0),
-        opacities=jnp.where(used, opacity, 0.0).astype(posterior.alpha.dtype),
+        opacities=jnp.where(used, chosen, 0.0).astype(posterior.alpha.dtype),
     )
     return prune(splats, np.asarray(used)) if drop_unused else splats

@@ -6,9 +6,9 @@ import jax
 
 from experiments.learners.start import scene_prior
 from experiments.protocol import SceneResult, frame_points
-from vbgs import model
+from vbgs import model, opacity
 from vbgs.data.scene import Frame, Scene
-from vbgs.splats import Splats, from_posterior
+from vbgs.splats import Splats, from_posterior, mixture_geometry
 
 
 class VbgsLearner:
@@ -21,6 +21,7 @@ class VbgsLearner:
         self.task = task
         self.prior = scene_prior(task, scene)
         self.state = model.start(self.prior)
+        self.evidence = opacity.no_evidence(task.components)
 
     @staticmethod
     def check(task) -> None:
@@ -31,13 +32,20 @@ class VbgsLearner:
         pixels without depth are not points, so it plays no part here)."""
         xyz, rgb = frame_points(frame)
         t = self.task
+        if t.opacity_rule == "evidence":  # read against the model that assigns the points
+            assigning = self.prior if t.assign == "prior" else self.state.posterior
+            self.evidence = opacity.observe(self.evidence, *mixture_geometry(assigning),
+                                            frame.camera, frame.depth)
         self.state, _ = model.update(self.state, xyz, rgb, assign=t.assign, config=t.prior,
                                      estep=t.estep, n_candidates=t.candidates)
         jax.block_until_ready(self.state.stats.count)
 
     def splats(self, drop_unused: bool = False) -> Splats:
+        evidence = self.task.opacity_rule == "evidence"
         return from_posterior(self.state.posterior, self.prior, opacity=self.task.opacity,
-                              cov_scale=self.task.splat_scale, drop_unused=drop_unused)
+                              cov_scale=self.task.splat_scale, drop_unused=drop_unused,
+                              opacities=opacity.expected_opacity(self.evidence) if evidence
+                              else None)
 
     def details(self, result: SceneResult) -> dict:
         """Learner-specific numbers for the run's record (none yet)."""
