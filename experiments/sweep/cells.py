@@ -136,16 +136,16 @@ def jsonable(value):
 MAX_VIEWS = 4  # views of a multi-view image (a scene's test views) kept in its PNG
 
 
-def as_picture(image) -> np.ndarray:
+def as_picture(image, limit: int = MAX_VIEWS) -> np.ndarray:
     """One image for a PNG: ``[h, w, 3]`` or ``[h, w]`` as is; a list or stack of views
-    (``[n, h, w, 3]``, ``[n, h, w]``) as its first MAX_VIEWS side by side."""
+    (``[n, h, w, 3]``, ``[n, h, w]``) as its first ``limit`` side by side, white gaps between."""
     if isinstance(image, (list, tuple)):
-        views = [np.asarray(v, dtype=np.float32) for v in image[:MAX_VIEWS]]
+        views = [np.asarray(v, dtype=np.float32) for v in image[:limit]]
     else:
         img = np.asarray(image, dtype=np.float32)
         if img.ndim == 2 or (img.ndim == 3 and img.shape[-1] in (3, 4)):
             return img
-        views = list(img[:MAX_VIEWS])
+        views = list(img[:limit])
     h = max(v.shape[0] for v in views)
     pad = [np.pad(v, [(0, h - v.shape[0])] + [(0, 0)] * (v.ndim - 1), constant_values=1.0)
            for v in views]

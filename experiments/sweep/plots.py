@@ -8,10 +8,12 @@ import itertools
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 import pandas as pd
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
+from experiments.sweep.cells import as_picture  # noqa: E402
 from matplotlib.ticker import (  # noqa: E402
     FormatStrFormatter,
     LogLocator,
@@ -22,6 +24,7 @@ from matplotlib.ticker import (  # noqa: E402
 # Settings that tell lines apart (when they vary); the others are averaged over.
 LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth")
 MAX_RENDERS_PER_ROW, MAX_RENDER_ROWS = 6, 6
+RENDER_FIGURE_WIDTH = 14.0  # inches: about 1500 px at the figures' 110 dpi
 
 
 def _line_columns(df: pd.DataFrame, style: list[str]) -> list[str]:
@@ -168,43 +171,68 @@ def _image(path: Path):
     return plt.imread(path) if path.is_file() else None
 
 
+def _rgb(image: np.ndarray) -> np.ndarray:
+    """An image read back from PNG as float RGB ``[h, w, 3]`` (alpha dropped)."""
+    image = np.asarray(image, np.float32)
+    return np.repeat(image[..., None], 3, -1) if image.ndim == 2 else image[..., :3]
+
+
 def plot_renders(df: pd.DataFrame, style: list[str], out: Path, path: Path):
-    """One row per task and dataset: the target, then the render of one cell per line
-    style (the one with the most components, lowest seed)."""
+    """A grid a person can read, one block per task and dataset. Multi-view renders (a
+    scene's test views): a ground-truth row, then one row per line style (the cell with
+    the most components, lowest seed). Single images (photos): one row, the target and
+    then one render per line style. At most RENDER_FIGURE_WIDTH inches wide."""
     if df.empty:
         return None, "no finished cells"
     cols = _line_columns(df, style)
     df = df.assign(_label=_labels(df, cols))
     keys = [c for c in ("components", "seed") if c in df]
-    rows = []
+    rows = []  # (title, picture, captions under its parts or None)
     for (task, dataset), part in df.groupby(["task", "dataset"], sort=True):
         picked = []
         for _, line in part.groupby("_label", sort=True):
             best = line.sort_values(keys, ascending=[False, True][:len(keys)]).iloc[0]
             render = _image(out / "renders" / f"{best['key']}.png")
             if render is not None:
-                picked.append((best, render))
-        if picked:
-            target = _image(out / "renders" / f"{picked[0][0]['key']}.target.png")
-            rows.append((f"{task}: {dataset}", target, picked[:MAX_RENDERS_PER_ROW]))
+                picked.append((best, _rgb(render)))
+        if not picked:
+            continue
+        target = _image(out / "renders" / f"{picked[0][0]['key']}.target.png")
+
+        def caption(row) -> str:
+            size = f", k={int(row['components'])}" if "components" in row else ""
+            return f"{row['psnr']:.2f} dB{size}: {row['_label']}"
+
+        strip = picked[0][1].shape[1] > 1.5 * picked[0][1].shape[0]
+        if strip:
+            if target is not None:
+                rows.append((f"{task}: {dataset}, ground truth", _rgb(target), None))
+            rows += [(caption(row), render, None) for row, render in picked[:MAX_RENDER_ROWS]]
+        else:
+            shown = picked[:MAX_RENDERS_PER_ROW]
+            images = ([_rgb(target)] if target is not None else []) + [r for _, r in shown]
+            captions = (["target"] if target is not None else []) + [
+                caption(row).replace(": ", "\n").replace(", ", "\n") for row, _ in shown]
+            rows.append((f"{task}: {dataset}", images, captions))
     if not rows:
         return None, "no cell saved a render"
-    rows = rows[:MAX_RENDER_ROWS]
-    ncols = 1 + max(len(picked) for _, _, picked in rows)
-    aspect = max(r.shape[1] / r.shape[0] for _, _, picked in rows for _, r in picked)
-    width = 2.9 * min(max(aspect, 1.0), 4.0)  # multi-view strips are wide
-    row_height = width / max(aspect, 1e-3) + 1.0  # the image, and room for its titles
-    fig, axes = plt.subplots(len(rows), ncols, figsize=(width * ncols, row_height * len(rows)),
-                             squeeze=False)
-    for (name, target, picked), axrow in zip(rows, axes, strict=True):
-        for ax in axrow:
-            ax.axis("off")
-        if target is not None:
-            axrow[0].imshow(target)
-        axrow[0].set_title(f"target\n{name}", fontsize=9)
-        for ax, (row, render) in zip(axrow[1:], picked, strict=False):
-            ax.imshow(render)
-            size = f", k={int(row['components'])}" if "components" in row else ""
-            label = row["_label"].replace(", ", "\n")
-            ax.set_title(f"{row['psnr']:.2f} dB{size}\n{label}", fontsize=8)
+    pictures = [as_picture(p, limit=len(p)) if isinstance(p, list) else p for _, p, _ in rows]
+    heights = [RENDER_FIGURE_WIDTH * p.shape[0] / p.shape[1] + (1.1 if c else 0.35)
+               for p, (_, _, c) in zip(pictures, rows, strict=True)]
+    fig, axes = plt.subplots(len(rows), 1, figsize=(RENDER_FIGURE_WIDTH, sum(heights)),
+                             gridspec_kw={"height_ratios": heights}, squeeze=False)
+    for ax, picture, (title, parts, captions) in zip(axes[:, 0], pictures, rows, strict=True):
+        ax.imshow(np.clip(picture, 0, 1))
+        ax.set_title(title, fontsize=9, loc="left")
+        ax.set_yticks([])
+        for spine in ax.spines.values():
+            spine.set_visible(False)
+        if captions:  # one caption under the centre of each part
+            widths = [p.shape[1] for p in parts]
+            gap = (picture.shape[1] - sum(widths)) / max(1, len(widths) - 1)
+            starts = np.cumsum([0.0] + [w + gap for w in widths[:-1]])
+            ax.set_xticks(starts + np.asarray(widths) / 2, captions, fontsize=7)
+            ax.tick_params(length=0)
+        else:
+            ax.set_xticks([])
     return _save(fig, path, "Target and renders (PSNR in dB, k = components)"), ""
