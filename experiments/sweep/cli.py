@@ -196,7 +196,7 @@ def run_sweep(args) -> dict:
         summary["report_error"] = report["error"]
     if counts["failed"]:
         summary["note"] = "failed cells keep their traceback in cells/<key>.json and rerun next time"
-    if args.strict and (counts["failed"] or report.get("error")):
+    if getattr(args, "strict", False) and (counts["failed"] or report.get("error")):
         _strict_exit(summary, as_json=args.json)
     return summary
 
