@@ -53,15 +53,18 @@ def _naive_stats(logits, x, c, w):
 
 
 def _case(d, k=6, n=32, seed=0):
-    """A posterior with unequal counts, kappas, dofs and colours, and a batch of points
-    (centred frame) with the last 5 marked as padding (weight 0)."""
+    """A posterior (random soft assignments of 200 points) with unequal counts, kappas,
+    dofs and colours, and a batch of points (centred frame) with the last 5 marked as
+    padding (weight 0)."""
     rng = np.random.default_rng(seed)
     xyz = jnp.asarray(rng.normal(size=(200, d)), jnp.float32)
     rgb = jnp.asarray(rng.uniform(size=(200, 3)), jnp.float32)
     prior = model.init(xyz, rgb, k, key=jax.random.key(seed), scheme="data",
                        config=model.PriorConfig(colour_noise=NOISE))
-    state, _ = model.update(model.start(prior), xyz[:120], rgb[:120], assign="prior")
-    q = state.posterior
+    r = jnp.asarray(rng.dirichlet(np.linspace(0.1, 3.0, k), 200), jnp.float32)  # [200, k]
+    x0 = xyz - prior.origin
+    q = model.m_step(prior, expfam.Stats(r.sum(0), r.T @ x0,
+                                         jnp.einsum("nk,ni,nj->kij", r, x0, x0), r.T @ rgb))
     x = jnp.asarray(rng.normal(size=(n, d)), jnp.float32) - q.origin
     c = jnp.asarray(rng.uniform(size=(n, 3)), jnp.float32)
     w = jnp.asarray(np.r_[np.ones(n - 5), np.zeros(5)], jnp.float32)
