@@ -71,7 +71,8 @@ def _best_seconds(fns, repeats: int) -> list[float]:
 
 def bench_adapter(size: int = 256, n_frames: int = 32, *, batch_size: int = BENCH_BATCH,
                   repeats: int = BENCH_REPEATS, seed: int = 0) -> dict:
-    """Frames per second of ``OnnxDepth.predict`` vs ``session.run`` on prepared input.
+    """Frames per second of ``OnnxDepth.predict`` vs ``session.run`` on prepared input,
+    and ``max_abs_diff``: the largest difference between their outputs (they must agree).
 
     Both use the same model, CPU provider and batch size. The adapter's time includes
     frame checks, ImageNet normalisation, NCHW transpose and output squeeze; the
@@ -92,8 +93,10 @@ def bench_adapter(size: int = 256, n_frames: int = 32, *, batch_size: int = BENC
             session.run(["y"], {"x": x})
 
     adapter_s, session_s = _best_seconds([lambda: adapter.predict(frames), raw], repeats)
+    session_out = np.concatenate([session.run(["y"], {"x": x})[0][:, 0] for x in prepared])
     return {
         "size": size, "n_frames": n_frames, "batch_size": batch_size,
+        "max_abs_diff": float(np.abs(adapter.predict(frames) - session_out).max()),
         "adapter_fps": n_frames / adapter_s, "session_fps": n_frames / session_s,
         "adapter_over_session": adapter_s / session_s,
         "overhead_ms_per_frame": 1000.0 * (adapter_s - session_s) / n_frames,

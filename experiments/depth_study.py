@@ -2,10 +2,12 @@
 
 No network weights ship with the project, so the "network" here is a test model
 (:func:`depth.testing.depth_lookup_model`) that returns the true inverse depth of the
-scene under a known affine distortion plus fixed noise, ``p = a / depth + b + e``.
-The RGB-only path is then exercised end to end: ONNX inference through
-:class:`depth.OnnxDepth`, alignment to metric depth from 1% of the first frame's
-pixels, and the same stream protocol and held-out evaluation as with sensor depth.
+scene under a known affine distortion plus fixed noise, ``p = a / depth + b + e``:
+the "estimated" depth is a synthetic distortion of the true depth, not the output of
+a learned model. The RGB-only path is then exercised end to end: ONNX inference
+through :class:`depth.OnnxDepth`, alignment to metric depth from 1% of the first
+frame's pixels, and the same stream protocol and held-out evaluation as with sensor
+depth. The written table carries the command and every setting that made it.
 """
 
 from __future__ import annotations
@@ -37,6 +39,21 @@ def write_lookup_model(task: SceneTask, path: Path) -> Path:
     return path
 
 
+def study_settings(task_kw: dict, methods) -> dict:
+    """Every setting a depth-study table depends on, for its header and CSV columns."""
+    return {**task_kw, "methods": " ".join(methods), "disparity_scale": DISPARITY_SCALE,
+            "disparity_shift": DISPARITY_SHIFT, "disparity_noise": DISPARITY_NOISE}
+
+
+def study_command(task_kw: dict, methods, out) -> str:
+    """The ``python -m experiments.run depth-study`` line that reproduces a table."""
+    return ("python -m experiments.run depth-study "
+            f"--scene {task_kw['scene']} --components {task_kw['components']} "
+            f"--frames {task_kw['frames']} --size {task_kw['size']} "
+            f"--methods {' '.join(methods)} --steps-per-frame {task_kw['steps_per_frame']} "
+            f"--out {out}")
+
+
 def run_depth_study(out_dir: str | Path, *, methods=("vbgs", "gradient"), progress=False,
                     **task_kw) -> list[dict]:
     """Held-out metrics with sensor and with estimated depth for each method."""
@@ -56,6 +73,6 @@ def run_depth_study(out_dir: str | Path, *, methods=("vbgs", "gradient"), progre
                 "train_depth_abs_rel": result.depth.get("depth_abs_rel", 0.0),
                 "align_scale": result.depth.get("depth_align_scale", float("nan")),
                 "align_shift": result.depth.get("depth_align_shift", float("nan")),
-                "seconds": result.seconds,
+                "seconds": result.seconds, "dropped": result.dropped,
             })
     return rows

@@ -137,10 +137,11 @@ def _fit_scene(args) -> dict:
 
 def _add_depth_study(sub):
     p = sub.add_parser("depth-study", help="sensor vs estimated depth (ONNX test model)")
+    # defaults: the settings of the committed results/depth_study (minutes on 2 cores)
     p.add_argument("--scene", default="object")
-    p.add_argument("--components", type=int, default=20000)
-    p.add_argument("--frames", type=int, default=60)
-    p.add_argument("--size", type=int, default=128)
+    p.add_argument("--components", type=int, default=5000)
+    p.add_argument("--frames", type=int, default=30)
+    p.add_argument("--size", type=int, default=64)
     p.add_argument("--methods", nargs="+", choices=["vbgs", "gradient"],
                    default=["vbgs", "gradient"])
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
@@ -150,12 +151,15 @@ def _add_depth_study(sub):
 
 def _depth_study(args) -> dict:
     from experiments.bench import write_table
-    from experiments.depth_study import run_depth_study
+    from experiments.depth_study import run_depth_study, study_command, study_settings
 
+    task_kw = dict(scene=args.scene, components=args.components, frames=args.frames,
+                   size=args.size, init="data", steps_per_frame=args.steps_per_frame)
     rows = run_depth_study(args.out, methods=args.methods, progress=sys.stderr.isatty(),
-                           scene=args.scene, components=args.components, frames=args.frames,
-                           size=args.size, init="data", steps_per_frame=args.steps_per_frame)
-    paths = write_table(rows, args.out, "depth_study")
+                           **task_kw)
+    paths = write_table(rows, args.out, "depth_study",
+                        command=study_command(task_kw, args.methods, args.out),
+                        settings=study_settings(task_kw, args.methods))
     return {"rows": rows, "files": [str(p) for p in paths]}
 
 
@@ -200,23 +204,28 @@ def _bench(args) -> dict:
     from experiments import bench
 
     progress = sys.stderr.isatty()
+    defaults = {"image": ([64, 128], [500, 1000, 2000, 4000, 8000]),
+                "estep": ([128], [20000, 50000]), "raster": ([128, 256], [10_000, 50_000]),
+                "depth": ([256], None)}[args.target]
+    sizes, components = args.sizes or defaults[0], args.components or defaults[1]
     if args.target == "image":
-        rows = bench.bench_image(args.sizes or [64, 128],
-                                 args.components or [500, 1000, 2000, 4000, 8000],
-                                 iters=args.iters, progress=progress)
+        rows = bench.bench_image(sizes, components, iters=args.iters, progress=progress)
     elif args.target == "estep":
-        rows = bench.bench_estep(args.components or [20000, 50000],
-                                 size=(args.sizes or [128])[0], progress=progress)
+        rows = bench.bench_estep(components, size=sizes[0], progress=progress)
     elif args.target == "raster":
         from experiments.bench_raster import bench_rasterizer
 
-        rows = bench_rasterizer(sizes=tuple(args.sizes or (128, 256)),
-                                counts=tuple(args.components or (10_000, 50_000)))
+        rows = bench_rasterizer(sizes=tuple(sizes), counts=tuple(components))
     else:
         from depth.bench import bench_adapter
 
-        rows = [bench_adapter(size=(args.sizes or [256])[0])]
-    paths = bench.write_table(rows, args.out, f"bench_{args.target}")
+        rows = [bench_adapter(size=sizes[0])]
+    command = " ".join(["python -m experiments.run bench", args.target,
+                        "--sizes", *map(str, sizes)]
+                       + (["--components", *map(str, components)] if components else [])
+                       + (["--iters", str(args.iters)] if args.target == "image" else [])
+                       + ["--out", str(args.out)])
+    paths = bench.write_table(rows, args.out, f"bench_{args.target}", command=command)
     return {"rows": rows, "files": [str(p) for p in paths]}
 
 

@@ -210,7 +210,7 @@ def run_dask(cells: list[Cell], client) -> Iterator[dict]:
             try:
                 yield future.result()
             except Exception as err:  # the worker died or could not run the function
-                yield _crashed(futures[future], err)
+                yield _crashed(futures[future], f"{type(err).__name__}: {err}", err)
             future.release()
     finally:
         client.close()

@@ -62,6 +62,8 @@ def add_sweep(sub) -> None:
     p.add_argument("--max-cells", type=_positive, help="run at most this many pending cells")
     p.add_argument("--no-report", action="store_true",
                    help="skip the tables and figures at the end (run `report` later)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with status 1 when a cell or the report failed (for scripts, CI)")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
@@ -238,7 +240,20 @@ def run_sweep(args) -> dict:
         summary["unreadable"] = report["unreadable"]
     if counts["failed"]:
         summary["note"] = "failed cells keep their traceback in cells/<key>.json and rerun next time"
+    if getattr(args, "strict", False) and (counts["failed"] or report.get("error")):
+        _strict_exit(summary, as_json=args.json)
     return summary
+
+
+def _strict_exit(summary: dict, *, as_json: bool) -> None:
+    """``--strict``: print the summary as usual, then exit with status 1."""
+    from experiments.cli_common import print_result
+
+    print_result("sweep", summary, as_json=as_json)
+    what = [f"{summary['failed']} cell(s) failed"] if summary["failed"] else []
+    what += ["the report failed"] if summary.get("report_error") else []
+    print(f"error: --strict: {' and '.join(what)}; see {summary['log']}", file=sys.stderr)
+    raise SystemExit(1)
 
 
 def _report(out: Path) -> dict:

@@ -33,7 +33,7 @@ from vbgs.io_atomic import write_atomic, write_text_atomic
 # Grouping columns in this order first; any other varying setting follows.
 GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
                "replay", "estep", "depth")
-METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("depth_l1", "depth L1"),
+METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("lpips", "LPIPS"), ("depth_l1", "depth L1"),
            ("forgetting_db", "forgetting (dB)"), ("seconds", "fit s"),
            ("seconds_per_frame", "s/frame"), ("peak_memory_mb", "peak MB"),
            ("replay_mb", "replay MB"), ("components_used", "used"))

@@ -22,16 +22,22 @@ def test_fit_image_json_and_png(tmp_path):
     result = json.loads(out.stdout.strip().splitlines()[-1])
     for key in ("psnr", "ssim", "seconds", "components_used", "elbo"):
         assert key in result
-    assert result["psnr"] > 24 and 0 < result["ssim"] <= 1
+    # measured 30.26 dB, SSIM 0.945
+    assert result["psnr"] > 29.0 and 0.9 < result["ssim"] <= 1
     assert len(result["elbo"]) == 4 and result["elbo"][-1] >= result["elbo"][0]
     assert png.stat().st_size > 10_000
 
 
-def test_fit_image_patch_stream_summary(capsys):
-    assert main(["fit-image", "--image", "chelsea", "--size", "24", "--components", "200",
-                 "--stream", "patches", "--order", "reversed", "--assign", "posterior"]) == 0
+def test_fit_image_patch_stream_summary_and_scores(capsys):
+    args = ["fit-image", "--image", "chelsea", "--size", "24", "--components", "200",
+            "--stream", "patches", "--order", "reversed", "--assign", "posterior"]
+    assert main(args) == 0
     out = capsys.readouterr().out
     assert "psnr" in out and "components_used" in out
+    assert main([*args, "--json"]) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    # measured 31.30 dB, SSIM 0.942 after one pass over the 9 patches
+    assert result["psnr"] > 29.5 and result["ssim"] > 0.9
 
 
 @pytest.mark.parametrize(
@@ -53,4 +59,6 @@ def test_bench_image_writes_tables(tmp_path):
                  "--iters", "1", "--out", str(tmp_path)]) == 0
     text = (tmp_path / "bench_image.md").read_text()
     assert "Measured on:" in text and "seconds_per_iter" in text
+    assert (f"Command: `python -m experiments.run bench image --sizes 16 --components 20 40 "
+            f"--iters 1 --out {tmp_path}`") in text
     assert len((tmp_path / "bench_image.csv").read_text().splitlines()) == 3

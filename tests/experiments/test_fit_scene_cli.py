@@ -23,7 +23,10 @@ def test_fit_scene_json_ply_png(tmp_path):
     for key in ("psnr", "ssim", "depth_l1", "seconds_per_frame", "peak_memory_mb",
                 "components_used", "early_psnr_when_seen", "early_psnr_at_end"):
         assert np.isfinite(r[key]), key
-    assert r["psnr"] > 10 and 0 < r["components_used"] <= 600
+    # measured 16.44 dB, SSIM 0.527, depth L1 0.218 (seed 0; 16.51 dB with seed 1); a
+    # render of the background alone scores about 9 dB on these views
+    assert r["psnr"] > 15.5 and r["ssim"] > 0.45 and r["depth_l1"] < 0.3
+    assert 0 < r["components_used"] <= 600
     assert load_ply(ply).count == r["components_used"]
     assert png.stat().st_size > 5_000
 
@@ -40,9 +43,15 @@ def test_depth_study_recovers_alignment(tmp_path):
                  "--size", "32", "--out", str(tmp_path)]) == 0
     text = (tmp_path / "depth_study.md").read_text()
     assert "estimated" in text and "sensor" in text
+    # the table says how it was made: the command and every setting
+    assert (f"Command: `python -m experiments.run depth-study --scene object --components 400 "
+            f"--frames 5 --size 32 --methods vbgs --steps-per-frame 50 --out {tmp_path}`"
+            in text)
+    assert "components = 400" in text and "disparity_scale = 2.0" in text
     import pandas as pd
 
     rows = pd.read_csv(tmp_path / "depth_study.csv").set_index("depth")
+    assert (rows["components"] == 400).all() and (rows["frames"] == 5).all()
     est = rows.loc["estimated"]
     # p = 2 / depth + 0.3 + noise  =>  1 / depth = 0.5 p - 0.15; at 32 px the first frame
     # gives only 8 reference pixels, so the noise (0.01) allows a few per cent

@@ -39,11 +39,15 @@ def check_keys(result, task):
     assert len(result["images"]["render"]) == task.n_test
 
 
+# Held-out scores measured on these tiny runs (30 steps in all): replay none 15.25 dB,
+# SSIM 0.400; full 14.89 dB, 0.390; static 15.72 dB, 0.429. A render of the background
+# alone scores about 9 dB on these views.
 @pytest.mark.parametrize("replay, frames_held", [("none", 0), ("full", 6)])
 def test_continual_run_returns_every_key(replay, frames_held):
     task = tiny_task(replay=replay)
     result = run_gradient_scene(task)
     check_keys(result, task)
+    assert result["psnr"] > 14.0 and result["ssim"] > 0.33 and result["depth_l1"] < 1.0
     assert result["replay_bytes"] == frames_held * FRAME_BYTES
     assert math.isfinite(result["early_psnr_when_seen"]) and math.isfinite(
         result["early_psnr_at_end"])
@@ -55,6 +59,7 @@ def test_static_run_has_no_forgetting_metrics():
     task = tiny_task(protocol="static", steps=30)
     result = run_gradient_scene(task)
     check_keys(result, task)
+    assert result["psnr"] > 14.5 and result["ssim"] > 0.36
     assert result["early_psnr_when_seen"] is None and result["forgetting_curve"] is None
     assert result["steps_total"] == 30 and result["replay_bytes"] == 0
 
@@ -83,4 +88,7 @@ def test_image_run_has_the_image_task_keys():
                 "width", "loss"):
         assert key in result
     assert result["elbo"] == [] and len(result["loss"]) == 30
-    assert math.isfinite(result["psnr"]) and result["images"]["render"].shape == (16, 16, 3)
+    assert result["images"]["render"].shape == (16, 16, 3)
+    # measured 19.83 dB, SSIM 0.815 (astronaut, 16 px, 60 splats, 30 steps)
+    assert result["psnr"] > 18.5 and result["ssim"] > 0.75
+    assert result["loss"][-1] < result["loss"][0]

@@ -2,7 +2,6 @@
 
 import csv
 import dataclasses
-import importlib.util
 import json
 import os
 import signal
@@ -272,8 +271,6 @@ def test_scene_cells_through_a_stand_in_scene_task(tmp_path, monkeypatch, capsys
     assert (out / "forgetting.png").stat().st_size > 5_000
 
 
-@pytest.mark.skipif(importlib.util.find_spec("experiments.scene_task") is None,
-                    reason="the scene task (experiments/scene_task.py) is not there yet")
 def test_real_scene_cell(tmp_path, capsys):
     config = tmp_path / "c.toml"
     config.write_text('name = "scene"\n[[grid]]\ntask = "scene"\ndataset = "object"\n'
