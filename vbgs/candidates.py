@@ -13,6 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
+from vbgs.precision import quad_form
+
 # Candidates per point by default: enough that the truncated responsibilities match
 # the dense ones to within rendering precision for splat-sized components.
 DEFAULT_CANDIDATES = 16
@@ -29,10 +31,19 @@ def nearest_components(means, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.n
     return np.asarray(idx, np.int32).reshape(len(x), c)
 
 
-def candidate_logits(phi: jnp.ndarray, weights: jnp.ndarray, cand: jnp.ndarray) -> jnp.ndarray:
-    """``l_nc = phi_n . W_{cand_nc}``: log-joint of each point with its candidates,
-    ``phi [n, F]``, ``weights [k, F]``, ``cand [n, C]`` -> ``[n, C]``."""
-    return jnp.einsum("nf,ncf->nc", phi, weights[cand])
+def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
+                     colour_noise: float) -> jnp.ndarray:
+    """``l_nc``: log-joint of each point with its candidates, ``[n, C]``, in centred form
+    ``const_k - 1/2 (x_n - m_k)^T P_k (x_n - m_k) - |c_n - mc_k|^2 / (2 sigma_c^2)``
+    with ``k = cand_nc`` (see :class:`vbgs.model.Terms`); ``x [n, d]``, ``c [n, 3]``.
+
+    Elementwise products of centred quantities only: exact whatever the backend's
+    matmul precision (TF32 included), and no large terms cancel.
+    """
+    diff = x[:, None, :] - terms.mean[cand]  # [n, C, d]
+    maha = quad_form(diff, terms.prec[cand])  # [n, C]
+    dc = c[:, None, :] - terms.colour_mean[cand]  # [n, C, 3]
+    return terms.const[cand] - 0.5 * maha - 0.5 * jnp.sum(dc**2, -1) / colour_noise**2
 
 
 def scatter_moments(acc: jnp.ndarray, resp: jnp.ndarray, phi: jnp.ndarray,
