@@ -23,11 +23,20 @@ DEFAULT_CANDIDATES = 16
 def nearest_components(means, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
     """Indices ``[n, C]`` of the ``C`` component means ``[k, d]`` nearest to each point
     ``x [n, d]`` (Euclidean, host KD-tree), ``C = min(n_candidates, k)``."""
-    means = np.asarray(means, np.float64)
-    c = int(min(n_candidates, means.shape[0]))
+    return query(means_tree(means), x, n_candidates)
+
+
+def means_tree(means) -> cKDTree:
+    """A KD-tree over component means ``[k, d]`` (build once while the means are fixed)."""
+    return cKDTree(np.asarray(means, np.float64))
+
+
+def query(tree: cKDTree, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
+    """:func:`nearest_components` against a prebuilt :func:`means_tree`."""
+    c = int(min(n_candidates, tree.n))
     if c < 1:
         raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
-    _, idx = cKDTree(means).query(np.asarray(x, np.float64), k=c, workers=-1)
+    _, idx = tree.query(np.asarray(x, np.float64), k=c, workers=-1)
     return np.asarray(idx, np.int32).reshape(len(x), c)
 
 

@@ -183,6 +183,12 @@ def init(
 
 def check_points(xyz, rgb) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Validate a batch at the library boundary: shapes, dtypes, finiteness."""
+    xyz_np, rgb_np = check_points_host(xyz, rgb)
+    return jnp.asarray(xyz_np), jnp.asarray(rgb_np)
+
+
+def check_points_host(xyz, rgb) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`check_points` on the host: numpy arrays of one floating dtype."""
     xyz_np, rgb_np = np.asarray(xyz), np.asarray(rgb)
     if xyz_np.ndim != 2 or xyz_np.shape[1] not in (2, 3):
         raise ValueError(f"positions must have shape [n, 2] or [n, 3], got {xyz_np.shape}")
@@ -197,8 +203,21 @@ def check_points(xyz, rgb) -> tuple[jnp.ndarray, jnp.ndarray]:
             raise TypeError(f"{name} must be floating point, got dtype {a.dtype}")
         if not np.isfinite(a).all():
             raise ValueError(f"{name} contain NaN or inf ({np.size(a) - np.isfinite(a).sum()} values)")
-    dtype = jnp.result_type(xyz_np.dtype, rgb_np.dtype)
-    return jnp.asarray(xyz_np, dtype), jnp.asarray(rgb_np, dtype)
+    dtype = np.dtype(jnp.result_type(xyz_np.dtype, rgb_np.dtype))
+    return xyz_np.astype(dtype, copy=False), rgb_np.astype(dtype, copy=False)
+
+
+def padded_batch(xyz, rgb, origin, size: int, dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A validated batch, centred on ``origin`` and padded to ``size`` rows on the host:
+    ``(x [size, d], c [size, 3], w [size])`` with weight 0 on padding. Done in numpy so
+    that a new point count costs no compilation (eager JAX ops compile per shape)."""
+    xyz, rgb = check_points_host(xyz, rgb)
+    n, d = xyz.shape
+    dtype = np.dtype(dtype)
+    x, c, w = np.zeros((size, d), dtype), np.zeros((size, 3), dtype), np.zeros((size,), dtype)
+    x[:n] = xyz - np.asarray(origin, np.float64).astype(xyz.dtype)
+    c[:n], w[:n] = rgb, 1.0
+    return x, c, w
 
 
 # --------------------------------------------------------------------------- E-step
@@ -426,13 +445,12 @@ def update(
         raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
     if estep not in ("dense", "sparse"):
         raise ValueError(f"unknown E-step {estep!r}: use 'dense' or 'sparse'")
-    xyz, rgb = check_points(xyz, rgb)
+    xyz, rgb = check_points_host(xyz, rgb)
     if xyz.shape[1] != state.prior.dim:
         raise ValueError(f"points are {xyz.shape[1]}-D but the model is {state.prior.dim}-D")
-    dtype = state.prior.alpha.dtype
     n = xyz.shape[0]
     size = bucket_size(n)
-    x, c, w = pad_points((xyz - state.prior.origin).astype(dtype), rgb.astype(dtype), size)
+    x, c, w = padded_batch(xyz, rgb, state.prior.origin, size, state.prior.alpha.dtype)
     cand = None
     if estep == "sparse":
         q = state.prior if assign == "prior" else state.posterior
