@@ -134,14 +134,19 @@ def _depth_study(args) -> dict:
 
 def _add_bench(sub):
     p = sub.add_parser("bench", help="benchmarks; figures are printed and written as CSV/markdown")
-    p.add_argument("target", choices=["image", "estep", "raster", "depth"],
+    p.add_argument("target", choices=["image", "estep", "stream", "raster", "depth"],
                    help="image: CAVI per iteration; estep: dense vs sparse per frame; "
+                        "stream: seconds per streamed frame end to end, with a profile; "
                         "raster: 3-D rasterizer; depth: ONNX adapter throughput")
     p.add_argument("--sizes", type=int, nargs="+", default=None,
                    help="image sizes (image: 64 128, raster: 128 256, estep: 128)")
     p.add_argument("--components", type=int, nargs="+", default=None,
                    help="component counts (image: 500..8000, estep: 20000 50000)")
     p.add_argument("--iters", type=int, default=3, help="timed CAVI iterations per cell")
+    p.add_argument("--frames", type=int, default=60, help="stream: frames streamed per row")
+    p.add_argument("--scenes", nargs="+", default=["object", "room"], help="stream: scenes")
+    p.add_argument("--search", choices=["auto", "grid", "kdtree"], default="auto",
+                   help="stream: sparse candidate search (auto: KD-tree on CPU, grid elsewhere)")
     p.add_argument("--out", default="results/bench", help="folder for the CSV and markdown table")
     p.add_argument("--json", action="store_true")
 
@@ -157,6 +162,26 @@ def _bench(args) -> dict:
     elif args.target == "estep":
         rows = bench.bench_estep(args.components or [20000, 50000],
                                  size=(args.sizes or [128])[0], progress=progress)
+    elif args.target == "stream":
+        from experiments import bench_stream
+
+        rows = bench_stream.bench_stream(tuple(args.components or (20000, 50000, 100000)),
+                                         tuple(args.scenes), frames=args.frames,
+                                         size=(args.sizes or [128])[0], search=args.search,
+                                         progress=progress)
+        profile = _stream_profile(args.scenes[0], (args.components or [20000])[0],
+                                  (args.sizes or [128])[0], args.search)
+        paths = bench.write_table(rows, args.out, "bench_stream")
+        paths += bench.write_table(profile, args.out, "bench_stream_profile")
+        if not args.json:
+            from tabulate import tabulate
+
+            print(f"profile of one frame ({args.scenes[0]}, sparse E-step):")
+            print(tabulate(profile, headers="keys", floatfmt=".4g", tablefmt="github"))
+            print(tabulate(bench_stream.speedups(rows), headers="keys", floatfmt=".3g",
+                           tablefmt="github"))
+        return {"rows": rows, "speedups": bench_stream.speedups(rows), "profile": profile,
+                "files": [str(p) for p in paths]}
     elif args.target == "raster":
         from experiments.bench_raster import bench_rasterizer
 
@@ -168,6 +193,15 @@ def _bench(args) -> dict:
         rows = [bench_adapter(size=(args.sizes or [256])[0])]
     paths = bench.write_table(rows, args.out, f"bench_{args.target}")
     return {"rows": rows, "files": [str(p) for p in paths]}
+
+
+def _stream_profile(scene_name: str, k: int, size: int, search: str) -> list[dict]:
+    from experiments.bench_stream import _prior, profile_frame
+    from vbgs.data.formats import load_scene
+
+    scene = load_scene(scene_name, size=size, n_train=20, n_test=1, seed=0)
+    return [{"scene": scene_name, "components": k, **row}
+            for row in profile_frame(scene, _prior(scene, k), search=search)]
 
 
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),

@@ -30,6 +30,7 @@ from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
 from vbgs.metrics import depth_l1, psnr, ssim
 from vbgs.raster import rasterize
+from vbgs.stepper import Stepper
 from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY, Splats, from_posterior, save_ply
 
 EARLY_FRACTION = 0.1  # the first 10% of the stream defines the "early" views
@@ -139,12 +140,12 @@ class VbgsLearner:
         self.prior = model.init(xyz, rgb, task.components, key=key, scheme=task.init,
                                 config=task.prior, bounds=scene.bounds)
         self.state = model.start(self.prior)
+        self.step = Stepper(self.prior, assign=task.assign, config=task.prior, estep=task.estep,
+                            n_candidates=task.candidates)
 
     def learn(self, frame: Frame) -> None:
         xyz, rgb = frame_points(frame)
-        t = self.task
-        self.state, _ = model.update(self.state, xyz, rgb, assign=t.assign, config=t.prior,
-                                     estep=t.estep, n_candidates=t.candidates)
+        self.state, _ = self.step(self.state, xyz, rgb)
         jax.block_until_ready(self.state.stats.count)
 
     def splats(self, drop_unused: bool = False) -> Splats:

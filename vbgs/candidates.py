@@ -13,7 +13,6 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from vbgs.precision import quad_form
 
 # Candidates per point by default: enough that the truncated responsibilities match
 # the dense ones to within rendering precision for splat-sized components.
@@ -47,12 +46,25 @@ def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
     with ``k = cand_nc`` (see :class:`vbgs.model.Terms`); ``x [n, d]``, ``c [n, 3]``.
 
     Elementwise products of centred quantities only: exact whatever the backend's
-    matmul precision (TF32 included), and no large terms cancel.
+    matmul precision (TF32 included), and no large terms cancel. The terms are packed
+    into one ``[rows, k]`` table and gathered once, one contiguous ``[n, C]`` plane per
+    row, and the quadratic form is unrolled over the ``d (d + 1) / 2`` distinct entries
+    of the symmetric ``P_k`` (fast on CPUs, where small trailing axes vectorise badly).
     """
-    diff = x[:, None, :] - terms.mean[cand]  # [n, C, d]
-    maha = quad_form(diff, terms.prec[cand])  # [n, C]
-    dc = c[:, None, :] - terms.colour_mean[cand]  # [n, C, 3]
-    return terms.const[cand] - 0.5 * maha - 0.5 * jnp.sum(dc**2, -1) / colour_noise**2
+    d = x.shape[1]
+    k = terms.mean.shape[0]
+    table = jnp.concatenate([terms.mean.T, terms.prec.reshape(k, d * d).T,
+                             terms.colour_mean.T, terms.const[None]], 0)  # [d + d*d + 4, k]
+    g = table[:, cand]  # [rows, n, C]
+    diff = [x[:, i, None] - g[i] for i in range(d)]  # d x [n, C]
+    maha = 0.0
+    for i in range(d):
+        for j in range(i, d):
+            p_ij = g[d + i * d + j]
+            maha = maha + (1.0 if i == j else 2.0) * p_ij * diff[i] * diff[j]
+    base = d + d * d
+    colour = sum((c[:, i, None] - g[base + i]) ** 2 for i in range(3))
+    return g[base + 3] - 0.5 * maha - 0.5 * colour / colour_noise**2
 
 
 def scatter_moments(acc: jnp.ndarray, resp: jnp.ndarray, phi: jnp.ndarray,
