@@ -216,10 +216,17 @@ def main(argv: list[str] | None = None) -> int:
     for add, _ in COMMANDS.values():
         add(sub)
     args = parser.parse_args(argv)
+    from vbgs.compilation import CompileTimer, enable_persistent_cache
+
+    enable_persistent_cache()  # opt out with VBGS_NO_COMPILE_CACHE=1
+    timer = CompileTimer()
     try:
-        result = COMMANDS[args.command][1](args)
+        with timer:
+            result = COMMANDS[args.command][1](args)
     except (ValueError, TypeError, FileNotFoundError) as err:
         return fail(err)
+    if args.command in ("fit-image", "fit-scene"):
+        result["compile_seconds"] = timer.seconds  # all compilation (or cache loads) in the run
     print_result(args.command, result, as_json=getattr(args, "json", False))
     return 0
 

@@ -166,19 +166,29 @@ def init(
     pts = np.asarray(xyz, np.float64)
     lo, hi = (np.asarray(b, np.float64) for b in bounds) if bounds else (pts.min(0), pts.max(0))
     origin = jnp.asarray(0.5 * (lo + hi), xyz.dtype)
+    means, colours = _place(key, xyz, rgb, jnp.asarray(lo, xyz.dtype), jnp.asarray(hi, xyz.dtype),
+                            origin, n_components, scheme)
+    return _make_prior(means, colours, origin, cell_length(lo, hi, n_components), config)
+
+
+@partial(jax.jit, static_argnames=("n_components", "scheme"))
+def _place(key, xyz, rgb, lo, hi, origin, n_components: int, scheme: str):
+    """Component spatial and colour means for :func:`init` (one compiled function)."""
     k_pos, k_col, k_pick = jax.random.split(key, 3)
     dtype = xyz.dtype
     if scheme == "random":
         u = jax.random.uniform(k_pos, (n_components, xyz.shape[1]), dtype)
         # uniform in the box, expressed about the origin to keep precision far from 0
-        means = origin + (u - 0.5) * jnp.asarray(hi - lo, dtype)
+        means = origin + (u - 0.5) * (hi - lo)
         c_lo, c_hi = rgb.min(0), rgb.max(0)
         colours = c_lo + jax.random.uniform(k_col, (n_components, 3), dtype) * (c_hi - c_lo)
-    else:
-        n = xyz.shape[0]
-        idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)
-        means, colours = xyz[idx], rgb[idx]
-    return make_prior(means, colours, origin, cell_length(lo, hi, n_components), config)
+        return means, colours
+    n = xyz.shape[0]
+    idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)
+    return xyz[idx], rgb[idx]
+
+
+_make_prior = jax.jit(make_prior, static_argnames=("config",))
 
 
 def check_points(xyz, rgb) -> tuple[jnp.ndarray, jnp.ndarray]:
