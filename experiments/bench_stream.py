@@ -4,8 +4,9 @@ profile of one frame.
 End to end means what a learner pays per arriving frame: unprojecting the RGB-D frame
 to points, padding on the host, the candidate search, the compiled E-/M-step and
 waiting for the result (:class:`vbgs.stepper.Stepper`). Building the stepper (prior
-terms, candidate structure) is reported as ``setup_s``; the time of calls that
-compiled as ``compile_s``; ``s_per_frame`` averages the frames that did not compile.
+terms, candidate structure) is reported as ``setup_s``; the compilation inside it and
+the whole time of frames whose call compiled as ``compile_s``; ``s_per_frame``
+averages the frames that did not compile.
 """
 
 from __future__ import annotations
@@ -35,11 +36,14 @@ def stream_row(scene, prior, estep: str, *, frames: int, search: str = "auto",
     """Stream ``frames`` frames through a fresh stepper; timings of one row."""
     from experiments.scene_task import frame_points, peak_memory_mb
 
-    t0 = time.perf_counter()
-    step = stepper.Stepper(prior, assign=assign, estep=estep, search=search)
-    jax.block_until_ready(step.fixed)
-    setup = time.perf_counter() - t0
-    state, compile_s, steady, counts = model.start(prior), 0.0, [], []
+    timer = CompileTimer()
+    with timer:
+        t0 = time.perf_counter()
+        step = stepper.Stepper(prior, assign=assign, estep=estep, search=search)
+        jax.block_until_ready(step.fixed)
+        setup = time.perf_counter() - t0
+    setup -= timer.seconds  # the prior terms' compilation counts as compilation
+    state, compile_s, steady, counts = model.start(prior), timer.seconds, [], []
     for frame in scene.train[:frames]:
         timer = CompileTimer()
         with timer:
@@ -161,3 +165,44 @@ def speedups(rows: list[dict]) -> list[dict]:
             out.append({"scene": r["scene"], "components": r["components"],
                         "sparse_over_dense": dense[0]["s_per_frame"] / r["s_per_frame"]})
     return out
+
+
+def sharded_row(n_devices: int, k: int, scene_name: str, *, frames: int, size: int,
+                estep: str) -> dict:
+    """:func:`stream_row` with the components split over ``n_devices`` devices."""
+    from vbgs import sharding
+    from vbgs.data.formats import load_scene
+
+    scene = load_scene(scene_name, size=size, n_train=frames, n_test=1, seed=0)
+    mesh = sharding.mesh(n_devices)
+    prior = sharding.shard_prior(_prior(scene, k), mesh)
+    row = stream_row(scene, prior, estep, frames=frames, search="grid")
+    return {"scene": scene_name, "size": size, "components": k, **row,
+            "devices": n_devices}
+
+
+def device_rows(counts, k: int, scene_name: str, *, frames: int, size: int,
+                estep: str = "sparse") -> list[dict]:
+    """One :func:`sharded_row` per device count, each in a fresh process with that many
+    host CPU devices (``XLA_FLAGS=--xla_force_host_platform_device_count=N``); on an
+    accelerator the process's own devices are used instead."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    rows = []
+    for n in counts:
+        env = dict(os.environ)
+        if jax.default_backend() == "cpu":
+            env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") +
+                                f" --xla_force_host_platform_device_count={n}").strip()
+        code = ("import json, sys; from experiments.bench_stream import sharded_row; "
+                f"print(json.dumps(sharded_row({n}, {k}, {scene_name!r}, frames={frames}, "
+                f"size={size}, estep={estep!r})))")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             env=env, check=False)
+        if out.returncode:
+            raise RuntimeError(f"bench stream on {n} devices failed: {out.stderr[-2000:]}")
+        rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    return rows

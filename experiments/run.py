@@ -147,6 +147,9 @@ def _add_bench(sub):
     p.add_argument("--scenes", nargs="+", default=["object", "room"], help="stream: scenes")
     p.add_argument("--search", choices=["auto", "grid", "kdtree"], default="auto",
                    help="stream: sparse candidate search (auto: KD-tree on CPU, grid elsewhere)")
+    p.add_argument("--devices", type=int, nargs="+", default=None,
+                   help="stream: rows with the components sharded over N devices (host CPUs: "
+                        "one process each with N forced host devices), first component count")
     p.add_argument("--out", default="results/bench", help="folder for the CSV and markdown table")
     p.add_argument("--json", action="store_true")
 
@@ -169,6 +172,10 @@ def _bench(args) -> dict:
                                          tuple(args.scenes), frames=args.frames,
                                          size=(args.sizes or [128])[0], search=args.search,
                                          progress=progress)
+        if args.devices:
+            rows += bench_stream.device_rows(args.devices, (args.components or [20000])[0],
+                                             args.scenes[0], frames=args.frames,
+                                             size=(args.sizes or [128])[0])
         profile = _stream_profile(args.scenes[0], (args.components or [20000])[0],
                                   (args.sizes or [128])[0], args.search)
         paths = bench.write_table(rows, args.out, "bench_stream")
