@@ -116,6 +116,7 @@ def profile_frame(scene, prior, *, search: str = "auto") -> list[dict]:
     stats, _ = e_fn(step.fixed.reference, xd, cd, wd, cand)
     rows.append(("M-step", _timed(jax.jit(model.m_step), prior, stats)))
     state = model.start(prior)
+    stepper._step.clear_cache()  # compile afresh (a load, where the persistent cache has it)
     timer = CompileTimer()
     with timer:
         step(state, xyz, rgb)
