@@ -188,14 +188,22 @@ def _oracle(args) -> dict:
 
 def _add_bench(sub):
     p = sub.add_parser("bench", help="benchmarks; figures are printed and written as CSV/markdown")
-    p.add_argument("target", choices=["image", "estep", "raster", "depth"],
+    p.add_argument("target", choices=["image", "estep", "stream", "raster", "depth"],
                    help="image: CAVI per iteration; estep: dense vs sparse per frame; "
+                        "stream: seconds per streamed frame end to end, with a profile; "
                         "raster: 3-D rasterizer; depth: ONNX adapter throughput")
     p.add_argument("--sizes", type=int, nargs="+", default=None,
                    help="image sizes (image: 64 128, raster: 128 256, estep: 128)")
     p.add_argument("--components", type=int, nargs="+", default=None,
                    help="component counts (image: 500..8000, estep: 20000 50000)")
     p.add_argument("--iters", type=int, default=3, help="timed CAVI iterations per cell")
+    p.add_argument("--frames", type=int, default=60, help="stream: frames streamed per row")
+    p.add_argument("--scenes", nargs="+", default=["object", "room"], help="stream: scenes")
+    p.add_argument("--search", choices=["auto", "grid", "kdtree"], default="auto",
+                   help="stream: sparse candidate search (auto: KD-tree on CPU, grid elsewhere)")
+    p.add_argument("--devices", type=int, nargs="+", default=None,
+                   help="stream: rows with the components sharded over N devices (host CPUs: "
+                        "one process each with N forced host devices), first component count")
     p.add_argument("--out", default="results/bench", help="folder for the CSV and markdown table")
     p.add_argument("--json", action="store_true")
 
@@ -206,12 +214,40 @@ def _bench(args) -> dict:
     progress = sys.stderr.isatty()
     defaults = {"image": ([64, 128], [500, 1000, 2000, 4000, 8000]),
                 "estep": ([128], [20000, 50000]), "raster": ([128, 256], [10_000, 50_000]),
-                "depth": ([256], None)}[args.target]
+                "stream": ([128], [20000, 50000, 100000]), "depth": ([256], None)}[args.target]
     sizes, components = args.sizes or defaults[0], args.components or defaults[1]
     if args.target == "image":
         rows = bench.bench_image(sizes, components, iters=args.iters, progress=progress)
     elif args.target == "estep":
         rows = bench.bench_estep(components, size=sizes[0], progress=progress)
+    elif args.target == "stream":
+        from experiments import bench_stream
+
+        rows = bench_stream.bench_stream(tuple(args.components or (20000, 50000, 100000)),
+                                         tuple(args.scenes), frames=args.frames,
+                                         size=(args.sizes or [128])[0], search=args.search,
+                                         progress=progress)
+        if args.devices:
+            rows += bench_stream.device_rows(args.devices, (args.components or [20000])[0],
+                                             args.scenes[0], frames=args.frames,
+                                             size=(args.sizes or [128])[0])
+        profile = _stream_profile(args.scenes[0], (args.components or [20000])[0],
+                                  (args.sizes or [128])[0], args.search)
+        command = " ".join(["python -m experiments.run bench stream --components",
+                            *map(str, components), "--scenes", *args.scenes, "--frames",
+                            str(args.frames), "--sizes", str(sizes[0]), "--search", args.search]
+                           + (["--devices", *map(str, args.devices)] if args.devices else []))
+        paths = bench.write_table(rows, args.out, "bench_stream", command=command)
+        paths += bench.write_table(profile, args.out, "bench_stream_profile", command=command)
+        if not args.json:
+            from tabulate import tabulate
+
+            print(f"profile of one frame ({args.scenes[0]}, sparse E-step):")
+            print(tabulate(profile, headers="keys", floatfmt=".4g", tablefmt="github"))
+            print(tabulate(bench_stream.speedups(rows), headers="keys", floatfmt=".3g",
+                           tablefmt="github"))
+        return {"rows": rows, "speedups": bench_stream.speedups(rows), "profile": profile,
+                "files": [str(p) for p in paths]}
     elif args.target == "raster":
         from experiments.bench_raster import bench_rasterizer
 
@@ -229,6 +265,15 @@ def _bench(args) -> dict:
     return {"rows": rows, "files": [str(p) for p in paths]}
 
 
+def _stream_profile(scene_name: str, k: int, size: int, search: str) -> list[dict]:
+    from experiments.bench_stream import _prior, profile_frame
+    from vbgs.data.formats import load_scene
+
+    scene = load_scene(scene_name, size=size, n_train=20, n_test=1, seed=0)
+    return [{"scene": scene_name, "components": k, **row}
+            for row in profile_frame(scene, _prior(scene, k), search=search)]
+
+
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "oracle": (_add_oracle, _oracle),
@@ -243,11 +288,18 @@ def main(argv: list[str] | None = None) -> int:
         for add, _ in COMMANDS.values():
             add(sub)
         args = parser.parse_args(argv)
-        result = COMMANDS[args.command][1](args)
+        from vbgs.compilation import CompileTimer, enable_persistent_cache
+
+        enable_persistent_cache()  # opt out with VBGS_NO_COMPILE_CACHE=1
+        timer = CompileTimer()
+        with timer:
+            result = COMMANDS[args.command][1](args)
     except (ValueError, TypeError, OSError) as err:  # OSError: a file that cannot be written
         return fail(err)
     except KeyboardInterrupt as err:  # Ctrl-C: one line, status 130, no traceback
         return interrupted(err)
+    if args.command in ("fit-image", "fit-scene"):
+        result["compile_seconds"] = timer.seconds  # all compilation (or cache loads) in the run
     warning = meaningless_score_warning(result)
     if warning:
         result["warning"] = warning

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
+
 # Candidates per point by default: enough that the truncated responsibilities match
 # the dense ones to within rendering precision for splat-sized components.
 DEFAULT_CANDIDATES = 16
@@ -21,18 +22,49 @@ DEFAULT_CANDIDATES = 16
 def nearest_components(means, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
     """Indices ``[n, C]`` of the ``C`` component means ``[k, d]`` nearest to each point
     ``x [n, d]`` (Euclidean, host KD-tree), ``C = min(n_candidates, k)``."""
-    means = np.asarray(means, np.float64)
-    c = int(min(n_candidates, means.shape[0]))
+    return query(means_tree(means), x, n_candidates)
+
+
+def means_tree(means) -> cKDTree:
+    """A KD-tree over component means ``[k, d]`` (build once while the means are fixed)."""
+    return cKDTree(np.asarray(means, np.float64))
+
+
+def query(tree: cKDTree, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
+    """:func:`nearest_components` against a prebuilt :func:`means_tree`."""
+    c = int(min(n_candidates, tree.n))
     if c < 1:
         raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
-    _, idx = cKDTree(means).query(np.asarray(x, np.float64), k=c, workers=-1)
+    _, idx = tree.query(np.asarray(x, np.float64), k=c, workers=-1)
     return np.asarray(idx, np.int32).reshape(len(x), c)
 
 
-def candidate_logits(phi: jnp.ndarray, weights: jnp.ndarray, cand: jnp.ndarray) -> jnp.ndarray:
-    """``l_nc = phi_n . W_{cand_nc}``: log-joint of each point with its candidates,
-    ``phi [n, F]``, ``weights [k, F]``, ``cand [n, C]`` -> ``[n, C]``."""
-    return jnp.einsum("nf,ncf->nc", phi, weights[cand])
+def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
+                     colour_noise: float) -> jnp.ndarray:
+    """``l_nc``: log-joint of each point with its candidates, ``[n, C]``, in centred form
+    ``const_k - 1/2 (x_n - m_k)^T P_k (x_n - m_k) - |c_n - mc_k|^2 / (2 sigma_c^2)``
+    with ``k = cand_nc`` (see :class:`vbgs.model.Terms`); ``x [n, d]``, ``c [n, 3]``.
+
+    Elementwise products of centred quantities only: exact whatever the backend's
+    matmul precision (TF32 included), and no large terms cancel. The terms are packed
+    into one ``[rows, k]`` table and gathered once, one contiguous ``[n, C]`` plane per
+    row, and the quadratic form is unrolled over the ``d (d + 1) / 2`` distinct entries
+    of the symmetric ``P_k`` (fast on CPUs, where small trailing axes vectorise badly).
+    """
+    d = x.shape[1]
+    k = terms.mean.shape[0]
+    table = jnp.concatenate([terms.mean.T, terms.prec.reshape(k, d * d).T,
+                             terms.colour_mean.T, terms.const[None]], 0)  # [d + d*d + 4, k]
+    g = table[:, cand]  # [rows, n, C]
+    diff = [x[:, i, None] - g[i] for i in range(d)]  # d x [n, C]
+    maha = 0.0
+    for i in range(d):
+        for j in range(i, d):
+            p_ij = g[d + i * d + j]
+            maha = maha + (1.0 if i == j else 2.0) * p_ij * diff[i] * diff[j]
+    base = d + d * d
+    colour = sum((c[:, i, None] - g[base + i]) ** 2 for i in range(3))
+    return g[base + 3] - 0.5 * maha - 0.5 * colour / colour_noise**2
 
 
 def scatter_moments(acc: jnp.ndarray, resp: jnp.ndarray, phi: jnp.ndarray,

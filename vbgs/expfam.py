@@ -10,6 +10,10 @@ Per component k (axis letters: n points, k components, d spatial dimensions):
 
 All sufficient statistics are taken in the model's centred frame (see
 ``model.Mixture.origin``) so that coordinates far from zero lose no precision.
+
+Reduced-precision matrix units (TF32 on NVIDIA GPUs): every product here over the
+``d x d`` axes is written in centred, elementwise form (:mod:`vbgs.precision`), so no
+result depends on the backend's default matmul precision.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 from jax.scipy.special import digamma, gammaln, multigammaln
+
+from vbgs.precision import mat_vec, quad_form
 
 LOG_2PI = 1.8378770664093453
 
@@ -119,10 +125,8 @@ def quadratic_loglik_coefficients(prec, mean, logdet_prec, extra=0.0):
     returns ``(P, P m [k, d], c [k])``.
     """
     d = mean.shape[-1]
-    pm = jnp.einsum("kij,kj->ki", prec, mean)
-    const = (
-        -0.5 * d * LOG_2PI + 0.5 * logdet_prec - 0.5 * jnp.einsum("ki,ki->k", mean, pm) + extra
-    )
+    pm = mat_vec(prec, mean)  # elementwise: robust to reduced-precision matmuls
+    const = -0.5 * d * LOG_2PI + 0.5 * logdet_prec - 0.5 * jnp.sum(mean * pm, -1) + extra
     return prec, pm, const
 
 
@@ -143,7 +147,7 @@ def niw_expected_loglik(q: NIW, x: jnp.ndarray) -> jnp.ndarray:
     """
     d = q.mean.shape[-1]
     diff = x[:, None, :] - q.mean[None]  # [n, k, d]
-    maha = jnp.einsum("nki,kij,nkj->nk", diff, niw_expected_precision(q), diff)
+    maha = quad_form(diff, niw_expected_precision(q)[None])  # [n, k]
     return (
         -0.5 * d * LOG_2PI + 0.5 * niw_expected_logdet_precision(q)[None] - 0.5 * maha
         - 0.5 * d / q.kappa[None]
@@ -165,7 +169,7 @@ def niw_kl(q: NIW, p: NIW) -> jnp.ndarray:
     dm = q.mean - p.mean
     mean_kl = 0.5 * (
         d * p.kappa / q.kappa - d + d * jnp.log(q.kappa / p.kappa)
-        + p.kappa * q.dof * jnp.einsum("ki,kij,kj->k", dm, psi_q_inv, dm)
+        + p.kappa * q.dof * quad_form(dm, psi_q_inv)
     )
     i = jnp.arange(1, d + 1, dtype=q.dof.dtype)
     mv_digamma = digamma(0.5 * (q.dof[:, None] + 1.0 - i)).sum(-1)
@@ -174,7 +178,7 @@ def niw_kl(q: NIW, p: NIW) -> jnp.ndarray:
     wishart_kl = (
         0.5 * (q.dof - p.dof) * mv_digamma
         - 0.5 * q.dof * d
-        + 0.5 * q.dof * jnp.einsum("kij,kji->k", p.scale, psi_q_inv)
+        + 0.5 * q.dof * jnp.sum(p.scale * jnp.swapaxes(psi_q_inv, -1, -2), (-1, -2))
         + 0.5 * p.dof * (logdet_q - logdet_p)
         - multigammaln(0.5 * q.dof, d)
         + multigammaln(0.5 * p.dof, d)

@@ -12,8 +12,10 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from vbgs.model import Assign, Mixture, PriorConfig, State, start, update
+from vbgs.candidates import DEFAULT_CANDIDATES
+from vbgs.model import Assign, EStep, Info, Mixture, PriorConfig, State, start, update
 from vbgs.reassign import reassign
+from vbgs.stepper import Stepper
 
 
 class FitInfo(NamedTuple):
@@ -75,6 +77,8 @@ def stream(
     config: PriorConfig = PriorConfig(),
     key: jax.Array | None = None,
     callback: Callable | None = None,
+    estep: EStep = "dense",
+    n_candidates: int = DEFAULT_CANDIDATES,
 ) -> State:
     """Continual learning: each ``(xyz, rgb)`` batch is seen once, through
     :func:`update`; nothing is replayed.
@@ -85,15 +89,28 @@ def stream(
     one more E-step per batch and changes the reference model, so ``prior``
     assignment is then no longer order-invariant. ``callback(i, state, info)``
     observes each batch.
+
+    Without ``key`` the batches go through one :class:`vbgs.stepper.Stepper` (terms and
+    candidate structure built once, one compiled step); with ``key`` the reference
+    model changes every batch and each goes through :func:`update`. ``estep`` and
+    ``n_candidates`` are as in :func:`update`.
     """
     state = start(prior)
+    step = None if key is not None else Stepper(prior, assign=assign, config=config,
+                                                 estep=estep, n_candidates=n_candidates)
     for i, (xyz, rgb) in enumerate(batches):
-        if key is not None:
+        if step is not None:
+            state, info = step(state, xyz, rgb)
+            if callback is not None:  # the caller observes: copy its [n] log-likelihoods
+                info = Info(info.elbo, np.asarray(info.point_loglik)[: len(xyz)])
+        else:
             key, sub = jax.random.split(key)
-            _, scored = update(state, xyz, rgb, assign=assign, config=config)
+            _, scored = update(state, xyz, rgb, assign=assign, config=config, estep=estep,
+                               n_candidates=n_candidates)
             state, _ = reassign(state, xyz, rgb, scored.point_loglik, key=sub,
                                 colour_noise=config.colour_noise)
-        state, info = update(state, xyz, rgb, assign=assign, config=config)
+            state, info = update(state, xyz, rgb, assign=assign, config=config, estep=estep,
+                                 n_candidates=n_candidates)
         if callback is not None:
             callback(i, state, info)
     return state

@@ -21,8 +21,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs import candidates, expfam
+from vbgs import candidates, expfam, precision
 from vbgs.expfam import NIW, ColourNormal, Stats
+from vbgs.precision import mat_vec
 
 Assign = Literal["prior", "posterior"]
 InitScheme = Literal["random", "data"]
@@ -165,23 +166,39 @@ def init(
     pts = np.asarray(xyz, np.float64)
     lo, hi = (np.asarray(b, np.float64) for b in bounds) if bounds else (pts.min(0), pts.max(0))
     origin = jnp.asarray(0.5 * (lo + hi), xyz.dtype)
+    means, colours = _place(key, xyz, rgb, jnp.asarray(lo, xyz.dtype), jnp.asarray(hi, xyz.dtype),
+                            origin, n_components, scheme)
+    return _make_prior(means, colours, origin, cell_length(lo, hi, n_components), config)
+
+
+@partial(jax.jit, static_argnames=("n_components", "scheme"))
+def _place(key, xyz, rgb, lo, hi, origin, n_components: int, scheme: str):
+    """Component spatial and colour means for :func:`init` (one compiled function)."""
     k_pos, k_col, k_pick = jax.random.split(key, 3)
     dtype = xyz.dtype
     if scheme == "random":
         u = jax.random.uniform(k_pos, (n_components, xyz.shape[1]), dtype)
         # uniform in the box, expressed about the origin to keep precision far from 0
-        means = origin + (u - 0.5) * jnp.asarray(hi - lo, dtype)
+        means = origin + (u - 0.5) * (hi - lo)
         c_lo, c_hi = rgb.min(0), rgb.max(0)
         colours = c_lo + jax.random.uniform(k_col, (n_components, 3), dtype) * (c_hi - c_lo)
-    else:
-        n = xyz.shape[0]
-        idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)
-        means, colours = xyz[idx], rgb[idx]
-    return make_prior(means, colours, origin, cell_length(lo, hi, n_components), config)
+        return means, colours
+    n = xyz.shape[0]
+    idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)
+    return xyz[idx], rgb[idx]
+
+
+_make_prior = jax.jit(make_prior, static_argnames=("config",))
 
 
 def check_points(xyz, rgb) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Validate a batch at the library boundary: shapes, dtypes, finiteness."""
+    xyz_np, rgb_np = check_points_host(xyz, rgb)
+    return jnp.asarray(xyz_np), jnp.asarray(rgb_np)
+
+
+def check_points_host(xyz, rgb) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`check_points` on the host: numpy arrays of one floating dtype."""
     xyz_np, rgb_np = np.asarray(xyz), np.asarray(rgb)
     if xyz_np.ndim != 2 or xyz_np.shape[1] not in (2, 3):
         raise ValueError(f"positions must have shape [n, 2] or [n, 3], got {xyz_np.shape}")
@@ -196,8 +213,21 @@ def check_points(xyz, rgb) -> tuple[jnp.ndarray, jnp.ndarray]:
             raise TypeError(f"{name} must be floating point, got dtype {a.dtype}")
         if not np.isfinite(a).all():
             raise ValueError(f"{name} contain NaN or inf ({np.size(a) - np.isfinite(a).sum()} values)")
-    dtype = jnp.result_type(xyz_np.dtype, rgb_np.dtype)
-    return jnp.asarray(xyz_np, dtype), jnp.asarray(rgb_np, dtype)
+    dtype = np.dtype(jnp.result_type(xyz_np.dtype, rgb_np.dtype))
+    return xyz_np.astype(dtype, copy=False), rgb_np.astype(dtype, copy=False)
+
+
+def padded_batch(xyz, rgb, origin, size: int, dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A validated batch, centred on ``origin`` and padded to ``size`` rows on the host:
+    ``(x [size, d], c [size, 3], w [size])`` with weight 0 on padding. Done in numpy so
+    that a new point count costs no compilation (eager JAX ops compile per shape)."""
+    xyz, rgb = check_points_host(xyz, rgb)
+    n, d = xyz.shape
+    dtype = np.dtype(dtype)
+    x, c, w = np.zeros((size, d), dtype), np.zeros((size, 3), dtype), np.zeros((size,), dtype)
+    x[:n] = xyz - np.asarray(origin, np.float64).astype(xyz.dtype)
+    c[:n], w[:n] = rgb, 1.0
+    return x, c, w
 
 
 # --------------------------------------------------------------------------- E-step
@@ -232,23 +262,62 @@ def _features(x: jnp.ndarray, c: jnp.ndarray | None) -> jnp.ndarray:
     return jnp.concatenate(parts, -1)
 
 
+class Terms(NamedTuple):
+    """Per-component terms of the log-joint in centred form:
+    ``l_nk = const_k - 1/2 (x_n - m_k)^T P_k (x_n - m_k) - |c_n - mc_k|^2 / (2 sigma_c^2)``
+    with ``P_k = E[Sigma_k^-1]`` and ``const_k = E[log pi_k] + 1/2 E[log|Sigma_k^-1|]
+    - d/2 log 2pi - d/(2 kappa_k) - 3/2 log(2 pi sigma_c^2) - 3/(2 lambda_k)``.
+
+    Depends on the assigning model only, so under prior assignment it is built once per
+    stream. ``colour_mean`` is None when the colour is left out (see
+    :func:`log_joint_weights`).
+    """
+
+    mean: jnp.ndarray  # [k, d]
+    prec: jnp.ndarray  # [k, d, d]
+    colour_mean: jnp.ndarray | None  # [k, 3]
+    const: jnp.ndarray  # [k]
+
+
+def component_terms(q: Mixture, colour_noise: float | None) -> Terms:
+    """The centred-form terms of :class:`Terms` for the assigning model ``q``."""
+    prec, _, const = expfam.niw_loglik_coefficients(q.space._replace(mean=jnp.zeros_like(
+        q.space.mean)))  # about the component's own mean: no -1/2 m^T P m term
+    const = const + expfam.dirichlet_expected_log(q.alpha)
+    colour_mean = None
+    if colour_noise is not None:
+        _, c_const = expfam.colour_loglik_coefficients(
+            q.colour._replace(mean=jnp.zeros_like(q.colour.mean)), colour_noise)
+        const, colour_mean = const + c_const, q.colour.mean
+    return Terms(q.space.mean, prec, colour_mean, const)
+
+
 def log_joint_weights(q: Mixture, colour_noise: float | None) -> jnp.ndarray:
     """``W [k, F]`` with ``l_nk = phi_n . W_k - |c_n|^2 / (2 sigma_c^2)`` where
-    ``l_nk = E[log pi_k] + E[log N(x_n|mu_k,Sigma_k)] (+ E[log N(c_n|mu_c,k, sigma_c^2)])``.
+    ``l_nk = E[log pi_k] + E[log N(x_n|mu_k,Sigma_k)] (+ E[log N(c_n|mu_c,k, sigma_c^2)])``:
+    the centred form of :class:`Terms` expanded into features, ``W_k = [-1/2 vec(P_k),
+    P_k m_k, mc_k / sigma_c^2, const_k - 1/2 m_k^T P_k m_k - |mc_k|^2 / (2 sigma_c^2)]``.
 
-    With ``colour_noise=None`` the colour term is left out (responsibilities given the
-    position only, as the image renderer needs).
+    The feature form cancels large terms, so products with it must run at full float32
+    precision (:func:`feature_logits`). With ``colour_noise=None`` the colour term is
+    left out (responsibilities given the position only, as the image renderer needs).
     """
-    prec, pm, const = expfam.niw_loglik_coefficients(q.space)
-    k = prec.shape[0]
-    cols = [-0.5 * prec.reshape(k, -1), pm]
-    const = const + expfam.dirichlet_expected_log(q.alpha)
+    t = component_terms(q, colour_noise)
+    k = t.prec.shape[0]
+    pm = mat_vec(t.prec, t.mean)  # [k, d]
+    const = t.const - 0.5 * jnp.sum(t.mean * pm, -1)
+    cols = [-0.5 * t.prec.reshape(k, -1), pm]
     if colour_noise is not None:
-        lin, c_const = expfam.colour_loglik_coefficients(q.colour, colour_noise)
-        cols.append(lin)
-        const = const + c_const
+        cols.append(t.colour_mean / colour_noise**2)
+        const = const - 0.5 * jnp.sum(t.colour_mean**2, -1) / colour_noise**2
     cols.append(const[:, None])
     return jnp.concatenate(cols, -1)
+
+
+def feature_logits(phi: jnp.ndarray, weights: jnp.ndarray) -> jnp.ndarray:
+    """``phi [n, F] @ W^T [F, k]`` at full float32 precision (explicit: the feature form
+    cancels terms much larger than the result, see :mod:`vbgs.precision`)."""
+    return precision.matmul(phi, weights.T)
 
 
 def pad_points(x: jnp.ndarray, c: jnp.ndarray, size: int):
@@ -280,28 +349,44 @@ def e_step(q: Mixture, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray, colour_no
     :mod:`vbgs.candidates`). Returns the summed statistics and
     ``log sum_k exp(l_nk)`` per point.
     """
+    reference = log_joint_weights(q, colour_noise) if cand is None else component_terms(
+        q, colour_noise)
+    return e_step_with(reference, x, c, w, colour_noise, chunk, cand)
+
+
+def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
+                colour_noise: float, chunk: int,
+                cand: jnp.ndarray | None = None) -> tuple[Stats, jnp.ndarray]:
+    """:func:`e_step` given the assigning model's precomputed terms: feature weights
+    ``[k, F]`` (:func:`log_joint_weights`) for the dense E-step, :class:`Terms` with
+    ``cand [n, C]`` for the sparse one.
+
+    Precision: the dense E-step's two products (logits ``phi W^T`` and moments
+    ``r^T phi``) run at explicit full float32 (:func:`vbgs.precision.matmul`); the sparse
+    E-step is in centred form, elementwise only (:func:`vbgs.candidates.candidate_logits`
+    and :func:`vbgs.candidates.scatter_moments`).
+    """
     n, d = x.shape
-    weights = log_joint_weights(q, colour_noise)  # [k, F]
     inv2var = 0.5 / colour_noise**2
+    n_rows = reference.shape[0] if cand is None else reference.mean.shape[0]
 
     def one_chunk(acc, batch):
         xb, cb, wb, candb = batch
         phi = _features(xb, cb)  # [chunk, F]
         if candb is None:
-            logits = phi @ weights.T  # [chunk, k]
+            logits = feature_logits(phi, reference) - inv2var * jnp.sum(cb**2, -1, keepdims=True)
         else:
-            logits = candidates.candidate_logits(phi, weights, candb)  # [chunk, C]
-        logits = logits - inv2var * jnp.sum(cb**2, -1, keepdims=True)
+            logits = candidates.candidate_logits(xb, cb, reference, candb, colour_noise)
         lse = jax.nn.logsumexp(logits, -1)  # [chunk]
-        resp = jnp.exp(logits - lse[:, None]) * wb[:, None]
+        resp = jnp.exp(logits - lse[:, None]) * wb[:, None]  # [chunk, k or C]
         if candb is None:
-            return acc + resp.T @ phi, lse
+            return acc + precision.matmul(resp.T, phi), lse
         return candidates.scatter_moments(acc, resp, phi, candb), lse
 
     def shape(a):
         return None if a is None else a.reshape((n // chunk, chunk) + a.shape[1:])
 
-    acc0 = jnp.zeros(weights.shape, x.dtype)
+    acc0 = jnp.zeros((n_rows, d * d + d + 4), x.dtype)
     acc, lse = jax.lax.scan(one_chunk, acc0, (shape(x), shape(c), shape(w), shape(cand)))
     return moments_to_stats(acc, d), lse.reshape(-1)
 
@@ -370,13 +455,12 @@ def update(
         raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
     if estep not in ("dense", "sparse"):
         raise ValueError(f"unknown E-step {estep!r}: use 'dense' or 'sparse'")
-    xyz, rgb = check_points(xyz, rgb)
+    xyz, rgb = check_points_host(xyz, rgb)
     if xyz.shape[1] != state.prior.dim:
         raise ValueError(f"points are {xyz.shape[1]}-D but the model is {state.prior.dim}-D")
-    dtype = state.prior.alpha.dtype
     n = xyz.shape[0]
     size = bucket_size(n)
-    x, c, w = pad_points((xyz - state.prior.origin).astype(dtype), rgb.astype(dtype), size)
+    x, c, w = padded_batch(xyz, rgb, state.prior.origin, size, state.prior.alpha.dtype)
     cand = None
     if estep == "sparse":
         q = state.prior if assign == "prior" else state.posterior

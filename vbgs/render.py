@@ -12,7 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs.data.images import pixel_centres
-from vbgs.model import Mixture, _features, bucket_size, chunk_size, log_joint_weights
+from vbgs.model import (Mixture, _features, bucket_size, chunk_size, feature_logits,
+                        log_joint_weights)
+from vbgs.precision import matmul
 
 
 @partial(jax.jit, static_argnames=("chunk",))
@@ -20,8 +22,8 @@ def _expected_colour(q: Mixture, x: jnp.ndarray, chunk: int) -> jnp.ndarray:
     weights = log_joint_weights(q, colour_noise=None)  # [k, F]
 
     def one_chunk(xb):
-        logits = _features(xb, None) @ weights.T  # [chunk, k]
-        return jax.nn.softmax(logits, -1) @ q.colour.mean  # [chunk, 3]
+        logits = feature_logits(_features(xb, None), weights)  # [chunk, k], full float32
+        return matmul(jax.nn.softmax(logits, -1), q.colour.mean)  # [chunk, 3]
 
     out = jax.lax.map(one_chunk, x.reshape(-1, chunk, x.shape[-1]))
     return out.reshape(-1, 3)

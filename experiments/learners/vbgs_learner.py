@@ -9,6 +9,7 @@ from experiments.protocol import SceneResult, frame_points
 from vbgs import model, opacity
 from vbgs.data.scene import Frame, Scene
 from vbgs.splats import Splats, from_posterior, mixture_geometry
+from vbgs.stepper import Stepper
 
 
 class VbgsLearner:
@@ -21,7 +22,10 @@ class VbgsLearner:
         self.task = task
         self.prior = scene_prior(task, scene)
         self.state = model.start(self.prior)
+        self.step = Stepper(self.prior, assign=task.assign, config=task.prior, estep=task.estep,
+                            n_candidates=task.candidates)  # compiled once per stream
         self.evidence = opacity.no_evidence(task.components)
+        self.prior_geometry = mixture_geometry(self.prior)  # the assigning model, prior mode
 
     @staticmethod
     def check(task) -> None:
@@ -33,11 +37,10 @@ class VbgsLearner:
         xyz, rgb = frame_points(frame)
         t = self.task
         if t.opacity_rule == "evidence":  # read against the model that assigns the points
-            assigning = self.prior if t.assign == "prior" else self.state.posterior
-            self.evidence = opacity.observe(self.evidence, *mixture_geometry(assigning),
-                                            frame.camera, frame.depth)
-        self.state, _ = model.update(self.state, xyz, rgb, assign=t.assign, config=t.prior,
-                                     estep=t.estep, n_candidates=t.candidates)
+            geometry = (self.prior_geometry if t.assign == "prior"
+                        else mixture_geometry(self.state.posterior))
+            self.evidence = opacity.observe(self.evidence, *geometry, frame.camera, frame.depth)
+        self.state, _ = self.step(self.state, xyz, rgb)
         jax.block_until_ready(self.state.stats.count)
 
     def splats(self, drop_unused: bool = False) -> Splats:

@@ -1,0 +1,209 @@
+"""``bench stream``: seconds per streamed frame end to end, compilation apart, and a
+profile of one frame.
+
+End to end means what a learner pays per arriving frame: unprojecting the RGB-D frame
+to points, padding on the host, the candidate search, the compiled E-/M-step and
+waiting for the result (:class:`vbgs.stepper.Stepper`). Building the stepper (prior
+terms, candidate structure) is reported as ``setup_s``; the compilation inside it and
+the whole time of frames whose call compiled as ``compile_s``; ``s_per_frame``
+averages the frames that did not compile.
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm.auto import tqdm
+
+from vbgs import candidates, grid, model, stepper
+from vbgs.compilation import CompileTimer
+
+PROFILE_REPEATS = 3
+
+
+def _prior(scene, k: int, seed: int = 0):
+    from experiments.scene_task import frame_points
+
+    xyz, rgb = (np.concatenate(a) for a in zip(*map(frame_points, scene.train), strict=True))
+    return model.init(xyz, rgb, k, key=jax.random.key(seed), scheme="data", bounds=scene.bounds)
+
+
+def stream_row(scene, prior, estep: str, *, frames: int, search: str = "auto",
+               assign: str = "prior") -> dict:
+    """Stream ``frames`` frames through a fresh stepper; timings of one row."""
+    from experiments.scene_task import frame_points, peak_memory_mb
+
+    timer = CompileTimer()
+    with timer:
+        t0 = time.perf_counter()
+        step = stepper.Stepper(prior, assign=assign, estep=estep, search=search)
+        jax.block_until_ready(step.fixed)
+        setup = time.perf_counter() - t0
+    setup -= timer.seconds  # the prior terms' compilation counts as compilation
+    state, compile_s, steady, counts = model.start(prior), timer.seconds, [], []
+    for frame in scene.train[:frames]:
+        timer = CompileTimer()
+        with timer:
+            t0 = time.perf_counter()
+            xyz, rgb = frame_points(frame)
+            state, _ = step(state, xyz, rgb)
+            jax.block_until_ready(state.stats.count)
+            seconds = time.perf_counter() - t0
+        counts.append(len(xyz))
+        if timer.seconds > 0:
+            compile_s += seconds
+        else:
+            steady.append(seconds)
+    return {"assign": assign, "estep": estep, "search": step.search if estep == "sparse" else "-",
+            "frames": len(counts), "points_per_frame": int(np.mean(counts)),
+            "padded": step.size, "setup_s": setup, "compile_s": compile_s,
+            "s_per_frame": float(np.mean(steady)) if steady else float("nan"),
+            "total_s": setup + compile_s + float(np.sum(steady)),
+            "peak_memory_mb": peak_memory_mb(), "devices": len(jax.devices())}
+
+
+def _timed(fn, *args):
+    jax.block_until_ready(fn(*args))
+    t0 = time.perf_counter()
+    for _ in range(PROFILE_REPEATS):
+        jax.block_until_ready(fn(*args))
+    return (time.perf_counter() - t0) / PROFILE_REPEATS
+
+
+def profile_frame(scene, prior, *, search: str = "auto") -> list[dict]:
+    """Seconds of each stage of one streamed frame (sparse E-step, prior assignment),
+    each stage compiled and timed on its own (warm, mean of a few runs)."""
+    from experiments.scene_task import frame_points
+
+    frame = scene.train[len(scene.train) // 2]
+    rows = []
+    t0 = time.perf_counter()
+    for _ in range(PROFILE_REPEATS):
+        xyz, rgb = frame_points(frame)
+    rows.append(("unprojection (host)", (time.perf_counter() - t0) / PROFILE_REPEATS))
+    t0 = time.perf_counter()
+    step = stepper.Stepper(prior, estep="sparse", search=search)
+    jax.block_until_ready(step.fixed)
+    rows.append((f"stepper setup, once per stream ({step.search})", time.perf_counter() - t0))
+    size = step.padded_size(len(xyz))
+    t0 = time.perf_counter()
+    for _ in range(PROFILE_REPEATS):
+        x, c, w = model.padded_batch(xyz, rgb, prior.origin, size, np.float32)
+    rows.append(("validate + pad (host)", (time.perf_counter() - t0) / PROFILE_REPEATS))
+    rows.append(("copy batch host -> device", _timed(jax.device_put, (x, c, w))))
+    xd, cd, wd = jax.device_put((x, c, w))
+    if step.search == "grid":
+        search_fn = jax.jit(grid.search, static_argnums=4)
+        args = (step.fixed.lists, prior.space.mean, xd, wd, step.spec)
+        rows.append(("candidate search (device grid)", _timed(search_fn, *args)))
+        cand = search_fn(*args)
+    else:
+        tree = candidates.means_tree(prior.space.mean)
+        t0 = time.perf_counter()
+        for _ in range(PROFILE_REPEATS):
+            cand = candidates.query(tree, x, step.n_candidates)
+        rows.append(("candidate search (host KD-tree)", (time.perf_counter() - t0)
+                     / PROFILE_REPEATS))
+        cand = jnp.asarray(cand)
+    chunk = step._chunk(size)
+    e_fn = jax.jit(lambda r, x, c, w, cand: model.e_step_with(r, x, c, w, step.colour_noise,
+                                                              chunk, cand))
+    rows.append(("E-step (sparse, centred form)", _timed(e_fn, step.fixed.reference, xd, cd, wd,
+                                                        cand)))
+    stats, _ = e_fn(step.fixed.reference, xd, cd, wd, cand)
+    rows.append(("M-step", _timed(jax.jit(model.m_step), prior, stats)))
+    state = model.start(prior)
+    stepper._step.clear_cache()  # compile afresh (a load, where the persistent cache has it)
+    timer = CompileTimer()
+    with timer:
+        step(state, xyz, rgb)
+    rows.append(("compile the whole step (once per padded size)", timer.seconds))
+    rows.append(("whole step, warm (search + E + M + copies)",
+                 _timed(lambda: step(state, xyz, rgb)[0].stats.count)))
+    out = step(state, xyz, rgb)[0].stats.count
+    rows.append(("copy counts device -> host (if asked)", _timed(np.asarray, out)))
+    return [{"stage": name, "seconds": s} for name, s in rows]
+
+
+def bench_stream(components=(20000, 50000, 100000), scenes=("object", "room"),
+                 esteps=("dense", "sparse"), *, frames: int = 60, dense_frames: int = 8,
+                 size: int = 128, search: str = "auto", dense_max: int = 50000,
+                 progress: bool = False) -> list[dict]:
+    """Rows of :func:`stream_row` for each scene, component count and E-step. The dense
+    E-step streams only ``dense_frames`` frames and only up to ``dense_max`` components
+    (it costs ``n x k`` per frame)."""
+    from vbgs.data.formats import load_scene
+
+    rows = []
+    cells = [(s, k, e) for s in scenes for k in components for e in esteps
+             if e == "sparse" or k <= dense_max]
+    loaded, priors = {}, {}
+    for scene_name, k, estep in tqdm(cells, desc="bench stream", disable=not progress):
+        if scene_name not in loaded:
+            loaded[scene_name] = load_scene(scene_name, size=size, n_train=frames, n_test=1,
+                                            seed=0)
+        scene = loaded[scene_name]
+        if (scene_name, k) not in priors:
+            priors = {(scene_name, k): _prior(scene, k)}
+        row = stream_row(scene, priors[(scene_name, k)], estep,
+                         frames=frames if estep == "sparse" else dense_frames, search=search)
+        rows.append({"scene": scene_name, "size": size, "components": k, **row})
+    return rows
+
+
+def speedups(rows: list[dict]) -> list[dict]:
+    """Sparse over dense seconds per frame, per scene and component count."""
+    out = []
+    for r in rows:
+        if r["estep"] != "sparse":
+            continue
+        dense = [d for d in rows if d["estep"] == "dense" and d["scene"] == r["scene"]
+                 and d["components"] == r["components"]]
+        if dense:
+            out.append({"scene": r["scene"], "components": r["components"],
+                        "sparse_over_dense": dense[0]["s_per_frame"] / r["s_per_frame"]})
+    return out
+
+
+def sharded_row(n_devices: int, k: int, scene_name: str, *, frames: int, size: int,
+                estep: str) -> dict:
+    """:func:`stream_row` with the components split over ``n_devices`` devices."""
+    from vbgs import sharding
+    from vbgs.data.formats import load_scene
+
+    scene = load_scene(scene_name, size=size, n_train=frames, n_test=1, seed=0)
+    mesh = sharding.mesh(n_devices)
+    prior = sharding.shard_prior(_prior(scene, k), mesh)
+    row = stream_row(scene, prior, estep, frames=frames, search="grid")
+    return {"scene": scene_name, "size": size, "components": k, **row,
+            "devices": n_devices}
+
+
+def device_rows(counts, k: int, scene_name: str, *, frames: int, size: int,
+                estep: str = "sparse") -> list[dict]:
+    """One :func:`sharded_row` per device count, each in a fresh process with that many
+    host CPU devices (``XLA_FLAGS=--xla_force_host_platform_device_count=N``); on an
+    accelerator the process's own devices are used instead."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    rows = []
+    for n in counts:
+        env = dict(os.environ)
+        if jax.default_backend() == "cpu":
+            env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") +
+                                f" --xla_force_host_platform_device_count={n}").strip()
+        code = ("import json, sys; from experiments.bench_stream import sharded_row; "
+                f"print(json.dumps(sharded_row({n}, {k}, {scene_name!r}, frames={frames}, "
+                f"size={size}, estep={estep!r})))")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             env=env, check=False)
+        if out.returncode:
+            raise RuntimeError(f"bench stream on {n} devices failed: {out.stderr[-2000:]}")
+        rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    return rows

@@ -1,0 +1,92 @@
+"""Right answers whatever the matmul precision: TF32 products emulated on the CPU.
+
+NVIDIA GPUs run float32 products in TF32 by default (10-bit mantissa operands). The
+helper :mod:`tf32` rounds the operands of every default-precision product that way, so
+these tests guard on CI what only a GPU would show. The last tests remove the
+protection (products at default precision) and show the fit collapsing, so they fail
+if the protection is ever lost.
+"""
+
+import importlib.util
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from vbgs import model, precision
+from vbgs.camera import unproject
+from vbgs.data.images import image_to_points, load_image
+from vbgs.data.synthetic import object_scene
+from vbgs.fit import fit
+from vbgs.metrics import psnr
+from vbgs.reassign import MIN_COUNT
+from vbgs.render import render_image
+
+_spec = importlib.util.spec_from_file_location("tf32", Path(__file__).with_name("tf32.py"))
+tf32 = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(tf32)
+
+SIZE, K, ITERS = 48, 1000, 2
+
+
+def _fit_image():
+    img = load_image("astronaut", SIZE)
+    uv, rgb = image_to_points(img)
+    prior = model.init(uv, rgb, K, key=jax.random.key(0), scheme="data")
+    post, _ = fit(prior, uv, rgb, iters=ITERS)
+    used = int(((post.alpha - prior.alpha) >= MIN_COUNT).sum())
+    return psnr(render_image(post, SIZE, SIZE), img), used
+
+
+@pytest.fixture(scope="module")
+def reference_fit():
+    return _fit_image()
+
+
+def test_round_tf32_keeps_ten_mantissa_bits():
+    x = jnp.asarray([1.0, 1.0 + 2**-11, 1.0 + 3 * 2**-11, 1.0 + 2**-10, np.pi, -2.5e-8],
+                    jnp.float32)
+    out = np.asarray(tf32.round_tf32(x))
+    # ties go to even; 1 + 2^-10 is representable; pi -> 3.140625 (= 3217 / 1024)
+    np.testing.assert_array_equal(out[:5], np.float32([1.0, 1.0, 1.0 + 2**-9, 1.0 + 2**-10,
+                                                       3.140625]))
+    assert abs(out[5] / -2.5e-8 - 1) < 2**-11
+
+
+def test_emulation_changes_default_products_only():
+    a = jnp.asarray(np.random.default_rng(0).normal(size=(8, 8)), jnp.float32)
+    with tf32.emulated_tf32():
+        default = np.asarray(a @ a)
+        highest = np.asarray(precision.matmul(a, a))
+    exact = np.asarray(a, np.float64) @ np.asarray(a, np.float64)
+    assert np.abs(default - exact).max() > 1e-4  # rounded operands
+    assert np.abs(highest - exact).max() < 1e-5
+
+
+def test_image_fit_unchanged_under_tf32(reference_fit):
+    with tf32.emulated_tf32():
+        emulated = _fit_image()
+    assert abs(emulated[0] - reference_fit[0]) < 0.1, (emulated, reference_fit)
+    assert emulated[1] == reference_fit[1]
+
+
+def test_image_fit_degrades_without_explicit_precision(reference_fit, monkeypatch):
+    """Products at default precision (the protection removed) collapse under TF32."""
+    monkeypatch.setattr(precision, "PRODUCT_PRECISION", jax.lax.Precision.DEFAULT)
+    with tf32.emulated_tf32():
+        emulated = _fit_image()
+    assert emulated[0] < reference_fit[0] - 3.0, (emulated, reference_fit)
+
+
+@pytest.mark.parametrize("estep", ["dense", "sparse"])
+def test_scene_update_unchanged_under_tf32(estep):
+    scene = object_scene(size=24, n_train=2, n_test=1, seed=0)
+    xyz, rgb = unproject(scene.train[0].camera, scene.train[0].rgb, scene.train[0].depth)
+    prior = model.init(xyz, rgb, 300, key=jax.random.key(0), scheme="data", bounds=scene.bounds)
+    ref, ref_info = model.update(model.start(prior), xyz, rgb, estep=estep)
+    with tf32.emulated_tf32():
+        emu, emu_info = model.update(model.start(prior), xyz, rgb, estep=estep)
+    np.testing.assert_allclose(emu.stats.count, ref.stats.count, rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(emu_info.point_loglik, ref_info.point_loglik, rtol=1e-5, atol=1e-3)

@@ -1,0 +1,162 @@
+"""A compiled per-batch update for streams: what :func:`vbgs.model.update` does, with the
+work that does not change from batch to batch done once per stream.
+
+Under prior assignment the assigning model is the fixed prior, so its E-step terms
+(precisions, log-determinants, digammas), its KL to itself and the candidate lists of
+the sparse E-step (:mod:`vbgs.grid`) are built once, when the :class:`Stepper` is made.
+Every batch is then one call of one compiled function (candidate search, E-step,
+M-step, ELBO) on points padded to a size that only grows, so a stream of similar
+frames compiles once; nothing is copied back to the host unless the caller asks.
+
+The sparse E-step's candidates come from the device grid (:mod:`vbgs.grid`, searched
+inside the compiled function) or from a host KD-tree over the fixed means
+(:mod:`vbgs.candidates`, built once); ``search="auto"`` takes the KD-tree on a CPU, where
+host and device share memory and the tree is faster, and the grid on an accelerator.
+
+Under posterior assignment the terms are recomputed inside the compiled function from
+the current posterior and the candidates come from a KD-tree over the current means,
+rebuilt every batch, because the means move.
+
+The slow references are :func:`vbgs.model.update` (dense, or sparse with the KD-tree);
+tests hold the stepper equal to them.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Literal, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vbgs import candidates, expfam, grid, model
+from vbgs.model import Assign, EStep, Info, Mixture, PriorConfig, State
+
+
+Search = Literal["auto", "grid", "kdtree"]
+
+
+class StepConfig(NamedTuple):
+    """Static settings of the compiled step (hashable)."""
+
+    assign: str
+    estep: str
+    colour_noise: float
+    chunk: int
+    grid: grid.GridSpec | None  # set when the compiled step searches candidates itself
+
+
+class Fixed(NamedTuple):
+    """Arrays built once per stream under prior assignment (None otherwise)."""
+
+    reference: object  # [k, F] feature weights (dense) or model.Terms (sparse)
+    kl: jnp.ndarray  # KL(prior || prior), a scalar (0 up to rounding)
+    lists: grid.CellLists | None
+
+
+def _reference(q: Mixture, estep: str, colour_noise: float):
+    if estep == "dense":
+        return model.log_joint_weights(q, colour_noise)
+    return model.component_terms(q, colour_noise)
+
+
+@partial(jax.jit, static_argnames=("estep", "colour_noise"))
+def _prior_terms(prior: Mixture, estep: str, colour_noise: float):
+    """The prior's E-step terms and ``KL(prior || prior)``, compiled as one function
+    (eager, their many small ops would each compile)."""
+    return _reference(prior, estep, colour_noise), model.kl(prior, prior, colour_noise)
+
+
+@partial(jax.jit, static_argnames=("config",))
+def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig):
+    """One batch: candidates (prior, sparse), E-step, statistics, M-step and ELBO.
+    x ``[n, d]`` centred, c ``[n, 3]``, w ``[n]`` (0 for padding)."""
+    if config.assign == "prior":
+        reference, kl = fixed.reference, fixed.kl
+        if config.grid is not None:
+            cand = grid.search(fixed.lists, state.prior.space.mean, x, w, config.grid)
+    else:
+        q = state.posterior
+        reference = _reference(q, config.estep, config.colour_noise)
+        kl = model.kl(q, state.prior, config.colour_noise)
+    batch, lse = model.e_step_with(reference, x, c, w, config.colour_noise, config.chunk,
+                                   cand if config.estep == "sparse" else None)
+    stats = expfam.add_stats(state.stats, batch)
+    elbo = jnp.sum(lse * w) - kl
+    # the prior is reattached by the caller (see model._update: passing an input through
+    # next to the ELBO reduction made XLA:CPU hang)
+    return model.m_step(state.prior, stats), stats, Info(elbo, lse)
+
+
+class Stepper:
+    """``stepper(state, xyz, rgb) -> (state, info)``: :func:`vbgs.model.update` for a
+    stream from ``prior``, compiled once per padded size (see the module docstring).
+
+    ``info.point_loglik`` stays on the device at the padded size: its first ``n``
+    entries belong to the batch's ``n`` points (slicing it per batch would compile a
+    slice per point count).
+
+    ``max_points``: the most points a batch will hold, if known; batches are padded to
+    a size that only grows (the first batch's bucket, or ``max_points``'s), so a stream
+    of similar frames compiles one function.
+    """
+
+    def __init__(self, prior: Mixture, *, assign: Assign = "prior",
+                 config: PriorConfig = PriorConfig(), estep: EStep = "dense",
+                 n_candidates: int = candidates.DEFAULT_CANDIDATES,
+                 max_points: int | None = None, search: Search = "auto"):
+        if assign not in ("prior", "posterior"):
+            raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
+        if estep not in ("dense", "sparse"):
+            raise ValueError(f"unknown E-step {estep!r}: use 'dense' or 'sparse'")
+        self.prior, self.assign, self.estep = prior, assign, estep
+        self.colour_noise = float(config.colour_noise)
+        self.n_candidates = int(min(n_candidates, prior.n_components))
+        if self.n_candidates < 1:
+            raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
+        if search not in ("auto", "grid", "kdtree"):
+            raise ValueError(f"unknown candidate search {search!r}: use 'auto', 'grid' or 'kdtree'")
+        if search == "auto":  # on a CPU the host KD-tree reads the device's own memory
+            search = "kdtree" if jax.default_backend() == "cpu" else "grid"
+        # the grid is built once, so it serves only a fixed assigning model
+        self.search = search if assign == "prior" else "kdtree"
+        self.spec, self.fixed, self._tree = None, None, None
+        if assign == "prior":
+            lists = None
+            if estep == "sparse" and self.search == "grid":
+                self.spec = grid.plan(prior.space.mean, self.n_candidates)
+                lists = grid.build(prior.space.mean, self.spec)
+            elif estep == "sparse":
+                self._tree = candidates.means_tree(prior.space.mean)
+            self.fixed = Fixed(*_prior_terms(prior, estep, self.colour_noise), lists)
+        self.size = model.bucket_size(max_points) if max_points else 0
+        self._origin = np.asarray(prior.origin)
+
+    def padded_size(self, n: int) -> int:
+        """The size batches of ``n`` points are padded to (grows, never shrinks)."""
+        if n > self.size:
+            self.size = model.bucket_size(n)
+        return self.size
+
+    def _chunk(self, size: int) -> int:
+        if self.estep == "dense":
+            return model.chunk_size(size, self.prior.n_components)
+        d = self.prior.dim
+        return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
+
+    def __call__(self, state: State, xyz, rgb) -> tuple[State, Info]:
+        xyz, rgb = model.check_points_host(xyz, rgb)
+        if xyz.shape[1] != self.prior.dim:
+            raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
+        size = self.padded_size(xyz.shape[0])
+        x, c, w = model.padded_batch(xyz, rgb, self._origin, size, self.prior.alpha.dtype)
+        cand = None
+        if self.estep == "sparse" and self.spec is None:
+            tree = self._tree or candidates.means_tree(state.posterior.space.mean)
+            cand = candidates.query(tree, x, self.n_candidates)
+        config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
+                            self.spec)
+        posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)
+        return State(state.prior, posterior, stats), info
+
