@@ -27,12 +27,10 @@ against the current posterior they follow it, like posterior assignment does.
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from vbgs.camera import Camera
 from vbgs.raster import BLUR_VARIANCE, NEAR, project
@@ -74,7 +72,7 @@ def observe(evidence: Evidence, means, covs, camera: Camera, depth) -> Evidence:
     return Evidence(evidence.hits + hits, evidence.passes + passes)
 
 
-@functools.partial(jax.jit)
+@jax.jit
 def _frame_counts(means, covs, fx, fy, cx, cy, pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring)."""
     height, width = depth.shape
