@@ -16,7 +16,8 @@ how it is scored, and the typed record of a run.
 * Final metrics are over all test views: PSNR, SSIM, depth L1 (where the ground truth
   has depth; rendered depth is the alpha-normalised expected depth).
 
-This module imports only :mod:`vbgs`: tasks and learners import it, never the reverse.
+This module imports only :mod:`vbgs` (and the init names): tasks and learners import
+it, never the reverse.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from tqdm.auto import tqdm
 
+from experiments.init_schemes import oracle_start
 from vbgs.camera import unproject
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
@@ -87,8 +89,9 @@ class SceneResult:
     images: Mapping[str, list] = field(repr=False)  # "target" and "render" per test view
     depth: Mapping[str, Any] = field(default_factory=lambda: {"depth_source": "sensor"})
     details: Mapping[str, Any] = field(default_factory=dict)  # learner-specific numbers
+    oracle_start: bool = False  # the start read frames that had not arrived (init data/random)
 
-    METRICS = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "peak_memory_mb",
+    METRICS = ("oracle_start", "psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "peak_memory_mb",
                "components_used", "replay_bytes", "early_views", "early_psnr_when_seen",
                "early_psnr_at_end", "forgetting_curve", "dropped", "images")
 
@@ -184,7 +187,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         components_used=used, replay_bytes=int(learner.replay_bytes), early_views=early_idx,
         early_psnr_when_seen=curve[0][1], early_psnr_at_end=curve[-1][1],
         forgetting_curve=curve, dropped=final.dropped,
-        images={"target": [f.rgb for f in scene.test], "render": final.renders})
+        images={"target": [f.rgb for f in scene.test], "render": final.renders},
+        oracle_start=oracle_start(task.init))
 
 
 PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates

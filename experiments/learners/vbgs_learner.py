@@ -1,12 +1,19 @@
-"""VBGS as a continual scene learner: each arriving frame is one :func:`vbgs.model.update`."""
+"""VBGS as a continual scene learner: each arriving frame is one :func:`vbgs.model.update`.
+
+With ``task.init == "stream"`` the learner starts empty and, before each frame is
+learned, adds components where the frame shows ground the model has no component for
+(:func:`vbgs.grow.grow`); the first frame fixes the cell side by getting
+FIRST_FRAME_SHARE of the capacity. ``data`` and ``random`` start from the prior of
+:func:`experiments.learners.start.scene_prior` (an oracle start).
+"""
 
 from __future__ import annotations
 
 import jax
 
-from experiments.learners.start import scene_prior
+from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import SceneResult, frame_points
-from vbgs import model
+from vbgs import grow, model
 from vbgs.data.scene import Frame, Scene
 from vbgs.splats import Splats, from_posterior
 
@@ -19,16 +26,35 @@ class VbgsLearner:
 
     def __init__(self, task, scene: Scene):
         self.task = task
-        self.prior = scene_prior(task, scene)
-        self.state = model.start(self.prior)
+        self.key = init_key(task)
+        self.rule: grow.Growth | None = None
+        self.state = None if task.init == "stream" else model.start(scene_prior(task, scene))
+
+    @property
+    def prior(self) -> model.Mixture:
+        """The current reference model (it grows under ``init="stream"``)."""
+        if self.state is None:
+            raise ValueError("the stream has not started: no frame has arrived yet")
+        return self.state.prior
 
     @staticmethod
     def check(task) -> None:
         """Nothing to check beyond the task's own validation."""
 
+    def _grow(self, xyz, rgb) -> None:
+        t = self.task
+        if self.state is None:
+            self.rule = grow.calibrate(xyz, t.components, FIRST_FRAME_SHARE * t.components,
+                                       refine=REFINE_SHARE)
+            self.state = grow.start_empty(xyz, t.components, self.rule.cell, t.prior)
+        self.key, sub = jax.random.split(self.key)
+        self.state, _ = grow.grow(self.state, xyz, rgb, self.rule, key=sub, config=t.prior)
+
     def learn(self, frame: Frame) -> None:
         xyz, rgb = frame_points(frame)
         t = self.task
+        if t.init == "stream":
+            self._grow(xyz, rgb)
         self.state, _ = model.update(self.state, xyz, rgb, assign=t.assign, config=t.prior,
                                      estep=t.estep, n_candidates=t.candidates)
         jax.block_until_ready(self.state.stats.count)
