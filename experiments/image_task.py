@@ -17,7 +17,8 @@ import jax
 import numpy as np
 from tqdm.auto import tqdm
 
-from vbgs import model
+from experiments.init_schemes import oracle_start
+from vbgs import grow, model
 from vbgs.baseline import TrainConfig, count_live, params_from_prior
 from vbgs.baseline.densify import DEAD_OPACITY
 from vbgs.baseline.image import IMAGE_STEPS, fit_image, render_image_params
@@ -36,7 +37,7 @@ class ImageTask:
     size: int | None = 64
     components: int = 2000
     iters: int = 10
-    init: str = "data"
+    init: str = "stream"  # stream | data | random (see experiments.init_schemes)
     seed: int = 0
     stream: str = "none"  # none | patches
     order: str = "sequential"
@@ -56,6 +57,35 @@ class ImageTask:
             raise ValueError(f"iters must be a positive integer, got {self.iters!r}")
         if self.method not in ("vbgs", "gradient"):
             raise ValueError(f"unknown method {self.method!r}: use 'vbgs' or 'gradient'")
+        oracle_start(self.init)  # a known scheme
+        if self.init == "stream" and self.stream != "none" and self.reassign:
+            raise ValueError("reassign moves unused components, but a stream started with "
+                             "init 'stream' grows its own: turn reassign off")
+
+
+def image_prior(task: ImageTask, uv, rgb, key: jax.Array) -> model.Mixture:
+    """The prior of a fit on all pixels ``uv [n, 2]``, ``rgb [n, 3]`` at once (for a batch
+    fit the whole image is the first and only batch, so ``stream`` peeks at nothing)."""
+    if task.init == "stream":
+        return grow.batch_prior(uv, rgb, task.components, key=key, config=task.prior)
+    return model.init(uv, rgb, task.components, key=key, scheme=task.init, config=task.prior)
+
+
+def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.Array,
+                   k_fit: jax.Array, uv, rgb, *, progress: bool, callback) -> model.State:
+    """One pass over the patches. ``init="stream"`` grows from the first patch, which
+    gets its share of K by pixels (the image's size is the sensor's, known before any
+    data); ``data`` and ``random`` start from the whole image ``uv``, ``rgb`` (an
+    oracle start)."""
+    shown = tqdm(batches, desc="patches", disable=not progress, leave=False)
+    if task.init == "stream":
+        first_cells = task.components * len(batches[0][0]) / (h * w)
+        return grow.stream(shown, task.components, first_cells, key=k_init,
+                           assign=task.assign, config=task.prior,
+                           callback=lambda i, s, inf, _: callback(i, s, inf))
+    prior = image_prior(task, uv, rgb, k_init)
+    return stream(prior, shown, assign=task.assign, config=task.prior,
+                  key=k_fit if task.reassign else None, callback=callback)
 
 
 def run_image(task: ImageTask, *, progress: bool = False) -> dict:
@@ -67,9 +97,9 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
     h, w, _ = img.shape
     uv, rgb = image_to_points(img)
     k_init, k_fit = jax.random.split(jax.random.key(task.seed))
-    prior = model.init(uv, rgb, task.components, key=k_init, scheme=task.init, config=task.prior)
     start = time.perf_counter()
     if task.stream == "none":
+        prior = image_prior(task, uv, rgb, k_init)
         bar = tqdm(total=task.iters, desc="CAVI", unit="it", disable=not progress, leave=False)
         post, info = fit(prior, uv, rgb, iters=task.iters, config=task.prior,
                          key=k_fit if task.reassign else None,
@@ -79,10 +109,8 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
     else:
         batches = list(patch_stream(img, task.patch, task.order, seed=task.seed))
         trace = []
-        state = stream(prior, tqdm(batches, desc="patches", disable=not progress, leave=False),
-                       assign=task.assign, config=task.prior,
-                       key=k_fit if task.reassign else None,
-                       callback=lambda i, s, inf: trace.append(float(inf.elbo)))
+        state = stream_patches(task, batches, h, w, k_init, k_fit, uv, rgb, progress=progress,
+                               callback=lambda i, s, inf: trace.append(float(inf.elbo)))
         post, elbo, counts = state.posterior, np.asarray(trace), state.stats.count
     render = render_image(post, h, w)
     seconds = time.perf_counter() - start
@@ -90,6 +118,7 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
     settings.pop("prior")
     return {
         **settings,
+        "oracle_start": task.stream != "none" and oracle_start(task.init),
         "height": h,
         "width": w,
         "psnr": psnr(render, img),
@@ -112,7 +141,7 @@ def run_gradient_image(task: ImageTask, *, steps: int = IMAGE_STEPS, progress: b
     h, w, _ = img.shape
     uv, rgb = image_to_points(img)
     k_init, k_fit = jax.random.split(jax.random.key(task.seed))  # as run_image splits
-    prior = model.init(uv, rgb, task.components, key=k_init, scheme=task.init, config=task.prior)
+    prior = image_prior(task, uv, rgb, k_init)
     bar = tqdm(total=steps, desc="Adam", unit="step", disable=not progress, leave=False)
     start = time.perf_counter()
     config = replace(config or TrainConfig(), lr_decay_steps=steps)  # images have no depth

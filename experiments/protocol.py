@@ -20,7 +20,8 @@ how it is scored, and the typed record of a run.
 * Final metrics are over all test views: PSNR, SSIM, depth L1 (where the ground truth
   has depth; rendered depth is the alpha-normalised expected depth).
 
-This module imports only :mod:`vbgs`: tasks and learners import it, never the reverse.
+This module imports only :mod:`vbgs` (and the init names): tasks and learners import
+it, never the reverse.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from tqdm.auto import tqdm
 
+from experiments.init_schemes import oracle_start
 from vbgs import background as bg
 from vbgs.camera import unproject
 from vbgs.data.scene import Frame, Scene
@@ -93,9 +95,10 @@ class SceneResult:
     images: Mapping[str, list] = field(repr=False)  # "target" and "render" per test view
     depth: Mapping[str, Any] = field(default_factory=lambda: {"depth_source": "sensor"})
     details: Mapping[str, Any] = field(default_factory=dict)  # learner-specific numbers
+    oracle_start: bool = False  # the start read frames that had not arrived (init data/random)
 
-    METRICS = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "peak_memory_mb",
-               "components_used", "replay_bytes", "early_views", "early_psnr_when_seen",
+    METRICS = ("oracle_start", "psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame",
+               "peak_memory_mb", "components_used", "replay_bytes", "early_views", "early_psnr_when_seen",
                "early_psnr_at_end", "forgetting_curve", "dropped", "background_rgb", "images")
 
     def to_dict(self, images: bool = True) -> dict:
@@ -201,7 +204,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         components_used=used, replay_bytes=int(learner.replay_bytes), early_views=early_idx,
         early_psnr_when_seen=curve[0][1], early_psnr_at_end=curve[-1][1],
         forgetting_curve=curve, dropped=final.dropped, background_rgb=background.tolist(),
-        images={"target": [f.rgb for f in scene.test], "render": final.renders})
+        images={"target": [f.rgb for f in scene.test], "render": final.renders},
+        oracle_start=oracle_start(task.init))
 
 
 PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates

@@ -23,6 +23,7 @@ from experiments.cli_common import (
     meaningless_score_warning,
     print_result,
 )
+from experiments.init_schemes import INIT_HELP, INITS
 from experiments.sweep.cli import add_report, add_sweep, run_report, run_sweep
 
 
@@ -32,7 +33,7 @@ def _add_fit_image(sub):
     p.add_argument("--size", type=int, default=64, help="resize to SIZE x SIZE (0: keep)")
     p.add_argument("--components", type=int, default=2000)
     p.add_argument("--iters", type=int, default=10, help="CAVI iterations (batch fits)")
-    p.add_argument("--init", choices=["random", "data"], default="data")
+    p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--stream", choices=["none", "patches"], default="none")
     p.add_argument("--order", choices=["sequential", "shuffled", "reversed"], default="sequential")
@@ -81,7 +82,7 @@ def _add_fit_scene(sub):
     p.add_argument("--assign", choices=["prior", "posterior"], default="prior")
     p.add_argument("--estep", choices=["dense", "sparse"], default="sparse")
     p.add_argument("--candidates", type=int, default=16, help="components per point (sparse)")
-    p.add_argument("--init", choices=["random", "data"], default="data")
+    p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--opacity", type=float, default=None, help="VBGS splat opacity")
     p.add_argument("--splat-scale", type=float, default=None,

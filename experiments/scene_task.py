@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS, METHODS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
 from vbgs import model
@@ -39,7 +40,7 @@ class SceneTask:
     assign: str = "prior"
     estep: str = "sparse"
     candidates: int = 16
-    init: str = "random"
+    init: str = "stream"  # stream | data | random (see experiments.init_schemes)
     seed: int = 0
     opacity_rule: str = "evidence"  # evidence (per component, vbgs.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
@@ -63,6 +64,7 @@ class SceneTask:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if self.method not in METHODS:
             raise ValueError(f"unknown method {self.method!r}: use one of {METHODS}")
+        oracle_start(self.init)  # a known scheme
         if self.protocol not in PROTOCOLS:
             raise ValueError(f"unknown protocol {self.protocol!r}: use one of {PROTOCOLS}")
         parse_background(self.background)  # fails on a malformed R,G,B

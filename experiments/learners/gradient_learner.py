@@ -77,6 +77,8 @@ class GradientLearner:
     def check(task) -> None:
         """Fail on a bad replay spec before any work."""
         parse_replay(task.replay)
+        if task.init == "stream":
+            raise ValueError("the gradient baseline has no stream start yet: use --init data")
 
     @staticmethod
     def static_frames(scene: Scene) -> list:

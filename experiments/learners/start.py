@@ -1,6 +1,6 @@
-"""Where a scene learner starts: the :func:`vbgs.model.init` prior both learners share.
-
-``task.init`` picks the scheme; the key is ``jax.random.key(task.seed)`` for both
+"""Where a scene learner starts: :func:`scene_prior` (the oracle starts ``data`` and
+``random`` of :mod:`experiments.init_schemes`, from every training frame) and the
+constants of the ``stream`` start. The key is ``jax.random.key(task.seed)`` for both
 learners, so VBGS and the gradient baseline start from the same components.
 """
 
@@ -12,6 +12,14 @@ import numpy as np
 from experiments.protocol import frame_points
 from vbgs import model
 from vbgs.data.scene import Scene
+
+
+# The share of the capacity K a 3-D stream's first frame gets (it fixes the cell side
+# of :mod:`vbgs.grow`); measured on the object scene, see the README.
+FIRST_FRAME_SHARE = 0.1
+# Share of the empty slots a frame may spend refining ground already covered (finer
+# cells, see vbgs.grow); what is left stays for new ground in later frames.
+REFINE_SHARE = 0.05
 
 
 def init_key(task) -> jax.Array:

@@ -1,12 +1,19 @@
-"""VBGS as a continual scene learner: each arriving frame is one :func:`vbgs.model.update`."""
+"""VBGS as a continual scene learner: each arriving frame is one :func:`vbgs.model.update`.
+
+With ``task.init == "stream"`` the learner starts empty and, before each frame is
+learned, adds components where the frame shows ground the model has no component for
+(:func:`vbgs.grow.grow`); the first frame fixes the cell side by getting
+FIRST_FRAME_SHARE of the capacity. ``data`` and ``random`` start from the prior of
+:func:`experiments.learners.start.scene_prior` (an oracle start).
+"""
 
 from __future__ import annotations
 
 import jax
 
-from experiments.learners.start import scene_prior
+from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import SceneResult, frame_points
-from vbgs import model, opacity
+from vbgs import grow, model, opacity
 from vbgs.data.scene import Frame, Scene
 from vbgs.splats import Splats, from_posterior, mixture_geometry
 from vbgs.stepper import Stepper
@@ -20,26 +27,53 @@ class VbgsLearner:
 
     def __init__(self, task, scene: Scene):
         self.task = task
-        self.prior = scene_prior(task, scene)
-        self.state = model.start(self.prior)
-        self.step = Stepper(self.prior, assign=task.assign, config=task.prior, estep=task.estep,
-                            n_candidates=task.candidates)  # compiled once per stream
+        self.key = init_key(task)
+        self.rule: grow.Growth | None = None
+        self.state = None if task.init == "stream" else model.start(scene_prior(task, scene))
+        self.step: Stepper | None = None  # compiled update, rebuilt when the reference grows
+        self.step_prior: model.Mixture | None = None  # the reference the stepper was built for
         self.evidence = opacity.no_evidence(task.components)
-        self.prior_geometry = mixture_geometry(self.prior)  # the assigning model, prior mode
+
+    @property
+    def prior(self) -> model.Mixture:
+        """The current reference model (it grows under ``init="stream"``)."""
+        if self.state is None:
+            raise ValueError("the stream has not started: no frame has arrived yet")
+        return self.state.prior
+
+    def _reference_changed(self) -> bool:
+        """Whether the stepper must be rebuilt: none yet, or the reference model grew."""
+        return self.step is None or self.step_prior is not self.state.prior
 
     @staticmethod
     def check(task) -> None:
         """Nothing to check beyond the task's own validation."""
 
+    def _grow(self, xyz, rgb) -> None:
+        t = self.task
+        if self.state is None:
+            self.rule = grow.calibrate(xyz, t.components, FIRST_FRAME_SHARE * t.components,
+                                       refine=REFINE_SHARE)
+            self.state = grow.start_empty(xyz, t.components, self.rule.cell, t.prior)
+        self.key, sub = jax.random.split(self.key)
+        self.state, _ = grow.grow(self.state, xyz, rgb, self.rule, key=sub, config=t.prior)
+
     def learn(self, frame: Frame, background=None) -> None:
-        """One conjugate update with the frame's points (the background is not surface:
-        pixels without depth are not points, so it plays no part here)."""
+        """Grow (stream init), then one conjugate update with the frame's points. The
+        background is not surface: pixels without depth are not points, so it plays no
+        part here."""
         xyz, rgb = frame_points(frame)
         t = self.task
+        if t.init == "stream":
+            self._grow(xyz, rgb)
+        if self._reference_changed():  # the compiled stepper holds the reference's terms
+            self.step_prior = self.state.prior
+            self.step = Stepper(self.state.prior, assign=t.assign, config=t.prior,
+                                estep=t.estep, n_candidates=t.candidates)
         if t.opacity_rule == "evidence":  # read against the model that assigns the points
-            geometry = (self.prior_geometry if t.assign == "prior"
-                        else mixture_geometry(self.state.posterior))
-            self.evidence = opacity.observe(self.evidence, *geometry, frame.camera, frame.depth)
+            assigning = self.state.prior if t.assign == "prior" else self.state.posterior
+            self.evidence = opacity.observe(self.evidence, *mixture_geometry(assigning),
+                                            frame.camera, frame.depth)
         self.state, _ = self.step(self.state, xyz, rgb)
         jax.block_until_ready(self.state.stats.count)
 
