@@ -14,6 +14,7 @@ import jax
 from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import SceneResult, frame_points
 from vbgs import grow, model
+from vbgs.bound import StreamBound, batch_bound
 from vbgs.data.scene import Frame, Scene
 from vbgs.splats import Splats, from_posterior
 
@@ -29,6 +30,8 @@ class VbgsLearner:
         self.key = init_key(task)
         self.rule: grow.Growth | None = None
         self.state = None if task.init == "stream" else model.start(scene_prior(task, scene))
+        self.bound = StreamBound()
+        self._last: tuple | None = None  # (q before the frame, xyz, rgb) for diagnose
 
     @property
     def prior(self) -> model.Mixture:
@@ -55,6 +58,7 @@ class VbgsLearner:
         t = self.task
         if t.init == "stream":
             self._grow(xyz, rgb)
+        self._last = (self.state.posterior, xyz, rgb)
         self.state, _ = model.update(self.state, xyz, rgb, assign=t.assign, config=t.prior,
                                      estep=t.estep, n_candidates=t.candidates)
         jax.block_until_ready(self.state.stats.count)
@@ -63,6 +67,14 @@ class VbgsLearner:
         return from_posterior(self.state.posterior, self.prior, opacity=self.task.opacity,
                               cov_scale=self.task.splat_scale, drop_unused=drop_unused)
 
+    def diagnose(self, frame: Frame) -> None:
+        """Add the last frame's streaming bound ``B_t`` (:mod:`vbgs.bound`; untimed)."""
+        before, xyz, rgb = self._last
+        t = self.task
+        self.bound = self.bound.add(batch_bound(before, self.state.posterior, xyz, rgb,
+                                                config=t.prior, estep=t.estep,
+                                                n_candidates=t.candidates))
+
     def details(self, result: SceneResult) -> dict:
-        """Learner-specific numbers for the run's record (none yet)."""
-        return {}
+        """The streaming bound (:meth:`vbgs.bound.StreamBound.summary`)."""
+        return self.bound.summary()
