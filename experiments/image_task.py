@@ -19,6 +19,7 @@ from tqdm.auto import tqdm
 
 from experiments.init_schemes import oracle_start
 from vbgs import grow, model
+from vbgs.bound import StreamBound, batch_bound
 from vbgs.baseline import TrainConfig, count_live, params_from_prior
 from vbgs.baseline.densify import DEAD_OPACITY
 from vbgs.baseline.image import IMAGE_STEPS, fit_image, render_image_params
@@ -72,20 +73,36 @@ def image_prior(task: ImageTask, uv, rgb, key: jax.Array) -> model.Mixture:
 
 
 def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.Array,
-                   k_fit: jax.Array, uv, rgb, *, progress: bool, callback) -> model.State:
-    """One pass over the patches. ``init="stream"`` grows from the first patch, which
-    gets its share of K by pixels (the image's size is the sensor's, known before any
-    data); ``data`` and ``random`` start from the whole image ``uv``, ``rgb`` (an
-    oracle start)."""
+                   k_fit: jax.Array, uv, rgb, *, progress: bool
+                   ) -> tuple[model.State, StreamBound]:
+    """One pass over the patches, with the streaming bound (:mod:`vbgs.bound`).
+    ``init="stream"`` grows from the first patch, which gets its share of K by pixels
+    (the image's size is the sensor's, known before any data); ``data`` and ``random``
+    start from the whole image ``uv``, ``rgb`` (an oracle start). With ``reassign`` on,
+    the bound's ``q_{t-1}`` is the posterior before the re-seeding (not after)."""
     shown = tqdm(batches, desc="patches", disable=not progress, leave=False)
+    total = [StreamBound()]
+
+    def observe(i, before: model.Mixture, after: model.Mixture):
+        xyz, rgb_ = batches[i]
+        total[0] = total[0].add(batch_bound(before, after, xyz, rgb_, config=task.prior))
+
     if task.init == "stream":
         first_cells = task.components * len(batches[0][0]) / (h * w)
-        return grow.stream(shown, task.components, first_cells, key=k_init,
-                           assign=task.assign, config=task.prior,
-                           callback=lambda i, s, inf, _: callback(i, s, inf))
+        state = grow.stream(shown, task.components, first_cells, key=k_init,
+                            assign=task.assign, config=task.prior,
+                            callback=lambda i, s, _, g: observe(i, g.posterior, s.posterior))
+        return state, total[0]
     prior = image_prior(task, uv, rgb, k_init)
-    return stream(prior, shown, assign=task.assign, config=task.prior,
-                  key=k_fit if task.reassign else None, callback=callback)
+    previous = [prior]
+
+    def after_batch(i, s, _):
+        observe(i, previous[0], s.posterior)
+        previous[0] = s.posterior
+
+    state = stream(prior, shown, assign=task.assign, config=task.prior,
+                   key=k_fit if task.reassign else None, callback=after_batch)
+    return state, total[0]
 
 
 def run_image(task: ImageTask, *, progress: bool = False) -> dict:
@@ -106,12 +123,14 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
                          callback=lambda *_: bar.update())
         bar.close()
         elbo, counts = info.elbo, post.alpha - prior.alpha
+        extra = {}
     else:
         batches = list(patch_stream(img, task.patch, task.order, seed=task.seed))
-        trace = []
-        state = stream_patches(task, batches, h, w, k_init, k_fit, uv, rgb, progress=progress,
-                               callback=lambda i, s, inf: trace.append(float(inf.elbo)))
-        post, elbo, counts = state.posterior, np.asarray(trace), state.stats.count
+        state, bound = stream_patches(task, batches, h, w, k_init, k_fit, uv, rgb,
+                                      progress=progress)
+        # a stream has no ELBO of one data set: its objective is the streaming bound
+        post, elbo, counts = state.posterior, np.zeros(0), state.stats.count
+        extra = bound.summary()
     render = render_image(post, h, w)
     seconds = time.perf_counter() - start
     settings = asdict(task)
@@ -126,6 +145,7 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
         "seconds": seconds,
         "components_used": int((np.asarray(counts) >= MIN_COUNT).sum()),
         "elbo": [float(e) for e in elbo],
+        **extra,
         "images": {"target": img, "render": render},
     }
 

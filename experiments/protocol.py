@@ -61,6 +61,14 @@ class Learner(Protocol):
     def splats(self, drop_unused: bool = False) -> Splats: ...
 
 
+def diagnose(learner, frame: Frame) -> None:
+    """The learner's untimed per-frame diagnostics (``learner.diagnose(frame)``, an
+    optional method of a Learner: the streaming bound of VBGS), run after ``learn``."""
+    hook = getattr(learner, "diagnose", None)
+    if hook is not None:
+        hook(frame)
+
+
 @dataclass(frozen=True)
 class Evaluation:
     """Mean scores over a set of views, and the renders ``[h, w, 3]`` per view."""
@@ -193,6 +201,7 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         t0 = time.perf_counter()
         learner.learn(frame, background)
         frame_seconds.append(time.perf_counter() - t0)
+        diagnose(learner, scene.train[i])
         if step in checkpoints:
             curve.append([step, evaluate(learner.splats(), early, background).psnr])
     final, used = _final(scene, learner, background, ply)

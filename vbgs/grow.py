@@ -37,6 +37,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from vbgs.model import Mixture, PriorConfig, State, check_points, m_step, make_prior, start
+from vbgs.model import update as model_update
 
 # Concentration of an empty slot: E[log pi] = digamma(1e-6) ~ -1e6, no responsibility.
 EMPTY_ALPHA = 1e-6
@@ -219,20 +220,18 @@ def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,
     """Continual learning from empty slots: each ``(xyz, rgb)`` batch is seen once;
     before it is learned (:func:`vbgs.model.update`), :func:`grow` fills empty slots
     on its poorly explained points. The cell side is fixed on the first batch so that
-    it occupies about ``first_cells`` cells. ``callback(i, state, info, grow_info)``
-    observes each batch."""
-    from vbgs.model import update
-
+    it gets about ``first_cells`` components. ``callback(i, state, info, grown)``
+    observes each batch (``grown``: the state after growth, before the batch)."""
     state, rule = None, None
     for i, (xyz, rgb) in enumerate(batches):
         if state is None:
             rule = calibrate(xyz, n_components, first_cells, refine=refine)
             state = start_empty(xyz, n_components, rule.cell, config)
         key, sub = jax.random.split(key)
-        state, ginfo = grow(state, xyz, rgb, rule, key=sub, config=config)
-        state, info = update(state, xyz, rgb, assign=assign, config=config)
+        grown, _ = grow(state, xyz, rgb, rule, key=sub, config=config)
+        state, info = model_update(grown, xyz, rgb, assign=assign, config=config)
         if callback is not None:
-            callback(i, state, info, ginfo)
+            callback(i, state, info, grown)
     if state is None:
         raise ValueError("the stream is empty: no batch arrived")
     return state

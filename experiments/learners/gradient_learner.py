@@ -1,9 +1,14 @@
 """The gradient 3DGS baseline (:mod:`vbgs.baseline`) as a scene learner.
 
-:class:`GradientLearner` starts from the VBGS initialisation (the same
-:func:`experiments.learners.start.scene_prior`, key and data as ``VbgsLearner``:
-component means, colour means and the prior's expected covariance as the initial
-scale) and trains with Adam on rendered frames:
+:class:`GradientLearner` starts where VBGS starts, with the same key: under
+``init="stream"`` from the first frame's grown prior (:mod:`vbgs.grow`), adding
+splats on each arriving frame's new ground by the same rule (and densifying within
+the capacity from live splats, :mod:`vbgs.baseline.densify`), with the scene extent
+of the first frame (:func:`stream_extent`); under the oracle starts ``data`` and
+``random`` from :func:`experiments.learners.start.scene_prior` over every frame, with
+the extent of every camera. Component means, colour means and the prior's expected
+covariance become the splats' means, colours and scales. It trains with Adam on
+rendered frames:
 
 * ``protocol="continual"`` (:func:`experiments.protocol.stream_protocol`): on each
   arriving frame the learner takes ``task.steps_per_frame`` steps, each on a frame
@@ -25,8 +30,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.learners.start import init_key, scene_prior
-from experiments.protocol import PROGRESS_BLOCK, SceneResult
+from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
+from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points
+from vbgs import grow
 from vbgs.baseline import (
     TrainConfig,
     Trainer,
@@ -35,8 +41,10 @@ from vbgs.baseline import (
     frame_arrays,
     params_from_prior,
     parse_replay,
+    reset_moments,
     to_splats,
 )
+from vbgs.baseline.params import place
 from vbgs.baseline.densify import DEAD_OPACITY
 from vbgs.data.scene import Frame, Scene
 from vbgs.raster import ALPHA_MIN
@@ -48,6 +56,13 @@ TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
 # PSNR 21.44 vs 21.32 and depth L1 0.077 vs 0.093.
 SCENE_DEPTH_WEIGHT = 0.1
 DEFAULT_CONFIG = TrainConfig(depth_weight=SCENE_DEPTH_WEIGHT)  # lr_decay_steps set per run
+
+
+def stream_extent(camera_position, xyz) -> float:
+    """The scene extent a stream knows from its first frame: 3DGS's 1.1 x camera
+    distance, here from the camera to the centre of the points it sees ``xyz [n, 3]``."""
+    centre = 0.5 * (np.min(xyz, 0) + np.max(xyz, 0))
+    return 1.1 * float(np.linalg.norm(np.asarray(camera_position) - centre))
 
 
 def total_steps(task, scene: Scene) -> int:
@@ -64,25 +79,61 @@ class GradientLearner:
 
     def __init__(self, task, scene: Scene, config: TrainConfig = DEFAULT_CONFIG):
         self.task = task
-        prior = scene_prior(task, scene)
-        config = replace(config, lr_decay_steps=total_steps(task, scene))
-        extent = camera_extent([f.camera.position for f in scene.train])
-        self.trainer = Trainer(config, extent=extent)
-        self.state = self.trainer.init(params_from_prior(prior),
-                                       key=jax.random.fold_in(init_key(task), TRAIN_KEY))
+        self.config = replace(config, lr_decay_steps=total_steps(task, scene))
+        self.key = init_key(task)
         self.replay = parse_replay(task.replay, seed=task.seed)
         self.losses: list[np.ndarray] = []
+        self.rule: grow.Growth | None = None
+        self.trainer = self.state = None
+        if task.init != "stream":  # an oracle start: every frame's points and cameras
+            extent = camera_extent([f.camera.position for f in scene.train])
+            self._start(params_from_prior(scene_prior(task, scene)), extent)
+
+    def _start(self, params, extent: float) -> None:
+        self.trainer = Trainer(self.config, extent=extent)
+        self.state = self.trainer.init(params, key=jax.random.fold_in(self.key, TRAIN_KEY))
+
+    def _grow(self, frame: Frame) -> None:
+        """Stream start: the first frame's grown prior (as VBGS's, :mod:`vbgs.grow`);
+        later frames add splats on their new ground by the same rule, in free rows."""
+        t = self.task
+        xyz, rgb = frame_points(frame)
+        self.key, sub = jax.random.split(self.key)
+        if self.state is None:
+            self.rule = grow.calibrate(xyz, t.components, FIRST_FRAME_SHARE * t.components,
+                                       refine=REFINE_SHARE)
+            start = grow.start_empty(xyz, t.components, self.rule.cell, t.prior)
+            prior = grow.grow(start, xyz, rgb, self.rule, key=sub, config=t.prior)[0].prior
+            self.origin = np.asarray(prior.origin, np.float64)
+            self.new_scale = float(params_from_prior(prior).log_scales[0, 0])
+            self._start(params_from_prior(prior, active=grow.is_active(prior)),
+                        stream_extent(frame.camera.position, xyz))
+            return
+        params = self.state.params
+        free = np.flatnonzero(~np.asarray(params.active))
+        taken = np.asarray(params.means, np.float64)[np.asarray(params.active)] - self.origin
+        chosen, _ = grow.select(np.asarray(xyz, np.float64) - self.origin, taken, len(free),
+                                self.rule, key=sub)
+        if len(chosen) == 0:
+            return
+        rows = free[: len(chosen)]
+        params = place(params, rows, xyz[chosen], rgb[chosen], np.exp(self.new_scale))
+        changed = np.zeros(params.means.shape[0], bool)
+        changed[rows] = True
+        self.state = self.state._replace(
+            params=params, opt_state=reset_moments(self.state.opt_state, jnp.asarray(changed)))
 
     @staticmethod
     def check(task) -> None:
         """Fail on a bad replay spec before any work."""
         parse_replay(task.replay)
-        if task.init == "stream":
-            raise ValueError("the gradient baseline has no stream start yet: use --init data")
 
-    @staticmethod
-    def static_frames(scene: Scene) -> list:
-        """All training frames in the form :meth:`train` takes."""
+    def static_frames(self, scene: Scene) -> list:
+        """All training frames in the form :meth:`train` takes (a stream start grows
+        on every frame first: the static protocol sees them all at once)."""
+        if self.task.init == "stream":
+            for frame in scene.train:
+                self._grow(frame)
         return [frame_arrays(f) for f in scene.train]
 
     @property
@@ -98,7 +149,10 @@ class GradientLearner:
         self.losses.append(losses)
 
     def learn(self, frame: Frame, background) -> None:
-        """Train on the arriving frame and the replay buffer, then buffer the frame."""
+        """Train on the arriving frame and the replay buffer, then buffer the frame
+        (under ``init="stream"`` first grow on the frame's new ground)."""
+        if self.task.init == "stream":
+            self._grow(frame)
         arrays = frame_arrays(frame)
         self.train([arrays, *self.replay.items], self.task.steps_per_frame, background)
         self.replay = self.replay.add(arrays)

@@ -14,6 +14,7 @@ import jax
 from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import SceneResult, frame_points
 from vbgs import grow, model, opacity
+from vbgs.bound import StreamBound, batch_bound
 from vbgs.data.scene import Frame, Scene
 from vbgs.splats import Splats, from_posterior, mixture_geometry
 from vbgs.stepper import Stepper
@@ -33,6 +34,8 @@ class VbgsLearner:
         self.step: Stepper | None = None  # compiled update, rebuilt when the reference grows
         self.step_prior: model.Mixture | None = None  # the reference the stepper was built for
         self.evidence = opacity.no_evidence(task.components)
+        self.bound = StreamBound()
+        self._last: tuple | None = None  # (q before the frame, xyz, rgb) for diagnose
 
     @property
     def prior(self) -> model.Mixture:
@@ -74,6 +77,7 @@ class VbgsLearner:
             assigning = self.state.prior if t.assign == "prior" else self.state.posterior
             self.evidence = opacity.observe(self.evidence, *mixture_geometry(assigning),
                                             frame.camera, frame.depth)
+        self._last = (self.state.posterior, xyz, rgb)
         self.state, _ = self.step(self.state, xyz, rgb)
         jax.block_until_ready(self.state.stats.count)
 
@@ -84,6 +88,14 @@ class VbgsLearner:
                               opacities=opacity.expected_opacity(self.evidence) if evidence
                               else None)
 
+    def diagnose(self, frame: Frame) -> None:
+        """Add the last frame's streaming bound ``B_t`` (:mod:`vbgs.bound`; untimed)."""
+        before, xyz, rgb = self._last
+        t = self.task
+        self.bound = self.bound.add(batch_bound(before, self.state.posterior, xyz, rgb,
+                                                config=t.prior, estep=t.estep,
+                                                n_candidates=t.candidates))
+
     def details(self, result: SceneResult) -> dict:
-        """Learner-specific numbers for the run's record (none yet)."""
-        return {}
+        """The streaming bound (:meth:`vbgs.bound.StreamBound.summary`)."""
+        return self.bound.summary()

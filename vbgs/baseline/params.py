@@ -150,6 +150,24 @@ def init_params(
     )
 
 
+def place(params: Params, rows, means, colours, scales, *,
+          opacity: float = INIT_OPACITY) -> Params:
+    """Fresh isotropic splats in ``rows [m]`` (indices): at ``means [m, d]`` with
+    ``colours [m, 3]`` in [0, 1], standard deviation ``scales`` (scalar or ``[m]``),
+    identity rotation, opacity ``opacity``; the rows become active. Built on the host
+    (m changes from call to call; a device scatter would compile once per m)."""
+    rows = np.asarray(rows, np.int64)
+    fresh = init_params(means, colours, np.broadcast_to(np.asarray(scales, np.float32),
+                                                        (len(rows),)), opacity=opacity)
+
+    def put(a, b):
+        out = np.array(a)
+        out[rows] = np.asarray(b)
+        return jnp.asarray(out)
+
+    return Params(*(put(a, b) for a, b in zip(params, fresh, strict=True)))
+
+
 def params_from_prior(prior, *, capacity: int | None = None, active=None,
                       opacity: float = INIT_OPACITY) -> Params:
     """Params starting where VBGS starts: a :func:`vbgs.model.init` prior's component means

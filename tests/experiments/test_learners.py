@@ -1,0 +1,69 @@
+"""Scene learners under the stream start: nothing read ahead, both methods start alike,
+and the run's record carries the streaming bound."""
+
+import math
+
+import numpy as np
+import pytest
+
+from experiments.learners import LEARNERS, GradientLearner, VbgsLearner
+from experiments.protocol import frame_points
+from experiments.scene_task import SceneTask, prepare_scene, run_scene
+from vbgs import grow
+
+
+class FirstFrameOnly(list):
+    """Training frames where only the first may be read (the others have not arrived)."""
+
+    def __getitem__(self, i):
+        if i != 0:
+            raise AssertionError(f"frame {i} read before it arrived")
+        return super().__getitem__(i)
+
+    def __iter__(self):
+        raise AssertionError("every frame read before they arrived")
+
+
+def tiny(**kw) -> SceneTask:
+    settings = dict(size=32, frames=6, n_test=2, components=300, steps_per_frame=5)
+    return SceneTask(**{**settings, **kw})
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return prepare_scene(tiny())[0]
+
+
+@pytest.mark.parametrize("method", sorted(LEARNERS))
+def test_stream_start_reads_only_the_frames_that_arrived(scene, method):
+    guarded = scene._replace(train=FirstFrameOnly(scene.train))
+    learner = LEARNERS[method](tiny(method=method), guarded)
+    learner.learn(guarded.train[0])
+    assert 0 < learner.splats(drop_unused=True).count <= 300
+
+
+def test_gradient_learner_grows_where_vbgs_grows(scene):
+    task = tiny(method="gradient")
+    vbgs, gradient = VbgsLearner(task, scene), GradientLearner(task, scene)
+    for frame in scene.train[:3]:
+        vbgs._grow(*frame_points(frame))
+        gradient._grow(frame)
+        active = grow.is_active(vbgs.prior)
+        rows = np.asarray(gradient.state.params.active)
+        assert rows.sum() == active.sum()
+    # the same first-frame components; later frames are scored against each learner's own
+    # (here: identical, untrained) means, so the same rows again
+    np.testing.assert_allclose(np.asarray(gradient.state.params.means)[rows],
+                               np.asarray(vbgs.prior.space.mean + vbgs.prior.origin)[active],
+                               rtol=1e-6, atol=1e-6)
+
+
+def test_vbgs_record_has_the_streaming_bound():
+    result = run_scene(tiny()).to_dict()
+    assert result["init"] == "stream" and result["oracle_start"] is False
+    per_batch = result["stream_bound_per_batch"]
+    assert len(per_batch) == 6 and all(math.isfinite(b) for b in per_batch)
+    assert result["stream_bound"] == pytest.approx(sum(per_batch), rel=1e-6)
+    assert result["stream_bound"] == pytest.approx(
+        result["stream_expected_loglik"] - result["stream_kl"], rel=1e-6)
+    assert run_scene(tiny(init="data", frames=3)).oracle_start is True
