@@ -224,13 +224,16 @@ def write_blender(scene: Scene, folder) -> Path:
     """Write ``scene`` in the Blender layout that :func:`load_blender` reads; return the folder.
 
     Files: ``train/r_000.png`` (8-bit RGB), ``train/r_000_depth.png`` (16-bit mm,
-    0 = missing), the same under ``test/``, and ``transforms_train.json`` /
-    ``transforms_test.json`` with ``camera_angle_x``, ``fl_x, fl_y, cx, cy, w, h``
+    0 = missing), the same under ``test/`` (and ``val/`` when the scene has validation
+    views), and ``transforms_train.json`` / ``transforms_test.json`` (/
+    ``transforms_val.json``) with ``camera_angle_x``, ``fl_x, fl_y, cx, cy, w, h``
     and per-frame ``transform_matrix`` in OpenGL axes. Colour is quantised to
     1/255 and depth to 1 mm; depth beyond 65.535 scene units is refused.
     """
     folder = Path(folder)
-    for split, frames in (("train", scene.train), ("test", scene.test)):
+    splits = [("train", scene.train), ("test", scene.test)] + ([("val", scene.val)]
+                                                               if scene.val else [])
+    for split, frames in splits:
         cams = {(f.camera.fx, f.camera.fy, f.camera.cx, f.camera.cy) + f.rgb.shape[1::-1]
                 for f in frames}  # fmt: skip
         if len(cams) > 1:
