@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs import candidates, expfam
+from vbgs import area, candidates, expfam
 from vbgs.expfam import NIW, ColourNormal, Stats
 
 Assign = Literal["prior", "posterior"]
@@ -34,9 +34,11 @@ class PriorConfig:
     """Prior strengths and the colour noise; hyperparameters, not state.
 
     The spatial scale of the prior is not a constant: it is the length ``ell`` of the
-    cell each component would own if the components tiled the data's bounding box,
-    ``ell = (prod_i extent_i / K)^(1/d_eff)`` over the non-degenerate dimensions, so the
-    defaults work whatever the units, the extent or the number of components.
+    cell each component would own if the K components tiled the cells the data occupy
+    (:func:`vbgs.area.occupied_cell_length`: about ``sqrt(area / K)`` for points on
+    surfaces), at most the cell of the data's bounding box,
+    ``(prod_i extent_i / K)^(1/d_eff)`` over the non-degenerate dimensions, so the
+    defaults work whatever the units, the extent, the data's dimension or K.
 
     colour_noise: ``sigma_c``, the fixed colour standard deviation of a component (colours
         in [0, 1]); small values make components colour-pure (the paper's "delta").
@@ -149,8 +151,13 @@ def init(
     scheme: InitScheme = "random",
     config: PriorConfig = PriorConfig(),
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    length_scale: float | None = None,
 ) -> Mixture:
     """A prior for ``n_components`` placed on data ``xyz [n, d]``, ``rgb [n, 3]``.
+
+    ``length_scale``: the cell length ``ell`` the prior covariance is scaled by (see
+    :class:`PriorConfig`); None estimates it from ``xyz`` (cells the data occupy, at
+    most the bounds' box cell).
 
     ``random``: spatial means uniform in the bounds (the data's box unless ``bounds``
     is given) and colour means uniform in the data's colour box. ``data``: spatial
@@ -177,7 +184,10 @@ def init(
         n = xyz.shape[0]
         idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)
         means, colours = xyz[idx], rgb[idx]
-    return make_prior(means, colours, origin, cell_length(lo, hi, n_components), config)
+    if length_scale is None:
+        length_scale = area.occupied_cell_length(pts, n_components, lo,
+                                                 cell_length(lo, hi, n_components))
+    return make_prior(means, colours, origin, length_scale, config)
 
 
 def check_points(xyz, rgb) -> tuple[jnp.ndarray, jnp.ndarray]:
