@@ -41,7 +41,7 @@ def test_tilted_plane_counts_the_cubes_it_crosses():
 
 
 def test_more_components_give_finer_cells_as_a_surface_should():
-    pts = _plane(2.0, 2.0, 0.005) + [0.0, 0.0, 0.3]
+    pts = _plane(2.0, 2.0, 0.01) + [0.0, 0.0, 0.3]
     pts = np.concatenate([pts, [[0.0, 0.0, 0.0], [2.0, 2.0, 1.0]]])
     ratio = _ell(pts, 1600) / _ell(pts, 400)
     assert ratio == pytest.approx(0.5, rel=0.05)  # K^(-1/2), not the box's K^(-1/3)
@@ -80,7 +80,7 @@ def test_bad_input_is_refused():
 
 
 def test_init_scales_the_prior_by_the_surface_length():
-    pts = (_plane(2.0, 2.0, 0.01) + [0.0, 0.0, 0.3]).astype(np.float32)
+    pts = (_plane(2.0, 2.0, 0.02) + [0.0, 0.0, 0.3]).astype(np.float32)
     rgb = np.full_like(pts, 0.5)
     bounds = (np.zeros(3, np.float32), np.array([2.0, 2.0, 1.0], np.float32))
     key = jax.random.key(0)
