@@ -160,7 +160,9 @@ def init(
     most the bounds' box cell).
 
     ``random``: spatial means uniform in the bounds (the data's box unless ``bounds``
-    is given) and colour means uniform in the data's colour box. ``data``: spatial
+    is given) and colour means the colours of randomly chosen data points (the data's
+    own colour distribution, no colour absent from the data; measured better than
+    uniform in the data's colour box or one shared mean colour). ``data``: spatial
     and colour means on randomly chosen data points (with replacement only when
     there are more components than points).
     """
@@ -178,8 +180,7 @@ def init(
         u = jax.random.uniform(k_pos, (n_components, xyz.shape[1]), dtype)
         # uniform in the box, expressed about the origin to keep precision far from 0
         means = origin + (u - 0.5) * jnp.asarray(hi - lo, dtype)
-        c_lo, c_hi = rgb.min(0), rgb.max(0)
-        colours = c_lo + jax.random.uniform(k_col, (n_components, 3), dtype) * (c_hi - c_lo)
+        colours = rgb[jax.random.choice(k_col, rgb.shape[0], (n_components,))]
     else:
         n = xyz.shape[0]
         idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)
