@@ -91,6 +91,8 @@ def print_result(command: str, result: dict, *, as_json: bool) -> None:
         print(tabulate(result["rows"], headers="keys", floatfmt=".4g", tablefmt="github"))
         for path in result.get("files", []):
             print(f"wrote {path}")
+        if "best" in result:
+            print("best: " + ", ".join(f"{k}={_short(v)}" for k, v in result["best"].items()))
         return
     keys = [k for k in _HEADLINE if k in result] + [k for k in result if k not in _HEADLINE]
     print(f"{command}:")

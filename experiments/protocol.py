@@ -19,6 +19,9 @@ how it is scored, and the typed record of a run.
   ``task.steps`` steps on all training frames, then is scored (no forgetting metrics).
 * Final metrics are over all test views: PSNR, SSIM, depth L1 (where the ground truth
   has depth; rendered depth is the alpha-normalised expected depth).
+* **Validation views** (``scene.val``) are never scored here: they are for
+  :func:`evaluate_validation`, which the tuning command (:mod:`experiments.tune`) uses
+  to choose render settings, so no setting is chosen on the test views.
 
 This module imports only :mod:`vbgs` (and the init names): tasks and learners import
 it, never the reverse.
@@ -174,6 +177,26 @@ def evaluate(splats: Splats, frames: list[Frame], background) -> Evaluation:
                       dropped, renders)
 
 
+def evaluate_validation(splats: Splats, scene: Scene, background) -> Evaluation:
+    """:func:`evaluate` over the scene's validation views (never its test views); a scene
+    without validation views is refused."""
+    if not scene.val:
+        raise ValueError(f"scene {scene.name!r} has no validation views; give the task "
+                         f"n_val >= 1 (datasets: a transforms_val.json or val_every)")
+    return evaluate(splats, scene.val, background)
+
+
+def stream_frames(task, scene: Scene, order: np.ndarray, *, progress: bool = False):
+    """Yield ``(step, frame, background)`` for the training frames in ``order`` (step
+    counts from 1), the background estimated from the frames that have arrived (or
+    fixed by the task, see :func:`scene_background`)."""
+    estimate = bg.empty()
+    for step, i in enumerate(tqdm(order, desc="frames", disable=not progress, leave=False), 1):
+        frame = scene.train[i]
+        estimate = bg.observe(estimate, frame.rgb, frame.depth)
+        yield step, frame, scene_background(task, estimate)
+
+
 def _final(scene: Scene, learner: Learner, background, ply: str | None
            ) -> tuple[Evaluation, int]:
     """Score every test view; save the used splats as PLY if asked; (scores, used)."""
@@ -193,15 +216,12 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
     early = [scene.test[i] for i in early_idx]
     n_early = max(1, int(round(EARLY_FRACTION * len(order))))
     checkpoints = set(np.linspace(n_early, len(order), CURVE_POINTS).round().astype(int))
-    curve, frame_seconds, estimate = [], [], bg.empty()
-    for step, i in enumerate(tqdm(order, desc="frames", disable=not progress, leave=False), 1):
-        frame = scene.train[i]
-        estimate = bg.observe(estimate, frame.rgb, frame.depth)
-        background = scene_background(task, estimate)
+    curve, frame_seconds = [], []
+    for step, frame, background in stream_frames(task, scene, order, progress=progress):
         t0 = time.perf_counter()
         learner.learn(frame, background)
         frame_seconds.append(time.perf_counter() - t0)
-        diagnose(learner, scene.train[i])
+        diagnose(learner, frame)
         if step in checkpoints:
             curve.append([step, evaluate(learner.splats(), early, background).psnr])
     final, used = _final(scene, learner, background, ply)

@@ -6,6 +6,7 @@ Commands:
   sweep       run a grid of cells from a TOML config (resumable), then report
   report      tables and plots from a sweep's results folder
   depth-study sensor depth against estimated depth (RGB-only path), per method
+  tune        choose render settings on validation views (never test views); writes a table
   oracle      render splats built from a view's ground truth: is the renderer right here?
   bench       benchmarks: image, estep, raster, depth
 """
@@ -134,6 +135,65 @@ def _fit_scene(args) -> dict:
         save_views(args.save, result.images["target"], result.images["render"],
                    f"{args.scene}, {args.method}: {result.psnr:.2f} dB held-out")
     return result.to_dict(images=False)
+
+
+DEFAULT_GRID = ["splat_scale=0.5,0.7,1.0,1.41", "opacity=0.3,0.5,0.7,0.9,1.0"]
+
+
+def _add_tune(sub):
+    p = sub.add_parser("tune", help="learn one stream, then score a grid of render settings "
+                                    "on validation views; writes OUT/SCENE.csv and .md")
+    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    p.add_argument("--format", choices=["blender", "replica", "tum"], default=None)
+    p.add_argument("--method", choices=["vbgs", "gradient"], default="vbgs")
+    p.add_argument("--components", type=int, default=20000)
+    p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
+    p.add_argument("--val-views", type=int, default=4, help="validation views (at most)")
+    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    p.add_argument("--order", choices=["sequential", "shuffled", "reversed"], default="sequential")
+    p.add_argument("--assign", choices=["prior", "posterior"], default="prior")
+    p.add_argument("--init", choices=["random", "data"], default="data")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--background", default="auto", help="auto or R,G,B in [0, 1]")
+    p.add_argument("--grid", nargs="+", default=DEFAULT_GRID, metavar="NAME=V1,V2",
+                   help="render settings (task fields) and their values, e.g. "
+                        "splat_scale=0.5,0.7,1.0 opacity=0.5,0.9 (default: %(default)s)")
+    p.add_argument("--out", default="results/tuning", help="folder for SCENE.csv and SCENE.md")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _tune(args) -> dict:
+    from pathlib import Path
+
+    from experiments.scene_task import SceneTask, load_task_scene
+    from experiments.tune import command_line, parse_grid, tune, write_tuning
+
+    task = SceneTask(scene=args.scene, format=args.format, method=args.method,
+                     components=args.components, frames=args.frames, n_test=1,
+                     n_val=args.val_views, size=args.size, order=args.order,
+                     assign=args.assign, init=args.init, seed=args.seed,
+                     background=args.background)
+    if args.val_views < 1:
+        raise ValueError(f"--val-views must be at least 1 (settings are chosen on them), "
+                         f"got {args.val_views}")
+    grid = parse_grid(args.grid, task)  # bad grids fail before any work
+    check_fewer_components(args.components, args.frames * args.size**2,
+                           f"at most {args.frames} frames x {args.size}x{args.size}",
+                           "use fewer --components, a larger --size or more --frames")
+    scene = load_task_scene(task)
+    argv = ["tune", "--scene", args.scene, *(["--format", args.format] if args.format else []),
+            "--method", args.method, "--components", str(args.components),
+            "--frames", str(args.frames), "--val-views", str(args.val_views),
+            "--size", str(args.size), "--order", args.order, "--assign", args.assign,
+            "--init", args.init, "--seed", str(args.seed), "--background", args.background,
+            "--grid", *args.grid, "--out", args.out]
+    rows = tune(task, scene, grid, progress=sys.stderr.isatty())
+    about = (f"{len(scene.train)} training frames streamed once ({args.order}, "
+             f"{args.assign} assignment); scores are means over {len(scene.val)} validation "
+             f"views (no test view is rendered). Best first.")
+    name = Path(args.scene).name or "scene"
+    paths = write_tuning(rows, args.out, name, command_line(argv), about)
+    return {"best": rows[0], "rows": rows, "files": [str(p) for p in paths]}
 
 
 def _add_depth_study(sub):
@@ -277,7 +337,7 @@ def _stream_profile(scene_name: str, k: int, size: int, search: str) -> list[dic
 
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
-            "oracle": (_add_oracle, _oracle),
+            "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
             "sweep": (add_sweep, run_sweep), "report": (add_report, run_report)}
 
 

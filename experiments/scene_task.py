@@ -35,6 +35,7 @@ class SceneTask:
     components: int = 20000
     frames: int = 60
     n_test: int = 8
+    n_val: int = 4  # validation views (tuning only: never scored by the protocol)
     size: int = 128
     order: str = "sequential"
     assign: str = "prior"
@@ -62,6 +63,8 @@ class SceneTask:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if not isinstance(self.n_val, int) or self.n_val < 0:
+            raise ValueError(f"n_val must be a non-negative integer, got {self.n_val!r}")
         if self.method not in METHODS:
             raise ValueError(f"unknown method {self.method!r}: use one of {METHODS}")
         oracle_start(self.init)  # a known scheme
@@ -74,12 +77,15 @@ class SceneTask:
 
 
 def load_task_scene(task: SceneTask) -> Scene:
-    """The scene of a task at the task's size and frame counts."""
+    """The scene of a task at the task's size and frame counts, with at most
+    ``task.n_val`` validation views (synthetic: extra views drawn like the test views;
+    datasets: their validation split, see :mod:`vbgs.data.formats`)."""
     if task.scene in ("object", "room") and not Path(task.scene).is_dir():
         return load_scene(task.scene, size=task.size, n_train=task.frames, n_test=task.n_test,
-                          seed=task.seed)
+                          seed=task.seed, n_val=task.n_val)
     scene = load_scene(task.scene, format=task.format, size=task.size)
-    return scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test])
+    return scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test],
+                          val=scene.val[: task.n_val])
 
 
 def prepare_scene(task) -> tuple[Scene, dict]:

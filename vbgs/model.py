@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs import candidates, expfam, precision
+from vbgs import area, candidates, expfam, precision
 from vbgs.expfam import NIW, ColourNormal, Stats
 from vbgs.precision import mat_vec
 
@@ -35,9 +35,11 @@ class PriorConfig:
     """Prior strengths and the colour noise; hyperparameters, not state.
 
     The spatial scale of the prior is not a constant: it is the length ``ell`` of the
-    cell each component would own if the components tiled the data's bounding box,
-    ``ell = (prod_i extent_i / K)^(1/d_eff)`` over the non-degenerate dimensions, so the
-    defaults work whatever the units, the extent or the number of components.
+    cell each component would own if the K components tiled the cells the data occupy
+    (:func:`vbgs.area.occupied_cell_length`: about ``sqrt(area / K)`` for points on
+    surfaces), at most the cell of the data's bounding box,
+    ``(prod_i extent_i / K)^(1/d_eff)`` over the non-degenerate dimensions, so the
+    defaults work whatever the units, the extent, the data's dimension or K.
 
     colour_noise: ``sigma_c``, the fixed colour standard deviation of a component (colours
         in [0, 1]); small values make components colour-pure (the paper's "delta").
@@ -150,11 +152,18 @@ def init(
     scheme: InitScheme = "random",
     config: PriorConfig = PriorConfig(),
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    length_scale: float | None = None,
 ) -> Mixture:
     """A prior for ``n_components`` placed on data ``xyz [n, d]``, ``rgb [n, 3]``.
 
+    ``length_scale``: the cell length ``ell`` the prior covariance is scaled by (see
+    :class:`PriorConfig`); None estimates it from ``xyz`` (cells the data occupy, at
+    most the bounds' box cell).
+
     ``random``: spatial means uniform in the bounds (the data's box unless ``bounds``
-    is given) and colour means uniform in the data's colour box. ``data``: spatial
+    is given) and colour means the colours of randomly chosen data points (the data's
+    own colour distribution, no colour absent from the data; measured better than
+    uniform in the data's colour box or one shared mean colour). ``data``: spatial
     and colour means on randomly chosen data points (with replacement only when
     there are more components than points).
     """
@@ -168,7 +177,10 @@ def init(
     origin = jnp.asarray(0.5 * (lo + hi), xyz.dtype)
     means, colours = _place(key, xyz, rgb, jnp.asarray(lo, xyz.dtype), jnp.asarray(hi, xyz.dtype),
                             origin, n_components, scheme)
-    return _make_prior(means, colours, origin, cell_length(lo, hi, n_components), config)
+    if length_scale is None:
+        length_scale = area.occupied_cell_length(pts, n_components, lo,
+                                                 cell_length(lo, hi, n_components))
+    return _make_prior(means, colours, origin, length_scale, config)
 
 
 @partial(jax.jit, static_argnames=("n_components", "scheme"))
@@ -180,8 +192,7 @@ def _place(key, xyz, rgb, lo, hi, origin, n_components: int, scheme: str):
         u = jax.random.uniform(k_pos, (n_components, xyz.shape[1]), dtype)
         # uniform in the box, expressed about the origin to keep precision far from 0
         means = origin + (u - 0.5) * (hi - lo)
-        c_lo, c_hi = rgb.min(0), rgb.max(0)
-        colours = c_lo + jax.random.uniform(k_col, (n_components, 3), dtype) * (c_hi - c_lo)
+        colours = rgb[jax.random.choice(k_col, rgb.shape[0], (n_components,))]
         return means, colours
     n = xyz.shape[0]
     idx = jax.random.choice(k_pick, n, (n_components,), replace=n_components > n)

@@ -11,6 +11,12 @@ the test split, ``transforms_val.json``), each with
 * ``frames[].transform_matrix``: 4x4 camera-to-world in OpenGL/Blender camera
   axes (x right, y up, z backward), converted to OpenCV axes on loading.
 
+Validation views (``Scene.val``, where render settings are tuned; test views only
+report) are ``transforms_val.json`` when the folder has it beside
+``transforms_test.json``; otherwise (no val file, or the val file serves as the test
+split) every ``val_every``-th training frame is held out of training as a validation
+view (:func:`~vbgs.data.scene.hold_out_validation`), so the stream is that much shorter.
+
 Intrinsics in pixels refer to a ``w x h`` image (keys ``w``, ``h``); a frame may
 override any intrinsic key (as nerfstudio writes them). Each frame's camera is
 scaled from ``w x h`` to its own image size, so frames of different sizes in one
@@ -40,6 +46,7 @@ from vbgs.data.scene import (
     Frame,
     Scene,
     bounds_from_frames,
+    hold_out_validation,
     read_rgb,
     require_some_depth,
     resize_frame,
@@ -49,6 +56,7 @@ from vbgs.data.scene import (
 from vbgs.io_atomic import write_atomic, write_text_atomic
 
 BLENDER_BACKGROUND = (1.0, 1.0, 1.0)
+VAL_EVERY = 8  # without transforms_val.json, every 8th training frame is a validation view
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
@@ -178,11 +186,16 @@ def load_blender(
     background=BLENDER_BACKGROUND,
     depth_scale: float = MILLIMETRES,
     require_depth: bool = True,
+    max_val: int | None = None,
+    val_every: int | None = VAL_EVERY,
 ) -> Scene:
     """Load a Blender/NeRF-synthetic folder (see the module docstring).
 
     size: resize (see :func:`~vbgs.data.scene.target_size`); stride, max_frames:
-    thin the training split; max_test: cap the test split; depth_scale: PNG
+    thin the training split; max_test: cap the test split; max_val: cap the
+    validation split; val_every: without a separate ``transforms_val.json``, hold out
+    every val_every-th training frame for validation (None: no validation views);
+    depth_scale: PNG
     depth codes per scene unit; require_depth: raise if a frame has no depth
     file (else its depth is all 0). Bounds come from the training depth.
     """
@@ -198,20 +211,29 @@ def load_blender(
     args = (size, background, depth_scale, require_depth)
     train = _load_split(train_json, lambda n: select(n, stride, max_frames), *args)
     test = _load_split(test_json, lambda n: list(range(n))[:max_test], *args)
-    return Scene(folder.name, train, test, bounds_from_frames(train), background)
+    val_json = folder / "transforms_val.json"
+    if val_json.is_file() and val_json != test_json:
+        val = _load_split(val_json, lambda n: list(range(n))[:max_val], *args)
+    else:
+        train, val = hold_out_validation(train, val_every)
+        val = val[:max_val]
+    return Scene(folder.name, train, test, bounds_from_frames(train), background, val)
 
 
 def write_blender(scene: Scene, folder) -> Path:
     """Write ``scene`` in the Blender layout that :func:`load_blender` reads; return the folder.
 
     Files: ``train/r_000.png`` (8-bit RGB), ``train/r_000_depth.png`` (16-bit mm,
-    0 = missing), the same under ``test/``, and ``transforms_train.json`` /
-    ``transforms_test.json`` with ``camera_angle_x``, ``fl_x, fl_y, cx, cy, w, h``
+    0 = missing), the same under ``test/`` (and ``val/`` when the scene has validation
+    views), and ``transforms_train.json`` / ``transforms_test.json`` (/
+    ``transforms_val.json``) with ``camera_angle_x``, ``fl_x, fl_y, cx, cy, w, h``
     and per-frame ``transform_matrix`` in OpenGL axes. Colour is quantised to
     1/255 and depth to 1 mm; depth beyond 65.535 scene units is refused.
     """
     folder = Path(folder)
-    for split, frames in (("train", scene.train), ("test", scene.test)):
+    splits = [("train", scene.train), ("test", scene.test)] + ([("val", scene.val)]
+                                                               if scene.val else [])
+    for split, frames in splits:
         cams = {(f.camera.fx, f.camera.fy, f.camera.cx, f.camera.cy) + f.rgb.shape[1::-1]
                 for f in frames}  # fmt: skip
         if len(cams) > 1:

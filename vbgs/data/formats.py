@@ -22,7 +22,9 @@ to cx, cy. They are rescaled when the images are not the published size.
 
 Replica and TUM hold out every ``test_every``-th frame (positions
 ``test_every // 2, + test_every, ...`` of the strided sequence, so the stream
-starts on a training frame). ``stride`` keeps every stride-th frame and
+starts on a training frame), then every ``val_every``-th remaining frame as a
+validation view (``Scene.val``, see :func:`~vbgs.data.scene.hold_out_validation`):
+those are neither streamed nor scored. ``stride`` keeps every stride-th frame and
 ``max_frames`` caps the count before splitting; ``size`` resizes images and
 intrinsics together (see :func:`~vbgs.data.scene.resize_frame`). Bounds come
 from the training depth.
@@ -37,13 +39,14 @@ from typing import NamedTuple
 import numpy as np
 
 from vbgs.camera import Camera
-from vbgs.data.blender import load_blender, write_blender
+from vbgs.data.blender import VAL_EVERY, load_blender, write_blender
 from vbgs.data.depth_png import read_depth_png
 from vbgs.data.scene import (
     Frame,
     Scene,
     bounds_from_frames,
     hold_out,
+    hold_out_validation,
     read_rgb,
     require_some_depth,
     resize_frame,
@@ -136,6 +139,7 @@ def load_replica(
     test_every: int | None = 8,
     intrinsics: Intrinsics = REPLICA_INTRINSICS,
     depth_scale: float = REPLICA_DEPTH_SCALE,
+    val_every: int | None = VAL_EVERY,
 ) -> Scene:
     """Load Replica in the SplaTAM layout (see module docstring)."""
     folder = Path(folder)
@@ -167,8 +171,15 @@ def load_replica(
         depth = read_depth_png(depths[i], depth_scale)
         frame = validate_frame(Frame(rgb, depth, cam), f"{images[i]} (depth {depths[i].name})")
         frames.append(resize_frame(require_some_depth(frame, f"{depths[i]}"), size))
+    return _split(folder.name, frames, test_every, val_every)
+
+
+def _split(name: str, frames: list[Frame], test_every, val_every) -> Scene:
+    """A scene from one trajectory: test views held out first, then validation views
+    from what is left (see the module docstring); bounds from the training frames."""
     train, test = hold_out(frames, test_every)
-    return Scene(folder.name, train, test, bounds_from_frames(train))
+    train, val = hold_out_validation(train, val_every)
+    return Scene(name, train, test, bounds_from_frames(train), val=val)
 
 
 # --------------------------------------------------------------------------- TUM RGB-D
@@ -230,6 +241,7 @@ def load_tum(
     intrinsics: Intrinsics = TUM_FR1_INTRINSICS,
     depth_scale: float = TUM_DEPTH_SCALE,
     max_time_diff: float = 0.02,
+    val_every: int | None = VAL_EVERY,
 ) -> Scene:
     """Load a TUM RGB-D sequence (see module docstring)."""
     folder = Path(folder)
@@ -260,8 +272,7 @@ def load_tum(
         what = f"{folder / rgb_rows[i][0]} (depth {depth_rows[jd][0]})"
         frame = require_some_depth(validate_frame(Frame(rgb, depth, cam), what), what)
         frames.append(resize_frame(frame, size))
-    train, test = hold_out(frames, test_every)
-    return Scene(folder.name, train, test, bounds_from_frames(train))
+    return _split(folder.name, frames, test_every, val_every)
 
 
 # --------------------------------------------------------------------------- entry point

@@ -43,10 +43,15 @@ class Scene(NamedTuple):
 
     name: a short label (synthetic scene name or dataset folder name);
     train: frames in trajectory order (streaming order matters: consecutive frames
-    are neighbouring views); test: held-out views for evaluation;
+    are neighbouring views); test: held-out views for evaluation only (scores are
+    reported on them, nothing is chosen on them);
     bounds: world-space ``(lo [3], hi [3])`` box around the content;
     background: the rgb colour seen where no geometry is hit (pixels with depth 0 in
-    object-centric scenes), the colour a renderer should composite onto.
+    object-centric scenes), the colour a renderer should composite onto;
+    val: validation views, apart from both the training and the test views: whatever
+    is still tuned (render settings) is chosen on these, never on ``test``. Last, with
+    a default, so positional construction ``Scene(name, train, test, bounds)`` keeps
+    working (a scene built that way has none).
     """
 
     name: str
@@ -54,6 +59,7 @@ class Scene(NamedTuple):
     test: list[Frame]
     bounds: tuple[np.ndarray, np.ndarray]
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    val: list[Frame] = []  # a NamedTuple field: shared default, never mutated
 
 
 def validate_frame(frame: Frame, what: str = "frame") -> Frame:
@@ -124,7 +130,7 @@ def validate_scene(scene: Scene) -> Scene:
     """Validate every frame and the bounds of a scene; return it unchanged or raise ValueError."""
     if not scene.train:
         raise ValueError(f"scene {scene.name!r} has no training frames")
-    for split, frames in (("train", scene.train), ("test", scene.test)):
+    for split, frames in (("train", scene.train), ("test", scene.test), ("val", scene.val)):
         for i, frame in enumerate(frames):
             validate_frame(frame, f"scene {scene.name!r} {split} frame {i}")
     lo, hi = (np.asarray(b) for b in scene.bounds)
@@ -170,6 +176,20 @@ def hold_out(frames: list, every: int | None) -> tuple[list, list]:
     test = [i % every == every // 2 for i in range(len(frames))]
     return [f for f, t in zip(frames, test, strict=True) if not t], [
         f for f, t in zip(frames, test, strict=True) if t
+    ]
+
+
+def hold_out_validation(frames: list, every: int | None) -> tuple[list, list]:
+    """Split training frames into ``(train, val)`` when a dataset ships no validation
+    split: positions ``every - 1 + j * every`` are validation views (every ``every``-th
+    frame, the first frame kept for training; :func:`hold_out` puts its test frames
+    at ``every // 2 + j * every``, so applied after it the two rarely pick neighbours).
+    ``every`` None or 0 holds nothing out."""
+    if not every:
+        return list(frames), []
+    val = [i % every == every - 1 for i in range(len(frames))]
+    return [f for f, v in zip(frames, val, strict=True) if not v], [
+        f for f, v in zip(frames, val, strict=True) if v
     ]
 
 

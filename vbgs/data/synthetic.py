@@ -14,7 +14,10 @@ primitives, so colour and z-depth are exact up to float32 rounding:
 
 World axes: z up, units are metres-like scene units. Training views follow a
 continuous closed path (frame i and i + 1 are neighbouring views, so streaming
-order matters); test views are drawn off that path under the same ``seed``.
+order matters); test views are drawn off that path under the same ``seed``;
+validation views (:func:`object_val_poses`, :func:`room_val_poses`) are drawn the way
+test views are, from a separate random stream (``[seed, scene tag, VAL_STREAM]``),
+so adding them leaves the training and test views bit-identical.
 ``seed`` also jitters object placement, so different seeds give different scenes
 and the same seed gives bit-identical frames.
 """
@@ -37,6 +40,8 @@ ROOM_CENTRE, ROOM_HALF = (0.0, 0.0, 1.3), (3.0, 2.5, 1.3)  # floor at z = 0, cei
 WALK_RADII = (2.2, 1.7)  # walkthrough ellipse in the room (x, y), well clear of the objects
 WALK_HEIGHT = 1.45  # eye height of the walkthrough
 LOOK_TARGET = np.array([0.0, 0.0, 0.8])  # the walkthrough looks about this point
+VAL_STREAM = 3  # third entry of the validation views' rng seed (train/test use [seed, tag])
+N_VAL = 4  # validation views per synthetic scene by default
 
 
 def object_primitives(seed: int = 0) -> list:
@@ -138,20 +143,33 @@ def object_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
         )
         for f in s
     ]
-    test = [
+    return train, _orbit_views(rng, n_test)
+
+
+def _orbit_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """``n`` orbit poses at uniform random azimuths and elevations in ORBIT_ELEVATION."""
+    lo, hi = ORBIT_ELEVATION
+    return [
         _orbit_pose(a, e)
-        for a, e in zip(rng.uniform(0, 2 * np.pi, n_test), rng.uniform(lo, hi, n_test), strict=True)
+        for a, e in zip(rng.uniform(0, 2 * np.pi, n), rng.uniform(lo, hi, n), strict=True)
     ]
-    return train, test
 
 
-def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> Scene:
+def object_val_poses(n_val: int = N_VAL, seed: int = 0) -> list[np.ndarray]:
+    """Validation poses of the ``"object"`` scene: drawn as its test views are, from
+    the rng stream ``[seed, 1, VAL_STREAM]`` (the test views use ``[seed, 1]``)."""
+    return _orbit_views(np.random.default_rng([seed, 1, VAL_STREAM]), n_val)
+
+
+def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
+                 n_val: int = N_VAL) -> Scene:
     """Object-centric scene seen from an orbit (see module docstring).
 
     size: image side in pixels (or ``(width, height)``); horizontal field of view
     ``OBJECT_FOV_X``. Training views go once around the object, azimuth advancing
     uniformly while elevation oscillates twice between the ``ORBIT_ELEVATION``
-    limits; test views sit at random azimuths and elevations on the same sphere.
+    limits; test views sit at random azimuths and elevations on the same sphere, and
+    so do the ``n_val`` validation views (another random stream).
     """
     train, test = object_poses(n_train, n_test, seed)
     prims = object_primitives(seed)
@@ -161,6 +179,7 @@ def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) ->
         test=_frames(prims, test, size, OBJECT_FOV_X, OBJECT_BACKGROUND),
         bounds=bounds_of(prims),
         background=OBJECT_BACKGROUND,
+        val=_frames(prims, object_val_poses(n_val, seed), size, OBJECT_FOV_X, OBJECT_BACKGROUND),
     )
 
 
@@ -189,25 +208,37 @@ def room_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
     train = [
         _walk_pose(p, 1.0, WALK_HEIGHT + 0.12 * np.sin(3 * p), 0.6 * np.sin(2 * p)) for p in phis
     ]
-    test = [
+    return train, _walk_views(rng, n_test)
+
+
+def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """``n`` poses off the walk: 0.85x its radius, eye height 1.2 or 1.7, random gaze."""
+    return [
         _walk_pose(p, 0.85, h, y)
         for p, h, y in zip(
-            rng.uniform(0, 2 * np.pi, n_test),
-            rng.choice([1.2, 1.7], n_test),
-            rng.uniform(-0.8, 0.8, n_test),
+            rng.uniform(0, 2 * np.pi, n),
+            rng.choice([1.2, 1.7], n),
+            rng.uniform(-0.8, 0.8, n),
             strict=True,
         )
     ]
-    return train, test
 
 
-def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> Scene:
+def room_val_poses(n_val: int = N_VAL, seed: int = 0) -> list[np.ndarray]:
+    """Validation poses of the ``"room"`` scene: drawn as its test views are, from the
+    rng stream ``[seed, 2, VAL_STREAM]`` (the test views use ``[seed, 2]``)."""
+    return _walk_views(np.random.default_rng([seed, 2, VAL_STREAM]), n_val)
+
+
+def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
+               n_val: int = N_VAL) -> Scene:
     """Room walkthrough (see module docstring); every pixel has valid depth.
 
     Training views walk once around the ellipse ``WALK_RADII`` at about
     ``WALK_HEIGHT``, gaze swinging up to +-34 degrees left and right of the room
     centre; test views are at 0.85x the radius, eye heights 1.2 or 1.7 and
-    random gaze offsets up to +-45 degrees.
+    random gaze offsets up to +-45 degrees; the ``n_val`` validation views are drawn
+    the same way from another random stream.
     """
     train, test = room_poses(n_train, n_test, seed)
     prims = room_primitives(seed)
@@ -217,6 +248,7 @@ def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0) -> S
         train=_frames(prims, train, size, ROOM_FOV_X, (0.0, 0.0, 0.0)),
         test=_frames(prims, test, size, ROOM_FOV_X, (0.0, 0.0, 0.0)),
         bounds=(lo, hi),
+        val=_frames(prims, room_val_poses(n_val, seed), size, ROOM_FOV_X, (0.0, 0.0, 0.0)),
     )
 
 

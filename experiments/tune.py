@@ -1,0 +1,130 @@
+"""Tune render settings on validation views: ``python -m experiments.run tune``.
+
+What is still a constant in the picture (today the task's ``opacity`` and
+``splat_scale``, read by the VBGS learner when it turns its posterior into splats) is
+chosen here, on the scene's validation views (``Scene.val``), never on its test views.
+
+The stream is learned once; each setting of the grid then only re-renders: a shallow
+copy of the learner gets the task with that setting (``dataclasses.replace``) and its
+``splats()`` are scored by :func:`experiments.protocol.evaluate_validation`. So a grid
+parameter must be a task field the learner reads at render time: fields that change
+the fit itself (:data:`FIT_FIELDS`) are refused. The grid is given by name
+(``--grid splat_scale=0.5,0.7,1.0 opacity=0.5,0.9``), so a new render setting needs
+no change here.
+
+Writes ``<out>/<scene>.csv`` and ``<out>/<scene>.md``, both headed by the command that
+made them; rows are sorted by validation PSNR, best first.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import shlex
+from dataclasses import fields, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from experiments.bench import machine
+from experiments.learners import LEARNERS
+from experiments.protocol import evaluate_validation, stream_frames
+from vbgs.data.streams import stream_order
+
+# Task fields that change what is learned (or what is scored): a re-render cannot tune them.
+FIT_FIELDS = frozenset({
+    "scene", "format", "method", "components", "frames", "n_test", "n_val", "size", "order",
+    "assign", "estep", "candidates", "init", "seed", "depth_model", "depth_kind",
+    "depth_preset", "depth_align", "background", "replay", "steps_per_frame", "steps",
+    "protocol", "prior",
+})
+
+
+def parse_grid(specs: list[str], task) -> dict[str, list]:
+    """``["name=v1,v2", ...]`` -> ``{name: [v1, v2]}``, each value converted to the type
+    of the task's current value of ``name`` (float when that is None)."""
+    known = {f.name for f in fields(task)}
+    grid: dict[str, list] = {}
+    for spec in specs:
+        name, sep, values = spec.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or not name or not values.strip():
+            raise ValueError(f"--grid entry {spec!r}: write NAME=V1,V2,... "
+                             f"(e.g. splat_scale=0.5,0.7,1.0)")
+        if name not in known:
+            raise ValueError(f"--grid: {name!r} is not a task setting; render settings: "
+                             f"{', '.join(sorted(known - FIT_FIELDS))}")
+        if name in FIT_FIELDS:
+            raise ValueError(f"--grid: {name!r} changes the fit, not the render, so one stream "
+                             f"cannot tune it; compare it with `python -m experiments.run sweep`")
+        if name in grid:
+            raise ValueError(f"--grid: {name!r} is given twice; list all its values in one entry")
+        current = getattr(task, name)
+        kind = float if current is None or isinstance(current, float) else type(current)
+        try:
+            grid[name] = [kind(v.strip()) for v in values.split(",")]
+        except ValueError:
+            raise ValueError(f"--grid {name}: cannot read {values!r} as {kind.__name__} "
+                             f"values") from None
+    if not grid:
+        raise ValueError("--grid needs at least one NAME=V1,V2,... entry")
+    return grid
+
+
+def settings(grid: dict[str, list]) -> list[dict]:
+    """Every combination of the grid's values, as ``{name: value}`` dicts."""
+    names = list(grid)
+    return [dict(zip(names, combo, strict=True)) for combo in itertools.product(*grid.values())]
+
+
+def learn_once(task, scene, *, progress: bool = False):
+    """The task's learner after one pass of the training stream, and the background
+    estimated over it."""
+    learner = LEARNERS[task.method](task, scene)
+    background = None
+    order = stream_order(len(scene.train), task.order, seed=task.seed)
+    for _, frame, background in stream_frames(task, scene, order, progress=progress):
+        learner.learn(frame, background)
+    return learner, background
+
+
+def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[dict]:
+    """Validation scores of every grid setting on one learned stream, best PSNR first.
+
+    Each row: the setting, then ``val_psnr``, ``val_ssim``, ``val_depth_l1`` (means over
+    ``scene.val``)."""
+    if not scene.val:
+        raise ValueError(f"scene {scene.name!r} has no validation views to tune on; "
+                         f"use --val-views >= 1")
+    LEARNERS[task.method].check(task)
+    learner, background = learn_once(task, scene, progress=progress)
+    rows = []
+    for setting in settings(grid):
+        view = copy.copy(learner)  # shares the learned state; only the render settings differ
+        view.task = replace(task, **setting)
+        ev = evaluate_validation(view.splats(), scene, background)
+        rows.append({**setting, "val_psnr": ev.psnr, "val_ssim": ev.ssim,
+                     "val_depth_l1": ev.depth_l1})
+    return sorted(rows, key=lambda r: -np.nan_to_num(r["val_psnr"], nan=-np.inf))
+
+
+def write_tuning(rows: list[dict], out_dir: str | Path, name: str, command: str,
+                 about: str) -> list[Path]:
+    """``name.csv`` and ``name.md`` under ``out_dir``, each headed by ``command`` (CSV:
+    ``#`` comment lines, read back with ``pandas.read_csv(path, comment="#")``)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    frame = pd.DataFrame(rows)
+    header = [f"command: {command}", about, f"measured on: {machine()}"]
+    csv, md = out / f"{name}.csv", out / f"{name}.md"
+    csv.write_text("".join(f"# {line}\n" for line in header) + frame.to_csv(index=False))
+    md.write_text(f"# Render settings tuned on validation views: {name}\n\n"
+                  f"Command: `{command}`\n\n{about}\n\nMeasured on: {machine()}\n\n"
+                  f"{frame.to_markdown(index=False, floatfmt='.4g')}\n")
+    return [csv, md]
+
+
+def command_line(argv: list[str]) -> str:
+    """The command that reproduces a run, for the table headers."""
+    return "python -m experiments.run " + shlex.join(argv)

@@ -1,0 +1,105 @@
+"""``python -m experiments.run tune``: render settings chosen on validation views only."""
+
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import experiments.tune as tune_module
+from experiments.learners import VbgsLearner
+from experiments.protocol import evaluate_validation, stream_frames
+from experiments.run import main
+from experiments.scene_task import SceneTask, load_task_scene
+from experiments.tune import parse_grid, settings, tune
+from vbgs.data.streams import stream_order
+
+TINY = SceneTask(components=150, frames=3, n_test=1, n_val=2, size=16, init="data")
+TUNE = ["tune", "--scene", "object", "--components", "150", "--frames", "3", "--size", "16",
+        "--val-views", "2"]
+
+
+def test_parse_grid_types_values_by_the_task_field():
+    grid = parse_grid(["splat_scale=0.5,1", "opacity=0.9"], TINY)
+    assert grid == {"splat_scale": [0.5, 1.0], "opacity": [0.9]}
+    assert all(isinstance(v, float) for v in grid["splat_scale"])
+    assert settings(grid) == [{"splat_scale": 0.5, "opacity": 0.9},
+                              {"splat_scale": 1.0, "opacity": 0.9}]
+
+
+@pytest.mark.parametrize("spec, message", [
+    (["opacity"], "write NAME=V1,V2"),
+    (["colour=1,2"], "'colour' is not a task setting"),
+    (["components=100,200"], "'components' changes the fit, not the render"),
+    (["opacity=0.5", "opacity=0.9"], "'opacity' is given twice"),
+    (["opacity=high"], "cannot read 'high' as float"),
+])
+def test_bad_grids_are_refused_with_the_fix(spec, message):
+    with pytest.raises(ValueError, match=message):
+        parse_grid(spec, TINY)
+
+
+def test_each_rerender_equals_a_fresh_stream_with_that_setting():
+    """Stream once and re-render (the tuning's fast path) == a learner streamed anew with
+    the setting in its task (the slow reference)."""
+    scene = load_task_scene(TINY)
+    grid = {"splat_scale": [0.6, 1.2], "opacity": [0.4]}
+    rows = tune(TINY, scene, grid)
+    assert [r["val_psnr"] for r in rows] == sorted((r["val_psnr"] for r in rows), reverse=True)
+    row = next(r for r in rows if r["splat_scale"] == 1.2)  # not the task's own setting
+    task = replace(TINY, splat_scale=1.2, opacity=0.4)
+    learner = VbgsLearner(task, scene)
+    order = stream_order(len(scene.train), task.order, seed=task.seed)
+    for _, frame, background in stream_frames(task, scene, order):
+        learner.learn(frame, background)
+    fresh = evaluate_validation(learner.splats(), scene, background)
+    assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
+    assert row["val_ssim"] == pytest.approx(fresh.ssim, abs=1e-5)
+    assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # settings change the picture
+
+
+def test_tuning_never_renders_a_test_view(monkeypatch):
+    scene = load_task_scene(TINY)
+    test_ids = {id(f) for f in scene.test}
+    seen = []
+    real = tune_module.evaluate_validation
+
+    def spy(splats, scene_, background):
+        seen.extend(id(f) for f in scene_.val)
+        return real(splats, scene_, background)
+
+    monkeypatch.setattr(tune_module, "evaluate_validation", spy)
+    tune(TINY, scene, {"splat_scale": [0.7]})
+    assert seen and not test_ids & set(seen)
+    with pytest.raises(ValueError, match="no validation views"):
+        evaluate_validation(None, scene._replace(val=[]), np.ones(3))
+
+
+def test_tune_command_writes_its_table_headed_by_the_command(tmp_path, capsys):
+    out = tmp_path / "tuning"
+    argv = [*TUNE, "--grid", "splat_scale=0.7,1.0", "opacity=0.5", "--out", str(out)]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "best: splat_scale=" in printed
+    csv, md = out / "object.csv", out / "object.md"
+    header = csv.read_text().splitlines()[0]
+    assert header.startswith("# command: python -m experiments.run tune --scene object")
+    assert "--grid splat_scale=0.7,1.0 opacity=0.5" in header
+    table = pd.read_csv(csv, comment="#")
+    assert list(table.columns) == ["splat_scale", "opacity", "val_psnr", "val_ssim",
+                                   "val_depth_l1"]
+    assert sorted(table["splat_scale"]) == [0.7, 1.0] and (table["opacity"] == 0.5).all()
+    assert table["val_psnr"].is_monotonic_decreasing and table["val_psnr"].gt(8).all()
+    assert "Command: `python -m experiments.run tune" in md.read_text()
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--grid", "frames=2,3"], "'frames' changes the fit, not the render"),
+    (["--val-views", "0"], "--val-views must be at least 1"),
+])
+def test_tune_refuses_bad_input_before_any_work(extra, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(tune_module, "tune", lambda *a, **k: pytest.fail("tuning started"))
+    assert main([*TUNE, *extra, "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err and err.count("\n") == 1
+    assert not (tmp_path / "t").exists()
