@@ -38,6 +38,10 @@ from vbgs.model import Assign, EStep, Info, Mixture, PriorConfig, State
 Search = Literal["auto", "grid", "kdtree"]
 
 
+# Headroom left when the padded size grows (see Stepper.padded_size).
+GROWTH = 1.25
+
+
 class StepConfig(NamedTuple):
     """Static settings of the compiled step (hashable)."""
 
@@ -138,9 +142,11 @@ class Stepper:
         self._origin = np.asarray(prior.origin)
 
     def padded_size(self, n: int) -> int:
-        """The size batches of ``n`` points are padded to (grows, never shrinks)."""
+        """The size batches of ``n`` points are padded to: it only grows, and when it
+        does it leaves :data:`GROWTH` headroom, so frames of a stream that vary in size
+        a little share one compiled step."""
         if n > self.size:
-            self.size = model.bucket_size(n)
+            self.size = model.bucket_size(int(n * GROWTH))
         return self.size
 
     def _chunk(self, size: int) -> int:
@@ -157,8 +163,10 @@ class Stepper:
         x, c, w = model.padded_batch(xyz, rgb, self._origin, size, self.prior.alpha.dtype)
         cand = None
         if self.estep == "sparse" and self.spec is None:
+            n = xyz.shape[0]
             tree = self._tree or candidates.means_tree(state.posterior.space.mean)
-            cand = candidates.query(tree, x, self.n_candidates)
+            cand = np.zeros((size, self.n_candidates), np.int32)  # padding: weight 0
+            cand[:n] = candidates.query(tree, x[:n], self.n_candidates)
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)
         posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)
