@@ -177,7 +177,7 @@ def sharded_row(n_devices: int, k: int, scene_name: str, *, frames: int, size: i
     scene = load_scene(scene_name, size=size, n_train=frames, n_test=1, seed=0)
     mesh = sharding.mesh(n_devices)
     prior = sharding.shard_prior(_prior(scene, k), mesh)
-    row = stream_row(scene, prior, estep, frames=frames, search="grid")
+    row = stream_row(scene, prior, estep, frames=frames)
     return {"scene": scene_name, "size": size, "components": k, **row,
             "devices": n_devices}
 

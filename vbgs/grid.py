@@ -34,6 +34,12 @@ CELL_FRACTION = 0.7
 LIST_QUANTILE = 0.99
 # Each cell's list is found among its centre's LIST_SEARCH_FACTOR x C nearest means.
 LIST_SEARCH_FACTOR = 16
+# Cells whose lists are built together (bounds the build's memory).
+BUILD_BLOCK = 4096
+# search="auto" uses the grid only when building it costs at most this many distances
+# (beyond, e.g. 100k components spread through a room's volume, the build takes minutes
+# and gigabytes on the host and the KD-tree is the better choice).
+MAX_BUILD_COST = 1 << 24
 # Cells in the grid at most (the cell table is one int32 per cell).
 MAX_CELLS = 1 << 24
 
@@ -102,42 +108,63 @@ def build(means, spec: GridSpec) -> CellLists:
     """
     means = np.asarray(means, np.float64)
     k, d = means.shape
-    dims = np.asarray(spec.dims)
-    occupied = np.zeros(spec.dims, bool)
-    occupied[tuple(np.clip(_cell_coords(means, spec), 0, dims - 1).T)] = True
-    near = occupied.copy()
-    for off in itertools.product((-1, 0, 1), repeat=d):
-        near |= np.roll(occupied, off, axis=tuple(range(d)))  # box has a spare cell a side
-    cells = np.flatnonzero(near)
-    centres = np.asarray(spec.lo) + (np.stack(np.unravel_index(cells, spec.dims), -1) + 0.5) \
-        * spec.cell
+    cells = listed_cells(means, spec)
     search = min(k, LIST_SEARCH_FACTOR * spec.n_candidates)
-    dist, ids = cKDTree(means).query(centres, k=search, workers=-1)
-    dist, ids = dist.reshape(len(cells), search), ids.reshape(len(cells), search)
-    # distances from each found mean to the nearest and farthest point of the cell box
-    gap = np.abs(means[ids] - centres[:, None, :])  # [cells, search, d]
-    half = 0.5 * spec.cell
-    mindist = np.sqrt((np.maximum(gap - half, 0.0) ** 2).sum(-1))
-    maxdist = np.sqrt(((gap + half) ** 2).sum(-1))
-    bound = np.partition(maxdist, spec.n_candidates - 1, axis=1)[:, spec.n_candidates - 1]
-    live = mindist <= bound[:, None]  # can be among the C nearest of some point of the cell
-    sizes = live.sum(1)
-    # means not found lie at least dist[:, -1] - s from the centre, so at least that far
-    # minus the half-diagonal from the box: the list is complete if that exceeds the bound
-    complete = (dist[:, -1] - math.sqrt(d) * half > bound) | (search == k)
+    tree = cKDTree(means)
+    ids = np.zeros((len(cells), search), np.int32)  # live entries first
+    sizes, complete = np.zeros(len(cells), np.int64), np.zeros(len(cells), bool)
+    for lo in range(0, len(cells), BUILD_BLOCK):  # blocks bound the float64 temporaries
+        block = slice(lo, lo + BUILD_BLOCK)
+        centres = _centres(cells[block], spec)
+        dist, near = tree.query(centres, k=search, workers=-1)
+        dist, near = dist.reshape(len(centres), search), near.reshape(len(centres), search)
+        # distances from each found mean to the nearest and farthest point of the cell box
+        gap = np.abs(means[near] - centres[:, None, :])  # [block, search, d]
+        half = 0.5 * spec.cell
+        mindist = np.sqrt((np.maximum(gap - half, 0.0) ** 2).sum(-1))
+        maxdist = np.sqrt(((gap + half) ** 2).sum(-1))
+        bound = np.partition(maxdist, spec.n_candidates - 1, axis=1)[:, spec.n_candidates - 1]
+        live = mindist <= bound[:, None]  # can be among the C nearest of a point of the cell
+        sizes[block] = live.sum(1)
+        # means not found are at least dist[:, -1] from the centre, so at least that minus
+        # the half-diagonal from the box: the list is complete if that exceeds the bound
+        complete[block] = (dist[:, -1] - math.sqrt(d) * half > bound) | (search == k)
+        rank = np.argsort(~live, axis=1, kind="stable")  # live first, nearest first
+        ids[block] = np.take_along_axis(near, rank, 1)
     length = max(spec.n_candidates, int(np.quantile(sizes[complete], LIST_QUANTILE))
                  if complete.any() else spec.n_candidates)
     keep = complete & (sizes <= length)
-    # live entries first, in order of distance to the centre
-    rank = np.argsort(~live, axis=1, kind="stable")[:, :length]
-    live = np.take_along_axis(live, rank, 1)
-    ids = np.take_along_axis(ids, rank, 1)
     row = np.full(spec.n_cells, -1, np.int32)
     row[cells[keep]] = np.arange(keep.sum(), dtype=np.int32)
-    live, ids = live[keep], np.where(live[keep], ids[keep], 0)
-    tab = np.where(live[..., None], means[ids], np.inf).transpose(0, 2, 1)  # [R, d, L]
+    live = np.arange(length)[None] < sizes[keep][:, None]
+    ids = np.where(live, ids[keep, :length], 0)
+    tab = np.where(live[..., None], means[ids].astype(np.float32), np.inf)  # [R, L, d]
     return CellLists(jnp.asarray(row), jnp.asarray(ids, jnp.int32),
-                     jnp.asarray(tab, jnp.float32))
+                     jnp.asarray(tab.transpose(0, 2, 1)))
+
+
+def listed_cells(means, spec: GridSpec) -> np.ndarray:
+    """Flat indices of the cells that get a list: those holding a mean and their
+    neighbours (the box has a spare cell a side, so no neighbour wraps around)."""
+    means = np.asarray(means, np.float64)
+    d = means.shape[1]
+    occupied = np.zeros(spec.dims, bool)
+    occupied[tuple(np.clip(_cell_coords(means, spec), 0, np.asarray(spec.dims) - 1).T)] = True
+    near = occupied.copy()
+    for off in itertools.product((-1, 0, 1), repeat=d):
+        near |= np.roll(occupied, off, axis=tuple(range(d)))
+    return np.flatnonzero(near)
+
+
+def build_cost(means, spec: GridSpec) -> int:
+    """Distances :func:`build` evaluates (listed cells x means searched per cell)."""
+    k = np.shape(means)[0]
+    return len(listed_cells(means, spec)) * min(k, LIST_SEARCH_FACTOR * spec.n_candidates)
+
+
+def _centres(cells: np.ndarray, spec: GridSpec) -> np.ndarray:
+    return np.asarray(spec.lo) + (np.stack(np.unravel_index(cells, spec.dims), -1) + 0.5) \
+        * spec.cell
 
 
 def exhaustive(means: jnp.ndarray, x: jnp.ndarray, n_candidates: int) -> jnp.ndarray:

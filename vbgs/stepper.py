@@ -11,7 +11,8 @@ frames compiles once; nothing is copied back to the host unless the caller asks.
 The sparse E-step's candidates come from the device grid (:mod:`vbgs.grid`, searched
 inside the compiled function) or from a host KD-tree over the fixed means
 (:mod:`vbgs.candidates`, built once); ``search="auto"`` takes the KD-tree on a CPU, where
-host and device share memory and the tree is faster, and the grid on an accelerator.
+host and device share memory and the tree is faster, and the grid on an accelerator
+unless building it would be costly (:data:`vbgs.grid.MAX_BUILD_COST`).
 
 Under posterior assignment the terms are recomputed inside the compiled function from
 the current posterior and the candidates come from a KD-tree over the current means,
@@ -35,6 +36,10 @@ from vbgs.model import Assign, EStep, Info, Mixture, PriorConfig, State
 
 
 Search = Literal["auto", "grid", "kdtree"]
+
+
+# Headroom left when the padded size grows (see Stepper.padded_size).
+GROWTH = 1.25
 
 
 class StepConfig(NamedTuple):
@@ -117,15 +122,18 @@ class Stepper:
             raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
         if search not in ("auto", "grid", "kdtree"):
             raise ValueError(f"unknown candidate search {search!r}: use 'auto', 'grid' or 'kdtree'")
-        if search == "auto":  # on a CPU the host KD-tree reads the device's own memory
-            search = "kdtree" if jax.default_backend() == "cpu" else "grid"
         # the grid is built once, so it serves only a fixed assigning model
-        self.search = search if assign == "prior" else "kdtree"
+        search = search if assign == "prior" and estep == "sparse" else "kdtree"
+        spec = grid.plan(prior.space.mean, self.n_candidates) if search != "kdtree" else None
+        if search == "auto":  # on a CPU the host KD-tree reads the device's own memory
+            cheap = grid.build_cost(prior.space.mean, spec) <= grid.MAX_BUILD_COST
+            search = "grid" if jax.default_backend() != "cpu" and cheap else "kdtree"
+        self.search = search
         self.spec, self.fixed, self._tree = None, None, None
         if assign == "prior":
             lists = None
             if estep == "sparse" and self.search == "grid":
-                self.spec = grid.plan(prior.space.mean, self.n_candidates)
+                self.spec = spec
                 lists = grid.build(prior.space.mean, self.spec)
             elif estep == "sparse":
                 self._tree = candidates.means_tree(prior.space.mean)
@@ -134,9 +142,11 @@ class Stepper:
         self._origin = np.asarray(prior.origin)
 
     def padded_size(self, n: int) -> int:
-        """The size batches of ``n`` points are padded to (grows, never shrinks)."""
+        """The size batches of ``n`` points are padded to: it only grows, and when it
+        does it leaves :data:`GROWTH` headroom, so frames of a stream that vary in size
+        a little share one compiled step."""
         if n > self.size:
-            self.size = model.bucket_size(n)
+            self.size = model.bucket_size(int(n * GROWTH))
         return self.size
 
     def _chunk(self, size: int) -> int:
@@ -153,8 +163,10 @@ class Stepper:
         x, c, w = model.padded_batch(xyz, rgb, self._origin, size, self.prior.alpha.dtype)
         cand = None
         if self.estep == "sparse" and self.spec is None:
+            n = xyz.shape[0]
             tree = self._tree or candidates.means_tree(state.posterior.space.mean)
-            cand = candidates.query(tree, x, self.n_candidates)
+            cand = np.zeros((size, self.n_candidates), np.int32)  # padding: weight 0
+            cand[:n] = candidates.query(tree, x[:n], self.n_candidates)
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)
         posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)

