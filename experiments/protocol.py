@@ -44,7 +44,7 @@ from vbgs.camera import unproject
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
 from vbgs.metrics import depth_l1, psnr, ssim
-from vbgs.raster import rasterize
+from vbgs.raster import exact_capacity, rasterize
 from vbgs.splats import Splats, save_ply
 
 EARLY_FRACTION = 0.1  # the first 10% of the stream defines the "early" views
@@ -156,8 +156,10 @@ def early_views(scene: Scene, order: np.ndarray) -> list[int]:
 
 def render_view(splats: Splats, frame: Frame, background) -> tuple[np.ndarray, np.ndarray, int]:
     """Render one view: rgb ``[h, w, 3]``, alpha-normalised depth ``[h, w]`` (0 where
-    uncovered) and the number of splats the tiles dropped."""
-    out = rasterize(splats, frame.camera, background=background)
+    uncovered) and the number of splats the tiles dropped (0: the capacity is chosen
+    so that nothing is, :func:`vbgs.raster.exact_capacity`)."""
+    out = rasterize(splats, frame.camera, background=background,
+                    capacity=exact_capacity(splats, frame.camera))
     alpha = np.asarray(out.alpha)
     depth = np.where(alpha > ALPHA_FOR_DEPTH, np.asarray(out.depth) / np.maximum(alpha, 1e-6), 0)
     return np.clip(np.asarray(out.rgb), 0, 1), depth, int(out.dropped)

@@ -380,6 +380,15 @@ def required_capacity(
     return int(counts.max())
 
 
+def exact_capacity(splats: Splats, camera: Camera, *, tile: int = DEFAULT_TILE,
+                   near: float = NEAR, blur: float = BLUR_VARIANCE) -> int:
+    """A ``capacity`` at which :func:`rasterize` drops nothing for this view: the
+    :func:`required_capacity` rounded up to a power of two and at least
+    DEFAULT_CAPACITY, so that renders of similar views share a few compiled sizes."""
+    need = required_capacity(splats, camera, tile=tile, near=near, blur=blur)
+    return max(DEFAULT_CAPACITY, 1 << max(0, need - 1).bit_length())
+
+
 @functools.partial(jax.jit, static_argnames=("width", "height", "tile", "blur"))
 def _tile_counts(splats, fx, fy, cx, cy, pose, near, *, width, height, tile, blur):
     """Overlapping splats per tile [ty, tx], by a 2-D difference array and two cumsums."""

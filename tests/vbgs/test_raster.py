@@ -234,3 +234,15 @@ def test_bad_input_is_reported():
         rasterize(splats, cam, background=(0, 0))
     empty = rasterize(Splats(*(a[:0] for a in splats)), cam, background=0.5)
     assert empty.rgb.shape == (cam.height, cam.width, 3) and float(empty.rgb.min()) == 0.5
+
+
+def test_exact_capacity_drops_nothing_and_buckets():
+    k = 10
+    cam = from_fov(16, 16, np.deg2rad(40), np.eye(4))
+    means = np.stack([np.zeros(k), np.zeros(k), np.linspace(3.0, 2.0, k)], -1)
+    splats = Splats(jnp.asarray(means, jnp.float32), jnp.tile(0.01 * jnp.eye(3), (k, 1, 1)),
+                    jnp.full((k, 3), 0.5), jnp.full((k,), 0.3))
+    assert raster.exact_capacity(splats, cam) == raster.DEFAULT_CAPACITY  # 10 needed
+    many = Splats(*(jnp.concatenate([a] * 300) for a in splats))  # 3000 overlaps in one tile
+    capacity = raster.exact_capacity(many, cam)
+    assert capacity == 4096 and int(rasterize(many, cam, capacity=capacity).dropped) == 0
