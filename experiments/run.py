@@ -198,7 +198,8 @@ def _tune(args) -> dict:
                   f"it under these settings).")
     name = Path(args.scene).name or "scene"
     paths = write_tuning(rows, args.out, name, command_line(argv), about)
-    return {"best": rows[0], "rows": rows, "no_effect": inert, "files": [str(p) for p in paths]}
+    best = {k: v for k, v in rows[0].items() if k not in inert}  # inert values mean nothing
+    return {"best": best, "rows": rows, "no_effect": inert, "files": [str(p) for p in paths]}
 
 
 def _add_depth_study(sub):
