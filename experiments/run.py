@@ -166,7 +166,13 @@ def _tune(args) -> dict:
     from pathlib import Path
 
     from experiments.scene_task import SceneTask, load_task_scene
-    from experiments.tune import command_line, parse_grid, tune, write_tuning
+    from experiments.tune import (
+        command_line,
+        inert_parameters,
+        parse_grid,
+        tune,
+        write_tuning,
+    )
 
     task = SceneTask(scene=args.scene, format=args.format, method=args.method,
                      components=args.components, frames=args.frames, n_test=1,
@@ -191,9 +197,14 @@ def _tune(args) -> dict:
     about = (f"{len(scene.train)} training frames streamed once ({args.order}, "
              f"{args.assign} assignment); scores are means over {len(scene.val)} validation "
              f"views (no test view is rendered). Best first.")
+    inert = inert_parameters(rows, grid)
+    if inert:
+        about += (f" No effect on any score: {', '.join(inert)} (the learner does not use "
+                  f"it under these settings).")
     name = Path(args.scene).name or "scene"
     paths = write_tuning(rows, args.out, name, command_line(argv), about)
-    return {"best": rows[0], "rows": rows, "files": [str(p) for p in paths]}
+    best = {k: v for k, v in rows[0].items() if k not in inert}  # inert values mean nothing
+    return {"best": best, "rows": rows, "no_effect": inert, "files": [str(p) for p in paths]}
 
 
 def _add_depth_study(sub):

@@ -33,11 +33,12 @@ from experiments.protocol import evaluate_validation, stream_frames
 from vbgs.data.streams import stream_order
 
 # Task fields that change what is learned (or what is scored): a re-render cannot tune them.
+# opacity_rule too: a learner gathers opacity evidence while learning only under its rule.
 FIT_FIELDS = frozenset({
     "scene", "format", "method", "components", "frames", "n_test", "n_val", "size", "order",
     "assign", "estep", "candidates", "init", "seed", "depth_model", "depth_kind",
     "depth_preset", "depth_align", "background", "replay", "steps_per_frame", "steps",
-    "protocol", "prior",
+    "protocol", "prior", "opacity_rule",
 })
 
 
@@ -107,6 +108,23 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
         rows.append({**setting, "val_psnr": ev.psnr, "val_ssim": ev.ssim,
                      "val_depth_l1": ev.depth_l1})
     return sorted(rows, key=lambda r: -np.nan_to_num(r["val_psnr"], nan=-np.inf))
+
+
+def inert_parameters(rows: list[dict], grid: dict[str, list]) -> list[str]:
+    """Grid parameters whose values never changed a score (e.g. a constant the learner
+    ignores under the task's other settings): with the other parameters fixed, every
+    value of such a parameter gave the same validation PSNR."""
+    inert = []
+    for name, values in grid.items():
+        if len(values) < 2:
+            continue
+        groups: dict[tuple, set] = {}
+        for row in rows:
+            key = tuple((k, row[k]) for k in grid if k != name)
+            groups.setdefault(key, set()).add(row["val_psnr"])
+        if all(len(scores) == 1 for scores in groups.values()):
+            inert.append(name)
+    return inert
 
 
 def write_tuning(rows: list[dict], out_dir: str | Path, name: str, command: str,

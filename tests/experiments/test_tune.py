@@ -11,7 +11,7 @@ from experiments.learners import VbgsLearner
 from experiments.protocol import evaluate_validation, stream_frames
 from experiments.run import main
 from experiments.scene_task import SceneTask, load_task_scene
-from experiments.tune import parse_grid, settings, tune
+from experiments.tune import inert_parameters, parse_grid, settings, tune
 from vbgs.data.streams import stream_order
 
 TINY = SceneTask(components=150, frames=3, n_test=1, n_val=2, size=16, init="data")
@@ -56,6 +56,15 @@ def test_each_rerender_equals_a_fresh_stream_with_that_setting():
     assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
     assert row["val_ssim"] == pytest.approx(fresh.ssim, abs=1e-5)
     assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # settings change the picture
+
+
+def test_a_parameter_that_changes_no_score_is_named():
+    grid = {"splat_scale": [0.5, 1.0], "opacity": [0.3, 0.9]}
+    rows = [{"splat_scale": s, "opacity": o, "val_psnr": 20.0 + s}  # opacity: no effect
+            for s in grid["splat_scale"] for o in grid["opacity"]]
+    assert inert_parameters(rows, grid) == ["opacity"]
+    rows[0]["val_psnr"] = 5.0
+    assert inert_parameters(rows, grid) == []
 
 
 def test_tuning_never_renders_a_test_view(monkeypatch):
