@@ -137,7 +137,7 @@ def _fit_scene(args) -> dict:
     return result.to_dict(images=False)
 
 
-DEFAULT_GRID = ["splat_scale=0.5,0.7,1.0,1.41", "opacity=0.3,0.5,0.7,0.9,1.0"]
+DEFAULT_GRID = ["splat_scale=0.5,0.7,0.85,1.0,1.41"]  # opacity comes from evidence (the default)
 
 
 def _add_tune(sub):
@@ -152,7 +152,7 @@ def _add_tune(sub):
     p.add_argument("--size", type=int, default=128, help="image size (longer side)")
     p.add_argument("--order", choices=["sequential", "shuffled", "reversed"], default="sequential")
     p.add_argument("--assign", choices=["prior", "posterior"], default="prior")
-    p.add_argument("--init", choices=["random", "data"], default="data")
+    p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--background", default="auto", help="auto or R,G,B in [0, 1]")
     p.add_argument("--grid", nargs="+", default=DEFAULT_GRID, metavar="NAME=V1,V2",
