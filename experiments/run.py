@@ -78,6 +78,8 @@ def _add_fit_scene(sub):
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--steps", type=int, default=3000, help="gradient, static protocol")
     p.add_argument("--protocol", choices=["continual", "static"], default="continual")
+    p.add_argument("--skip-margin", type=float, default=None, metavar="NATS",
+                   help="VBGS: skip points explained within NATS of their component's peak")
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
     p.add_argument("--depth-kind", choices=["metric", "inverse", "relative"], default="inverse")
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
@@ -100,7 +102,7 @@ def _fit_scene(args) -> dict:
                      replay=args.replay, steps_per_frame=args.steps_per_frame, steps=args.steps,
                      protocol=args.protocol, depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
-                     depth_align=args.depth_align, **render)
+                     depth_align=args.depth_align, skip_margin=args.skip_margin, **render)
     result = run_scene(task, progress=sys.stderr.isatty(), ply=args.ply)
     if args.save:
         save_views(args.save, result.images["target"], result.images["render"],
