@@ -92,6 +92,8 @@ def _add_fit_scene(sub):
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--steps", type=int, default=3000, help="gradient, static protocol")
     p.add_argument("--protocol", choices=["continual", "static"], default="continual")
+    p.add_argument("--skip-margin", type=float, default=None, metavar="NATS",
+                   help="VBGS: skip points explained within NATS of their component's peak")
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
     p.add_argument("--depth-kind", choices=["metric", "inverse", "relative"], default="inverse")
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
@@ -121,7 +123,8 @@ def _fit_scene(args) -> dict:
                      protocol=args.protocol, depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
                      depth_align=args.depth_align, background=args.background,
-                     opacity_rule=args.opacity_rule, **render)
+                     opacity_rule=args.opacity_rule,
+                     skip_margin=args.skip_margin, **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
                          f"held-out views), got {args.test_views}")

@@ -56,6 +56,8 @@ class SceneTask:
     steps_per_frame: int = 50
     steps: int = 3000
     protocol: str = "continual"  # continual | static
+    # VBGS: skip points explained within this many nats (None: learn every point; vbgs.skip)
+    skip_margin: float | None = None
     prior: model.PriorConfig = field(default_factory=model.PriorConfig)
 
     def __post_init__(self):

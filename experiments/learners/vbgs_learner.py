@@ -13,7 +13,7 @@ import jax
 
 from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import SceneResult, frame_points
-from vbgs import grow, model, opacity
+from vbgs import grow, model, opacity, skip
 from vbgs.bound import StreamBound, batch_bound
 from vbgs.data.scene import Frame, Scene
 from vbgs.splats import Splats, from_posterior, mixture_geometry
@@ -36,6 +36,7 @@ class VbgsLearner:
         self.evidence = opacity.no_evidence(task.components)
         self.bound = StreamBound()
         self._last: tuple | None = None  # (q before the frame, xyz, rgb) for diagnose
+        self.points_seen = self.points_skipped = self.frames_skipped = 0
 
     @property
     def prior(self) -> model.Mixture:
@@ -69,14 +70,25 @@ class VbgsLearner:
         t = self.task
         if t.init == "stream":
             self._grow(xyz, rgb)
+        if t.opacity_rule == "evidence":  # the whole depth map, skipped points or not, read
+            # against the model that assigns the points
+            assigning = self.state.prior if t.assign == "prior" else self.state.posterior
+            self.evidence = opacity.observe(self.evidence, *mixture_geometry(assigning),
+                                            frame.camera, frame.depth)
+        self.points_seen += len(xyz)
+        if t.skip_margin is not None:
+            keep = ~skip.well_explained(self.state.posterior, self.state.stats.count, xyz, rgb,
+                                        margin=t.skip_margin, colour_noise=t.prior.colour_noise)
+            self.points_skipped += int((~keep).sum())
+            if not keep.any():
+                self.frames_skipped += 1
+                self._last = None
+                return
+            xyz, rgb = xyz[keep], rgb[keep]
         if self._reference_changed():  # the compiled stepper holds the reference's terms
             self.step_prior = self.state.prior
             self.step = Stepper(self.state.prior, assign=t.assign, config=t.prior,
                                 estep=t.estep, n_candidates=t.candidates)
-        if t.opacity_rule == "evidence":  # read against the model that assigns the points
-            assigning = self.state.prior if t.assign == "prior" else self.state.posterior
-            self.evidence = opacity.observe(self.evidence, *mixture_geometry(assigning),
-                                            frame.camera, frame.depth)
         self._last = (self.state.posterior, xyz, rgb)
         self.state, _ = self.step(self.state, xyz, rgb)
         jax.block_until_ready(self.state.stats.count)
@@ -89,7 +101,10 @@ class VbgsLearner:
                               else None)
 
     def diagnose(self, frame: Frame) -> None:
-        """Add the last frame's streaming bound ``B_t`` (:mod:`vbgs.bound`; untimed)."""
+        """Add the last frame's streaming bound ``B_t`` (:mod:`vbgs.bound`; untimed) over
+        the points it learned (none when the whole frame was skipped)."""
+        if self._last is None:
+            return
         before, xyz, rgb = self._last
         t = self.task
         self.bound = self.bound.add(batch_bound(before, self.state.posterior, xyz, rgb,
@@ -97,5 +112,10 @@ class VbgsLearner:
                                                 n_candidates=t.candidates))
 
     def details(self, result: SceneResult) -> dict:
-        """The streaming bound (:meth:`vbgs.bound.StreamBound.summary`)."""
-        return self.bound.summary()
+        """The streaming bound (:meth:`vbgs.bound.StreamBound.summary`) and, when skipping
+        is on, the share of points skipped and the frames skipped whole."""
+        skipped = {}
+        if self.task.skip_margin is not None:
+            skipped = {"points_skipped": self.points_skipped / max(self.points_seen, 1),
+                       "frames_skipped": self.frames_skipped}
+        return {**self.bound.summary(), **skipped}
