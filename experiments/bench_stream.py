@@ -25,7 +25,7 @@ PROFILE_REPEATS = 3
 
 
 def _prior(scene, k: int, seed: int = 0):
-    from experiments.scene_task import frame_points
+    from experiments.protocol import frame_points
 
     xyz, rgb = (np.concatenate(a) for a in zip(*map(frame_points, scene.train), strict=True))
     return model.init(xyz, rgb, k, key=jax.random.key(seed), scheme="data", bounds=scene.bounds)
@@ -34,7 +34,7 @@ def _prior(scene, k: int, seed: int = 0):
 def stream_row(scene, prior, estep: str, *, frames: int, search: str = "auto",
                assign: str = "prior") -> dict:
     """Stream ``frames`` frames through a fresh stepper; timings of one row."""
-    from experiments.scene_task import frame_points, peak_memory_mb
+    from experiments.protocol import frame_points, peak_memory_mb
 
     timer = CompileTimer()
     with timer:
@@ -76,7 +76,7 @@ def _timed(fn, *args):
 def profile_frame(scene, prior, *, search: str = "auto") -> list[dict]:
     """Seconds of each stage of one streamed frame (sparse E-step, prior assignment),
     each stage compiled and timed on its own (warm, mean of a few runs)."""
-    from experiments.scene_task import frame_points
+    from experiments.protocol import frame_points
 
     frame = scene.train[len(scene.train) // 2]
     rows = []

@@ -27,6 +27,7 @@ from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any
 
+from experiments.init_schemes import INITS
 from experiments.sweep.tasks import TASKS, TaskUnavailable
 
 
@@ -74,7 +75,8 @@ SETTINGS: dict[str, Spec] = {
     "size": Spec(_INT, "image side / frame width in pixels", minimum=1),
     "components": Spec(_INT, "mixture components (capacity)", minimum=1),
     "iters": Spec(_INT, "CAVI iterations of a batch image fit", minimum=1),
-    "init": Spec(_STR, "component initialisation", ("random", "data")),
+    "init": Spec(_STR, "component initialisation (data, random: oracle starts on a stream)",
+                 INITS),
     "seed": Spec(_INT, "random seed", minimum=0),
     "stream": Spec(_STR, "image fit on all pixels, or a stream of patches",
                    ("none", "patches")),

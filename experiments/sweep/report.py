@@ -87,6 +87,8 @@ def _row(record: dict, setting_names: set[str]) -> dict:
         row["depth"] = "sensor" if settings["depth_model"] in (None, "sensor") else "estimated"
     task = TASKS.get(settings.get("task"))
     result = record.get("result") or {}
+    if result.get("oracle_start") and "init" in row:  # a stream start that read ahead
+        row["init"] = f"{row['init']} (oracle)"
     for name in sorted(setting_names - set(settings)):
         if _applies(settings, name, result.get(name)):
             row[name] = result[name]  # the task's default, shown where it applies
