@@ -38,7 +38,7 @@ def scene():
 def test_stream_start_reads_only_the_frames_that_arrived(scene, method):
     guarded = scene._replace(train=FirstFrameOnly(scene.train))
     learner = LEARNERS[method](tiny(method=method), guarded)
-    learner.learn(guarded.train[0])
+    learner.learn(guarded.train[0], np.zeros(3, np.float32))
     assert 0 < learner.splats(drop_unused=True).count <= 300
 
 

@@ -28,7 +28,7 @@ def test_quick_config_parses_and_expands():
                                                           "order", "assign", "seed", "dataset")}
     assert values["task"] == {"image", "scene"}
     assert {c.get("method", "vbgs") for c in cells} == {"vbgs", "gradient"}
-    assert values["init"] == {"random", "data"} and len(values["components"]) >= 2
+    assert values["init"] == {"stream", "random", "data"} and len(values["components"]) >= 2
     assert values["order"] == {"sequential", "shuffled", "reversed"}
     assert values["assign"] == {"prior", "posterior"} and values["seed"] == {0, 1}
     assert len(values["dataset"]) >= 3
@@ -52,7 +52,7 @@ def test_paper_config_parses():
         ({"components": [0]}, "grid[0].components: must be a positive integer, got 0"),
         ({"components": ["500"]}, "grid[0].components: must be an integer, got '500'"),
         ({"components": [True]}, "grid[0].components: must be an integer, got True"),
-        ({"init": ["zeros"]}, "grid[0].init: must be one of random, data, got 'zeros'"),
+        ({"init": ["zeros"]}, "grid[0].init: must be one of stream, data, random, got 'zeros'"),
         ({"order": "backwards"}, "grid[0].order: must be one of sequential"),
         ({"dataset": ["/no/such/photo.png"]}, "grid[0].dataset: '/no/such/photo.png' is "
                                               "neither a built-in dataset"),

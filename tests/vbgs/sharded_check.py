@@ -15,7 +15,10 @@ from vbgs.data.synthetic import object_scene
 def main() -> None:
     assert len(jax.devices()) == 4, jax.devices()
     scene = object_scene(size=24, n_train=3, n_test=1, seed=0)
-    pts = [unproject(f.camera, f.rgb, f.depth) for f in scene.train]
+    # float64 (JAX_ENABLE_X64 in the test's environment): the comparison is of the
+    # sharded algorithm, not of float32 summation order across devices
+    pts = [tuple(a.astype(np.float64) for a in unproject(f.camera, f.rgb, f.depth))
+           for f in scene.train]
     xyz, rgb = (np.concatenate(a) for a in zip(*pts, strict=True))
     prior = model.init(xyz, rgb, 400, key=jax.random.key(0), scheme="data", bounds=scene.bounds)
     out = {}

@@ -126,7 +126,7 @@ def test_loss_decreases_and_the_step_compiles_once(tiny):
     trainer = Trainer(cfg, extent=extent)
     state = trainer.init(params, key=jax.random.key(1))
     before = _mean_loss(state.params, scene.train, scene.background)
-    background = np.asarray(scene.background, np.float32)
+    background = jnp.asarray(scene.background, jnp.float32)  # as the scene learner passes it
     state, first = trainer.train(state, scene.train, 15, background)
     state = trainer.densify(state)  # new values, same shapes and dtypes
     state, second = trainer.train(state, scene.train, 15, 0.5 * background)  # no recompile

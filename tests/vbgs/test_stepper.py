@@ -79,8 +79,9 @@ def test_stepper_equals_model_update(scene_points, assign, estep, search):
         fast, finfo = step(fast, xyz, rgb)
         slow, sinfo = model.update(slow, xyz, rgb, assign=assign, estep=estep)
         n = len(xyz)
+        # posterior assignment carries float32 rounding from batch to batch (below)
         np.testing.assert_allclose(np.asarray(finfo.point_loglik)[:n], sinfo.point_loglik,
-                                   rtol=1e-5, atol=1e-4)
+                                   rtol=1e-5 if assign == "prior" else 1e-4, atol=1e-4)
         np.testing.assert_allclose(finfo.elbo, sinfo.elbo, rtol=1e-5)
     # posterior assignment carries float32 rounding (padding changes the summation
     # order) from batch to batch, so counts agree to 1e-3 of a point there
