@@ -23,7 +23,7 @@ from matplotlib.ticker import (  # noqa: E402
 
 # Settings that tell lines apart (when they vary); the others are averaged over.
 LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth")
-MAX_RENDERS_PER_ROW, MAX_RENDER_ROWS = 6, 6
+MAX_RENDERS_PER_ROW, MAX_RENDER_ROWS = 10, 10
 RENDER_FIGURE_WIDTH = 14.0  # inches: about 1500 px at the figures' 110 dpi
 
 
@@ -70,8 +70,9 @@ def _panels(n: int, width: float = 5.5, height: float = 4.2):
 
 
 def _save(fig, path: Path, title: str) -> Path:
-    fig.suptitle(title, fontsize=13)
-    fig.tight_layout()
+    top = 1 - 0.45 / fig.get_figheight()  # 0.45 in above the panels for the title
+    fig.suptitle(title, fontsize=13, y=1 - 0.1 / fig.get_figheight(), va="top")
+    fig.tight_layout(rect=(0, 0, 1, top))
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
