@@ -35,7 +35,7 @@ import numpy as np
 from vbgs.camera import project, unproject, valid_depth
 from vbgs.data.scene import Frame, Scene
 from vbgs.metrics import psnr
-from vbgs.raster import NEAR, rasterize, required_capacity
+from vbgs.raster import NEAR, exact_capacity, rasterize, surface_depth
 from vbgs.splats import Splats
 
 ORACLE_SIGMA_PX = 0.4  # splat standard deviation in pixels of the source view
@@ -70,12 +70,10 @@ def oracle_splats(frame: Frame) -> Splats:
 def render_oracle(splats: Splats, frame: Frame, background, near: float = NEAR
                   ) -> tuple[np.ndarray, np.ndarray]:
     """rgb ``[h, w, 3]`` and alpha-normalised depth ``[h, w]`` of the oracle splats, nothing dropped."""
-    capacity = max(16, required_capacity(splats, frame.camera, blur=0.0, near=near))
+    capacity = exact_capacity(splats, frame.camera, blur=0.0, near=near)
     out = rasterize(splats, frame.camera, background=background, capacity=capacity, blur=0.0,
                     near=near)
-    alpha = np.asarray(out.alpha)
-    depth = np.where(alpha > 0.5, np.asarray(out.depth) / np.maximum(alpha, 1e-6), 0.0)
-    return np.clip(np.asarray(out.rgb), 0.0, 1.0), depth
+    return np.clip(np.asarray(out.rgb), 0.0, 1.0), surface_depth(out)
 
 
 def covisible_mask(source: Frame, target: Frame) -> np.ndarray:

@@ -44,12 +44,11 @@ from vbgs.camera import unproject
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
 from vbgs.metrics import depth_l1, psnr, ssim
-from vbgs.raster import exact_capacity, rasterize
+from vbgs.raster import exact_capacity, rasterize, surface_depth
 from vbgs.splats import Splats, save_ply
 
 EARLY_FRACTION = 0.1  # the first 10% of the stream defines the "early" views
 CURVE_POINTS = 10  # evaluations of the early views along the stream
-ALPHA_FOR_DEPTH = 0.5  # rendered depth counts only where the splats cover the pixel
 COMPILE_FRAMES = 2  # the first frames' times include compilation: left out of the mean
 
 
@@ -160,9 +159,7 @@ def render_view(splats: Splats, frame: Frame, background) -> tuple[np.ndarray, n
     so that nothing is, :func:`vbgs.raster.exact_capacity`)."""
     out = rasterize(splats, frame.camera, background=background,
                     capacity=exact_capacity(splats, frame.camera))
-    alpha = np.asarray(out.alpha)
-    depth = np.where(alpha > ALPHA_FOR_DEPTH, np.asarray(out.depth) / np.maximum(alpha, 1e-6), 0)
-    return np.clip(np.asarray(out.rgb), 0, 1), depth, int(out.dropped)
+    return np.clip(np.asarray(out.rgb), 0, 1), surface_depth(out), int(out.dropped)
 
 
 def evaluate(splats: Splats, frames: list[Frame], background) -> Evaluation:

@@ -89,6 +89,7 @@ FRUSTUM_CLAMP = 1.3  # J is evaluated with x/z, y/z clamped to 1.3x the frustum 
 FRUSTUM_CULL = 2.0  # means beyond 2x the frustum extent are culled (guard band beyond the clamp)
 MAX_FOOTPRINT = 1.0  # splats whose projected sigma exceeds 1 image size (longer side) are culled
 DEPTH_CHUNK = 64  # splats composited per step; steps past a tile's count are skipped
+SURFACE_ALPHA = 0.5  # rendered depth counts only where the splats cover the pixel this much
 
 
 class RenderOutput(NamedTuple):
@@ -353,6 +354,13 @@ def rasterize(
         splats, camera.fx, camera.fy, camera.cx, camera.cy, camera.pose, background, near,
         width=width, height=height, tile=int(tile), capacity=int(capacity), blur=float(blur),
     )
+
+
+def surface_depth(out: RenderOutput, min_alpha: float = SURFACE_ALPHA) -> np.ndarray:
+    """Depth of the visible surface ``[h, w]``: the expected depth over the covered
+    fraction, ``D / alpha``, where ``alpha > min_alpha``; 0 (no surface) elsewhere."""
+    alpha = np.asarray(out.alpha)
+    return np.where(alpha > min_alpha, np.asarray(out.depth) / np.maximum(alpha, 1e-6), 0.0)
 
 
 def check_dropped(out: RenderOutput) -> RenderOutput:

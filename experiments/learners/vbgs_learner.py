@@ -33,6 +33,7 @@ class VbgsLearner:
         self.state = None if task.init == "stream" else model.start(scene_prior(task, scene))
         self.step: Stepper | None = None  # compiled update, rebuilt when the reference grows
         self.step_prior: model.Mixture | None = None  # the reference the stepper was built for
+        self.prior_geometry = None  # means and covariances of that reference (evidence)
         self.evidence = opacity.no_evidence(task.components)
         self.bound = StreamBound()
         self._last: tuple | None = None  # (q before the frame, xyz, rgb) for diagnose
@@ -70,11 +71,16 @@ class VbgsLearner:
         t = self.task
         if t.init == "stream":
             self._grow(xyz, rgb)
+        if self._reference_changed():  # the compiled stepper holds the reference's terms
+            self.step_prior = self.state.prior
+            self.prior_geometry = mixture_geometry(self.state.prior)
+            self.step = Stepper(self.state.prior, assign=t.assign, config=t.prior,
+                                estep=t.estep, n_candidates=t.candidates)
         if t.opacity_rule == "evidence":  # the whole depth map, skipped points or not, read
             # against the model that assigns the points
-            assigning = self.state.prior if t.assign == "prior" else self.state.posterior
-            self.evidence = opacity.observe(self.evidence, *mixture_geometry(assigning),
-                                            frame.camera, frame.depth)
+            geometry = (self.prior_geometry if t.assign == "prior"
+                        else mixture_geometry(self.state.posterior))
+            self.evidence = opacity.observe(self.evidence, *geometry, frame.camera, frame.depth)
         self.points_seen += len(xyz)
         if t.skip_margin is not None:
             keep = ~skip.well_explained(self.state.posterior, self.state.stats.count, xyz, rgb,
@@ -85,10 +91,6 @@ class VbgsLearner:
                 self._last = None
                 return
             xyz, rgb = xyz[keep], rgb[keep]
-        if self._reference_changed():  # the compiled stepper holds the reference's terms
-            self.step_prior = self.state.prior
-            self.step = Stepper(self.state.prior, assign=t.assign, config=t.prior,
-                                estep=t.estep, n_candidates=t.candidates)
         self._last = (self.state.posterior, xyz, rgb)
         self.state, _ = self.step(self.state, xyz, rgb)
         jax.block_until_ready(self.state.stats.count)
