@@ -68,6 +68,7 @@ so the compositing cost follows the actual overlaps rather than the capacity.
 from __future__ import annotations
 
 import functools
+import os
 from typing import NamedTuple
 
 import jax
@@ -75,6 +76,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs.camera import Camera
+from vbgs.precision import matmul
 from vbgs.splats import Splats, check_splats
 
 BLUR_VARIANCE = 0.3  # px², low-pass dilation added to every projected covariance
@@ -128,7 +130,7 @@ def project(
     docstring). ``pose``: [4, 4] camera-to-world; ``width``/``height``: the image size (px)."""
     pose = jnp.asarray(pose, splats.means.dtype)
     rot_wc = pose[:3, :3].T  # W, world -> camera
-    t_cam = (splats.means - pose[:3, 3]) @ rot_wc.T  # [k, 3]
+    t_cam = matmul(splats.means - pose[:3, 3], rot_wc.T)  # [k, 3]
     z = t_cam[:, 2]
     in_front = z > near
     z_safe = jnp.where(in_front, z, 1.0)  # keeps culled rows finite (and their gradients)
@@ -141,8 +143,8 @@ def project(
     zero = jnp.zeros_like(z)
     jac = jnp.stack([fx / z_safe, zero, -fx * x_over_z / z_safe,
                      zero, fy / z_safe, -fy * y_over_z / z_safe], -1).reshape(-1, 2, 3)
-    m = jac @ rot_wc  # [k, 2, 3]
-    cov2 = m @ splats.covs @ jnp.swapaxes(m, -1, -2)  # [k, 2, 2]
+    m = matmul(jac, rot_wc)  # [k, 2, 3]
+    cov2 = matmul(matmul(m, splats.covs), jnp.swapaxes(m, -1, -2))  # [k, 2, 2]
     a, b, c = cov2[:, 0, 0] + blur, cov2[:, 0, 1], cov2[:, 1, 1] + blur
     det = a * c - b * b
     conic = jnp.stack([c / det, -b / det, a / det], axis=-1)
@@ -157,38 +159,54 @@ def project(
     return Projected(uv, conic, z, opacity, extent, visible)
 
 
-def splat_alpha(pixels, uv, conic, opacity):
-    """α [p, m] of m splats at p pixel centres ``pixels [p, 2]`` (clamped, small ones zeroed).
+def alpha_from_offsets(du, dv, conic_a, conic_b, conic_c, opacity):
+    """α of splats at pixel offsets ``du = p_u - u``, ``dv = p_v - v`` (broadcasting shapes,
+    e.g. ``[p, m]`` offsets with ``[m]`` or ``[1, m]`` splat parameters), clamped and with
+    small ones zeroed: ``α = min(ALPHA_MAX, o exp(q))``, ``q = -½ dᵀ Σ'⁻¹ d``, then 0 where
+    ``α < ALPHA_MIN``. The one place of the alpha rule (XLA and Pallas paths).
 
-    ``α = min(ALPHA_MAX, o exp(q))`` with ``q = -½ dᵀ Σ'⁻¹ d``, then 0 where
-    ``α < ALPHA_MIN``. Written for speed on CPU without changing the result:
-    q is floored at POWER_FLOOR (below it α < ALPHA_MIN for any o <= 1 anyway;
-    the exp of a large negative number is a subnormal float, very slow on x86),
-    and the threshold is the exact step ``floor(α - ALPHA_MIN) + 1`` (0 or 1 since
-    0 <= α < 1) because XLA's CPU code for compare-and-select is not vectorised.
+    Written for speed on CPU without changing the result: q is floored at POWER_FLOOR
+    (below it α < ALPHA_MIN for any o <= 1 anyway; the exp of a large negative number
+    is a subnormal float, very slow on x86), and the threshold is the exact step
+    ``floor(α - ALPHA_MIN) + 1`` (0 or 1 since 0 <= α < 1) because XLA's CPU code for
+    compare-and-select is not vectorised. Elementwise only (no matrix products).
     """
-    du = pixels[:, None, 0] - uv[None, :, 0]  # [p, m]
-    dv = pixels[:, None, 1] - uv[None, :, 1]
-    power = -0.5 * (conic[:, 0] * du * du + conic[:, 2] * dv * dv) - conic[:, 1] * du * dv
+    power = -0.5 * (conic_a * du * du + conic_c * dv * dv) - conic_b * du * dv
     alpha = jnp.minimum(ALPHA_MAX, opacity * jnp.exp(jnp.maximum(power, POWER_FLOOR)))
     return alpha * jax.lax.stop_gradient(jnp.floor(alpha - ALPHA_MIN) + 1.0)
+
+
+def splat_alpha(pixels, uv, conic, opacity):
+    """α [p, m] of m splats at p pixel centres ``pixels [p, 2]`` (see :func:`alpha_from_offsets`)."""
+    du = pixels[:, None, 0] - uv[None, :, 0]  # [p, m]
+    dv = pixels[:, None, 1] - uv[None, :, 1]
+    return alpha_from_offsets(du, dv, conic[:, 0], conic[:, 1], conic[:, 2], opacity)
+
+
+def chunk_weights(alpha, log_trans, log_before):
+    """Compositing weights ``α_i T_i`` [p, m] of one depth-ordered chunk: ``alpha [p, m]``,
+    ``log_trans [p]`` the log transmittance in front of the chunk and ``log_before [p, m]``
+    the exclusive prefix sums ``Σ_{j<i} log(1 - α_j)`` within it, so that
+    ``log T_i = log T + log_before_i`` (floored by :func:`transmittance`)."""
+    return alpha * transmittance(log_trans[:, None] + log_before)
 
 
 def _composite_chunk(carry, pixels, uv, conic, opacity, colour, depth):
     """Composite one depth-ordered chunk of m splats over p pixels, front to back.
 
-    carry = (log T [p], C [p, 3], D [p]). Within the chunk
-    ``log T_i = log T + Σ_{j<i} log(1 - α_j)``, the prefix sum done as a product
-    with a strictly upper-triangular matrix of ones (a small matmul is faster on
-    CPU than a cumulative sum).
+    carry = (log T [p], C [p, 3], D [p]). Within the chunk the exclusive prefix sum
+    ``Σ_{j<i} log(1 - α_j)`` is a product with a strictly upper-triangular matrix of
+    ones (a small matmul is faster on CPU than a cumulative sum); the products run at
+    full float32 precision (:func:`vbgs.precision.matmul`), so TF32 cannot round them.
     """
     log_trans, rgb, dep = carry
     alpha = splat_alpha(pixels, uv, conic, opacity)  # [p, m]
     log1m = jnp.log1p(-alpha)
     m = alpha.shape[1]
     strict_upper = jnp.triu(jnp.ones((m, m), alpha.dtype), k=1)  # [j, i] = 1 where j < i
-    weight = alpha * transmittance(log_trans[:, None] + log1m @ strict_upper)  # α_i T_i
-    return log_trans + jnp.sum(log1m, axis=1), rgb + weight @ colour, dep + weight @ depth
+    weight = chunk_weights(alpha, log_trans, matmul(log1m, strict_upper))  # α_i T_i
+    return (log_trans + jnp.sum(log1m, axis=1), rgb + matmul(weight, colour),
+            dep + matmul(weight, depth))
 
 
 def transmittance(log_t):
@@ -197,11 +215,14 @@ def transmittance(log_t):
     return jnp.exp(jnp.maximum(log_t, LOG_T_MIN))
 
 
-def _tile_pixels(tile_id, n_tiles_x, tile):
-    """Pixel centres [tile², 2] as (u, v) of tile ``tile_id`` (row-major tile grid)."""
+def tile_pixel_coords(tile_id, n_tiles_x, tile):
+    """Pixel centres ``(u [tile²], v [tile²])`` of tile ``tile_id`` (row-major tile grid,
+    row-major pixels within the tile), from an iota (also inside a Pallas kernel)."""
+    lane = jax.lax.broadcasted_iota(jnp.int32, (tile * tile,), 0)
     ty, tx = tile_id // n_tiles_x, tile_id % n_tiles_x
-    r, c = jnp.meshgrid(jnp.arange(tile), jnp.arange(tile), indexing="ij")
-    return jnp.stack([(tx * tile + c).ravel() + 0.5, (ty * tile + r).ravel() + 0.5], -1)
+    u = (tx * tile + lane % tile).astype(jnp.float32) + 0.5
+    v = (ty * tile + lane // tile).astype(jnp.float32) + 0.5
+    return u, v
 
 
 def _tile_ranges(lo, hi, n_tiles_x, n_tiles_y, tile):
@@ -260,42 +281,67 @@ def tile_lists(lo, hi, visible, *, n_tiles_x, n_tiles_y, tile, capacity) -> Tile
     return TileLists(index, count, dropped.astype(jnp.int32))
 
 
-@functools.partial(jax.jit, static_argnames=("width", "height", "tile", "capacity", "blur"))
-def _rasterize(splats, fx, fy, cx, cy, pose, background, near, *, width, height, tile, capacity,
-               blur):
-    """The jitted body of :func:`rasterize` (image size, tile, capacity and blur static)."""
-    proj = project(splats, fx, fy, cx, cy, pose, near, blur, width=width, height=height)
+class TileSplats(NamedTuple):
+    """Every tile's splats, nearest first, gathered from the projection (t tiles, c slots);
+    slots past ``count`` have opacity 0."""
+
+    uv: jax.Array  # [t, c, 2]
+    conic: jax.Array  # [t, c, 3]
+    opacity: jax.Array  # [t, c]
+    colour: jax.Array  # [t, c, 3]
+    depth: jax.Array  # [t, c]
+    count: jax.Array  # [t] int32 splats used by the tile
+
+
+def tile_splats(splats, proj: Projected, *, width, height, tile, capacity):
+    """Depth-sort the projected splats, bin them into tiles (:func:`tile_lists`) and gather
+    each tile's parameters: ``(TileSplats, dropped)``. Differentiable w.r.t. the gathered
+    values (the choice of splats is not)."""
     order = jnp.argsort(jnp.where(proj.visible, proj.depth, jnp.inf))  # [k] front to back
     n_tiles_x, n_tiles_y = -(-width // tile), -(-height // tile)
-    n_tiles = n_tiles_x * n_tiles_y
     lists = tile_lists(
         jax.lax.stop_gradient(proj.uv - proj.extent)[order],
         jax.lax.stop_gradient(proj.uv + proj.extent)[order],
         proj.visible[order],
         n_tiles_x=n_tiles_x, n_tiles_y=n_tiles_y, tile=tile, capacity=capacity,
     )
-    # Pad each tile's list to whole chunks; padding and unused entries get opacity 0.
+    idx = order[lists.index]  # [t, c] splat ids
+    used = jnp.arange(capacity) < lists.count[:, None]  # [t, c]
+    gathered = TileSplats(
+        proj.uv[idx], proj.conic[idx], jnp.where(used, proj.opacity[idx], 0.0),
+        splats.colours[idx], proj.depth[idx], lists.count,
+    )
+    return gathered, lists.dropped
+
+
+def pad_slots(tiles: TileSplats, slots: int) -> TileSplats:
+    """``tiles`` with its slot axis padded to ``slots`` (zeros: opacity 0, never composited)."""
+    pad = slots - tiles.opacity.shape[1]
+
+    def padded(x):
+        return jnp.pad(x, ((0, 0), (0, pad)) + ((0, 0),) * (x.ndim - 2))
+
+    return TileSplats(*(padded(x) for x in tiles[:5]), tiles.count)
+
+
+def composite_tiles(tiles: TileSplats, *, n_tiles_x: int, tile: int):
+    """Front-to-back compositing of every tile (the XLA path): ``(log T [t, p], C [t, p, 3],
+    D [t, p])`` with p = tile² pixels. ``lax.map`` over tiles, ``lax.scan`` over chunks of
+    DEPTH_CHUNK splats, a ``lax.cond`` skipping the chunks past the tile's count."""
+    n_tiles, capacity = tiles.opacity.shape
     chunk = min(DEPTH_CHUNK, capacity)
     n_chunks = -(-capacity // chunk)
-    index = jnp.pad(lists.index, ((0, 0), (0, n_chunks * chunk - capacity)))
-    idx = order[index]  # [t, c] splat ids
-    used = jnp.arange(n_chunks * chunk) < lists.count[:, None]  # [t, c]
+    tiles = pad_slots(tiles, n_chunks * chunk)
 
     def chunked(x):  # [t, c, ...] -> [t, n_chunks, chunk, ...]
         return x.reshape((n_tiles, n_chunks, chunk) + x.shape[2:])
-
-    gathered = (
-        chunked(proj.uv[idx]), chunked(proj.conic[idx]),
-        chunked(jnp.where(used, proj.opacity[idx], 0.0)),
-        chunked(splats.colours[idx]), chunked(proj.depth[idx]),
-    )
 
     # Checkpointing per tile and per chunk keeps the backward pass's memory to the
     # chunk inputs; skipped chunks (past the tile's count) cost a branch only.
     @jax.checkpoint
     def one_tile(xs):
         tile_id, count, *chunks = xs
-        pixels = _tile_pixels(tile_id, n_tiles_x, tile)
+        pixels = jnp.stack(tile_pixel_coords(tile_id, n_tiles_x, tile), -1)  # [p, 2]
 
         def body(carry, xs):
             i, *chunk_params = xs
@@ -312,7 +358,27 @@ def _rasterize(splats, fx, fy, cx, cy, pose, background, near, *, width, height,
         carry, _ = jax.lax.scan(body, init, (jnp.arange(n_chunks), *chunks))
         return carry
 
-    log_trans, rgb, dep = jax.lax.map(one_tile, (jnp.arange(n_tiles), lists.count, *gathered))
+    return jax.lax.map(
+        one_tile, (jnp.arange(n_tiles), tiles.count, *(chunked(x) for x in tiles[:5])))
+
+
+@functools.partial(jax.jit, static_argnames=("width", "height", "tile", "capacity", "blur",
+                                             "impl", "interpret"))
+def _rasterize(splats, fx, fy, cx, cy, pose, background, near, *, width, height, tile, capacity,
+               blur, impl="xla", interpret=False):
+    """The jitted body of :func:`rasterize` (image size, tile, capacity, blur and the
+    resolved ``impl``, "xla" or "pallas", static; ``interpret``: Pallas interpret mode)."""
+    proj = project(splats, fx, fy, cx, cy, pose, near, blur, width=width, height=height)
+    tiles, dropped = tile_splats(splats, proj, width=width, height=height, tile=tile,
+                                 capacity=capacity)
+    n_tiles_x, n_tiles_y = -(-width // tile), -(-height // tile)
+    if impl == "pallas":
+        from vbgs.raster_pallas import composite_tiles_pallas  # imports this module
+
+        log_trans, rgb, dep = composite_tiles_pallas(tiles, n_tiles_x=n_tiles_x, tile=tile,
+                                                     interpret=interpret)
+    else:
+        log_trans, rgb, dep = composite_tiles(tiles, n_tiles_x=n_tiles_x, tile=tile)
 
     def to_image(x):  # [t, tile*tile, ...] -> [height, width, ...]
         x = x.reshape((n_tiles_y, n_tiles_x, tile, tile) + x.shape[2:])
@@ -321,7 +387,33 @@ def _rasterize(splats, fx, fy, cx, cy, pose, background, near, *, width, height,
 
     trans = transmittance(to_image(log_trans))
     rgb = to_image(rgb) + trans[..., None] * background
-    return RenderOutput(rgb, to_image(dep), 1.0 - trans, lists.dropped)
+    return RenderOutput(rgb, to_image(dep), 1.0 - trans, dropped)
+
+
+IMPLS = ("auto", "xla", "pallas")
+IMPL_ENV = "VBGS_RASTER_IMPL"  # overrides impl="auto" when set
+
+
+def resolve_impl(impl: str, tile: int) -> tuple[str, bool]:
+    """``(impl, interpret)`` actually used for ``impl`` in IMPLS: "auto" reads the
+    VBGS_RASTER_IMPL environment variable if set, else takes "pallas" on a GPU backend
+    (when ``tile`` is a power of two, as Triton blocks need) and "xla" otherwise.
+    Pallas off a GPU runs in interpret mode (slow; for tests)."""
+    if impl not in IMPLS:
+        raise ValueError(f"impl must be one of {', '.join(IMPLS)}, got {impl!r}")
+    if impl == "auto" and os.environ.get(IMPL_ENV):
+        impl = os.environ[IMPL_ENV]
+        if impl not in IMPLS:
+            raise ValueError(f"{IMPL_ENV} must be one of {', '.join(IMPLS)}, got {impl!r}; "
+                             "unset it or fix its value")
+    gpu = jax.default_backend() == "gpu"
+    power_of_two = tile > 0 and tile & (tile - 1) == 0
+    if impl == "auto":
+        impl = "pallas" if gpu and power_of_two else "xla"
+    if impl == "pallas" and not power_of_two:
+        raise ValueError(f"impl='pallas' needs a power-of-two tile (8, 16, 32), got {tile}; "
+                         "pass such a tile or impl='xla'")
+    return impl, impl == "pallas" and not gpu
 
 
 def rasterize(
@@ -333,6 +425,7 @@ def rasterize(
     capacity: int = DEFAULT_CAPACITY,
     near: float = NEAR,
     blur: float = BLUR_VARIANCE,
+    impl: str = "auto",
 ) -> RenderOutput:
     """Render ``splats`` seen by ``camera``: rgb [h, w, 3], depth [h, w], alpha [h, w], dropped.
 
@@ -345,14 +438,19 @@ def rasterize(
 
     background: RGB (or grey scalar) composited with T_final; tile: tile side (px);
     capacity: splats kept per tile; near: near-plane depth for culling; blur: the
-    low-pass dilation variance (px²) added to every projected covariance.
+    low-pass dilation variance (px²) added to every projected covariance; impl: the
+    compositing code, "xla" (lax.map over tiles), "pallas" (:mod:`vbgs.raster_pallas`,
+    interpret mode off a GPU) or "auto" (see :func:`resolve_impl`: pallas on a GPU, xla
+    otherwise, VBGS_RASTER_IMPL overrides). Both give the same render and gradients.
     """
     width, height, background = _check_inputs(splats, camera, background, tile, capacity, blur)
+    impl, interpret = resolve_impl(impl, int(tile))
     if splats.count == 0:
         return _empty(width, height, background)
     return _rasterize(
         splats, camera.fx, camera.fy, camera.cx, camera.cy, camera.pose, background, near,
         width=width, height=height, tile=int(tile), capacity=int(capacity), blur=float(blur),
+        impl=impl, interpret=interpret,
     )
 
 
