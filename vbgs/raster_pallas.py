@@ -35,6 +35,7 @@ import functools
 import jax
 import jax.numpy as jnp
 from jax.experimental import pallas as pl
+from jax.experimental.pallas import triton as pl_triton
 
 from vbgs.raster import (
     DEPTH_CHUNK,
@@ -46,6 +47,7 @@ from vbgs.raster import (
     tile_pixel_coords,
 )
 
+NUM_WARPS = 4  # Triton warps per tile program (256 pixel lanes at tile 16: 2 per thread)
 # Splat parameters handed to the kernel, one [t, c] row array each, in this order.
 FIELDS = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "red", "green", "blue", "depth")
 
@@ -98,6 +100,7 @@ def _pallas_forward(tiles: TileSplats, n_tiles_x: int, tile: int, interpret: boo
         out_specs=[out_row] * 5,
         out_shape=[jax.ShapeDtypeStruct((n_tiles, p), jnp.float32)] * 5,
         interpret=interpret,
+        compiler_params=pl_triton.CompilerParams(num_warps=NUM_WARPS),  # Triton, not Mosaic GPU
     )(tiles.count.astype(jnp.int32), *(x.astype(jnp.float32) for x in _rows(tiles)))
     return log_t, jnp.stack([red, green, blue], -1), dep
 
