@@ -16,7 +16,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs.camera import Camera, from_fov, look_at
-from vbgs.raster import DEFAULT_CAPACITY, DEFAULT_TILE, DEPTH_CHUNK, rasterize, required_capacity
+from vbgs.raster import (
+    DEFAULT_CAPACITY,
+    DEFAULT_TILE,
+    DEPTH_CHUNK,
+    rasterize,
+    required_capacity,
+    resolve_impl,
+)
 from vbgs.splats import Splats, covs_from_scale_rotation
 
 SPLAT_SIGMA = 0.015  # median per-axis standard deviation, scene units
@@ -45,6 +52,16 @@ def benchmark_scene(count: int, size: int, *, seed: int = 0) -> tuple[Splats, Ca
     return splats, camera
 
 
+def table_name(impl: str, tile: int = DEFAULT_TILE) -> str:
+    """The results file for ``impl`` on this backend: ``bench_raster`` for the XLA path on
+    the CPU (the committed table), ``bench_raster_<impl>_<backend>`` otherwise, so a GPU
+    or Pallas run never overwrites the CPU figures."""
+    resolved, _ = resolve_impl(impl, tile)
+    backend = jax.default_backend()
+    return "bench_raster" if (resolved, backend) == ("xla", "cpu") else \
+        f"bench_raster_{resolved}_{backend}"
+
+
 def _timed(fn, *args) -> float:
     """Wall time of one call, waiting for the result."""
     start = time.perf_counter()
@@ -59,6 +76,7 @@ def bench_rasterizer(
     *,
     tile: int = DEFAULT_TILE,
     capacity: int | None = DEFAULT_CAPACITY,
+    impl: str = "auto",
 ) -> list[dict]:
     """Forward and forward+backward wall times of ``rasterize`` for every size x count.
 
@@ -68,7 +86,14 @@ def bench_rasterizer(
     compile_backward_s (the warm-up calls, i.e. tracing + XLA compile + one run),
     and dropped (splat-tile overlaps beyond ``capacity``; 0 means the render is exact).
     The backward pass is the gradient of a photometric L2 loss w.r.t. all splat arrays.
+    ``impl``: the rasterizer's compositing ("auto", "xla", "pallas"; see
+    :func:`vbgs.raster.resolve_impl`); each row names the one used (Pallas off a GPU runs
+    in interpret mode, far slower: a correctness run, not a speed figure), the backend
+    and the device.
     """
+    resolved, interpret = resolve_impl(impl, tile)
+    where = {"impl": resolved + (" (interpret)" if interpret else ""),
+             "backend": jax.default_backend(), "device": jax.devices()[0].device_kind}
     rows = []
     for size in sizes:
         for count in counts:
@@ -78,7 +103,7 @@ def bench_rasterizer(
             target = jnp.full((size, size, 3), 0.5, jnp.float32)
 
             def render(s, camera=camera, cap=cap):
-                return rasterize(s, camera, tile=tile, capacity=cap)
+                return rasterize(s, camera, tile=tile, capacity=cap, impl=impl)
 
             def loss(s, render=render, target=target):
                 return jnp.sum((render(s).rgb - target) ** 2)
@@ -89,6 +114,7 @@ def bench_rasterizer(
             compile_backward_s = _timed(forward_backward, splats)
             rows.append(
                 {
+                    **where,
                     "size": size,
                     "splats": count,
                     "tile": tile,

@@ -279,6 +279,9 @@ def _add_bench(sub):
     p.add_argument("--devices", type=int, nargs="+", default=None,
                    help="stream: rows with the components sharded over N devices (host CPUs: "
                         "one process each with N forced host devices), first component count")
+    p.add_argument("--impl", choices=["auto", "xla", "pallas"], default="auto",
+                   help="raster: compositing code (auto: pallas on a GPU, xla otherwise; "
+                        "pallas off a GPU runs in interpret mode, slow)")
     p.add_argument("--out", default="results/bench", help="folder for the CSV and markdown table")
     p.add_argument("--json", action="store_true")
 
@@ -324,9 +327,9 @@ def _bench(args) -> dict:
         return {"rows": rows, "speedups": bench_stream.speedups(rows), "profile": profile,
                 "files": [str(p) for p in paths]}
     elif args.target == "raster":
-        from experiments.bench_raster import bench_rasterizer
+        from experiments.bench_raster import bench_rasterizer, table_name
 
-        rows = bench_rasterizer(sizes=tuple(sizes), counts=tuple(components))
+        rows = bench_rasterizer(sizes=tuple(sizes), counts=tuple(components), impl=args.impl)
     else:
         from depth.bench import bench_adapter
 
@@ -335,8 +338,10 @@ def _bench(args) -> dict:
                         "--sizes", *map(str, sizes)]
                        + (["--components", *map(str, components)] if components else [])
                        + (["--iters", str(args.iters)] if args.target == "image" else [])
+                       + (["--impl", args.impl] if args.target == "raster" else [])
                        + ["--out", str(args.out)])
-    paths = bench.write_table(rows, args.out, f"bench_{args.target}", command=command)
+    name = table_name(args.impl) if args.target == "raster" else f"bench_{args.target}"
+    paths = bench.write_table(rows, args.out, name, command=command)
     return {"rows": rows, "files": [str(p) for p in paths]}
 
 
