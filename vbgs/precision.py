@@ -33,6 +33,11 @@ def matmul(a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
     return jnp.matmul(a, b, precision=PRODUCT_PRECISION)
 
 
+def tensordot(a: jnp.ndarray, b: jnp.ndarray, axes) -> jnp.ndarray:
+    """``jnp.tensordot(a, b, axes)`` at :data:`PRODUCT_PRECISION`."""
+    return jnp.tensordot(a, b, axes=axes, precision=PRODUCT_PRECISION)
+
+
 def quad_form(diff: jnp.ndarray, prec: jnp.ndarray) -> jnp.ndarray:
     """``diff^T P diff`` over the last axis, ``diff [..., d]``, ``prec [..., d, d]`` -> ``[...]``,
     as elementwise products and sums (centred form: no matrix-unit rounding)."""

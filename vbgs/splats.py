@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.precision import matmul
+
 # Degree-0 real spherical harmonic, 1 / (2 sqrt(pi)): rgb = 0.5 + SH_C0 * f_dc.
 SH_C0 = 0.28209479177387814
 
@@ -122,11 +124,13 @@ def covs_from_scale_rotation(scales: jax.Array, quats: jax.Array) -> jax.Array:
     """World covariances ``Σ = R diag(s²) Rᵀ``, ``[k, 3, 3]``.
 
     scales: ``[k, 3]`` standard deviations s along the splat's own axes;
-    quats: ``[k, 4]`` rotations as (w, x, y, z), normalised here. Differentiable.
+    quats: ``[k, 4]`` rotations as (w, x, y, z), normalised here. Differentiable. The
+    product runs at full float32 precision (:func:`vbgs.precision.matmul`): in TF32 a thin
+    splat's small variances would take the rounding error of the large ones.
     """
     rot = rotations_from_quaternions(quats)  # [k, 3, 3]
     scaled = rot * (scales**2)[..., None, :]  # R diag(s²)
-    return scaled @ jnp.swapaxes(rot, -1, -2)
+    return matmul(scaled, jnp.swapaxes(rot, -1, -2))
 
 
 def quaternions_from_rotations(rots: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from vbgs.baseline.params import Params, logit, rotation_matrices
+from vbgs.precision import mat_vec
 
 DEAD_OPACITY = 0.005  # below this a splat is dead and its row is reused
 SPLIT_SCALE_DIVISOR = 1.6  # 3DGS: children of a split get scale / 1.6
@@ -105,7 +106,7 @@ def relocate(params: Params, key: jax.Array, score: jax.Array | None = None, *,
     log_scales = jnp.where(split[:, None], params.log_scales - shrink, params.log_scales)
     eps = jax.random.normal(k_noise, params.means.shape, params.means.dtype)  # [K, d]
     rot = rotation_matrices(params)[source]  # [K, d, d]
-    offset = jnp.einsum("kij,kj->ki", rot, jnp.exp(params.log_scales[source]) * eps)
+    offset = mat_vec(rot, jnp.exp(params.log_scales[source]) * eps)  # [K, d], elementwise
     tgt = targets[:, None]
     new = Params(
         means=jnp.where(tgt, params.means[source] + offset, params.means),

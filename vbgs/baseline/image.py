@@ -32,6 +32,7 @@ from vbgs.baseline.loss import image_loss
 from vbgs.baseline.params import Params, colours, rotation_matrices, trainable
 from vbgs.baseline.train import TrainConfig, Trainer
 from vbgs.data.images import pixel_centres
+from vbgs.precision import mat_vec, matmul
 
 IMAGE_STEPS = 2000  # default number of Adam steps for an image fit
 PIXEL_CHUNK = 1024  # pixels per chunk of the dense candidate pass (bounds [chunk, K] blocks)
@@ -47,11 +48,12 @@ def quadratic_coefficients(params: Params) -> jax.Array:
     The precision comes straight from the factors, ``P = Σ⁻¹ = R diag(s⁻²) Rᵀ =
     [[a, b], [b, c]]`` and ``log|Σ| = 2 Σ_i log s_i``; then ``-½(x-μ)ᵀP(x-μ) =
     -½a u² - b uv - ½c v² + (Pμ)·x - ½μᵀPμ``, plus ``log o - log 2π - ½ log|Σ|``.
+    P is a full float32 product (:func:`vbgs.precision.matmul`), Pμ an elementwise sum.
     """
     rot = rotation_matrices(params)  # [K, 2, 2]
-    prec = (rot * jnp.exp(-2.0 * params.log_scales)[:, None, :]) @ jnp.swapaxes(rot, -1, -2)
+    prec = matmul(rot * jnp.exp(-2.0 * params.log_scales)[:, None, :], jnp.swapaxes(rot, -1, -2))
     a, b, c = prec[:, 0, 0], prec[:, 0, 1], prec[:, 1, 1]
-    lin = jnp.einsum("kij,kj->ki", prec, params.means)  # [K, 2]
+    lin = mat_vec(prec, params.means)  # [K, 2]
     log_o = jax.nn.log_sigmoid(params.opacity_logits)
     const = (log_o - math.log(2 * math.pi) - jnp.sum(params.log_scales, -1)
              - 0.5 * jnp.sum(lin * params.means, -1))
@@ -66,14 +68,16 @@ def pixel_features(xy: jax.Array) -> jax.Array:
 
 
 def dense_logits(params: Params, xy: jax.Array) -> jax.Array:
-    """``log w_k(x)`` ``[p, K]`` for every position ``xy [p, 2]`` and every splat."""
-    return pixel_features(xy) @ quadratic_coefficients(params).T
+    """``log w_k(x)`` ``[p, K]`` for every position ``xy [p, 2]`` and every splat: ``φ(x) · W_k``
+    at full float32 precision (:func:`vbgs.precision.matmul`). Its terms (u² ~ 10⁴ px² at
+    256 px) are far larger than their sum, which TF32 operands would not survive."""
+    return matmul(pixel_features(xy), quadratic_coefficients(params).T)
 
 
 def render_dense(params: Params, xy: jax.Array) -> jax.Array:
     """The slow, obvious render: ``softmax_k(log w_k(x)) @ c`` over all K splats, ``[p, 3]``.
     O(p · K) memory; the reference for :func:`render_sparse`."""
-    return jax.nn.softmax(dense_logits(params, xy), axis=-1) @ colours(params)
+    return matmul(jax.nn.softmax(dense_logits(params, xy), axis=-1), colours(params))
 
 
 @partial(jax.jit, static_argnames=("n", "chunk"))

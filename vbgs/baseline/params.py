@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs import expfam
+from vbgs.precision import matmul
 from vbgs.splats import Splats, covs_from_scale_rotation, rotations_from_quaternions
 
 INIT_OPACITY = 0.1  # 3DGS's initial opacity
@@ -88,12 +89,12 @@ def rotation_matrices(params: Params) -> jax.Array:
 
 
 def covariances(params: Params) -> jax.Array:
-    """``Σ = R diag(s²) Rᵀ`` with ``s = exp(log_scales)``, ``[K, d, d]``."""
+    """``Σ = R diag(s²) Rᵀ`` with ``s = exp(log_scales)``, ``[K, d, d]`` (full float32 products)."""
     scales = jnp.exp(params.log_scales)
     if params.dim == 3:
         return covs_from_scale_rotation(scales, params.rotations)
     rot = rotations_2d(params.rotations)
-    return (rot * (scales**2)[:, None, :]) @ jnp.swapaxes(rot, -1, -2)
+    return matmul(rot * (scales**2)[:, None, :], jnp.swapaxes(rot, -1, -2))
 
 
 def to_splats(params: Params) -> Splats:
