@@ -16,11 +16,13 @@ import numpy as np
 import pytest
 
 from vbgs import model, precision
+from vbgs.baseline import TrainConfig, Trainer, camera_extent, params_from_prior, to_splats
 from vbgs.camera import unproject
 from vbgs.data.images import image_to_points, load_image
 from vbgs.data.synthetic import object_scene
 from vbgs.fit import fit
 from vbgs.metrics import psnr
+from vbgs.raster import rasterize
 from vbgs.reassign import MIN_COUNT
 from vbgs.render import render_image
 
@@ -90,3 +92,60 @@ def test_scene_update_unchanged_under_tf32(estep):
         emu, emu_info = model.update(model.start(prior), xyz, rgb, estep=estep)
     np.testing.assert_allclose(emu.stats.count, ref.stats.count, rtol=1e-4, atol=1e-3)
     np.testing.assert_allclose(emu_info.point_loglik, ref_info.point_loglik, rtol=1e-5, atol=1e-3)
+
+
+# --------------------------------------------------------------------------- 3-D splats
+
+
+@pytest.fixture(scope="module")
+def splat_scene():
+    """A 24 px object scene (2 training views) and baseline params from the VBGS data init."""
+    scene = object_scene(size=24, n_train=2, n_test=1, seed=0)
+    xyz, rgb = (np.concatenate(a) for a in zip(
+        *[unproject(f.camera, f.rgb, f.depth) for f in scene.train], strict=True))
+    prior = model.init(xyz, rgb, 150, key=jax.random.key(0), scheme="data", bounds=scene.bounds)
+    return scene, params_from_prior(prior)
+
+
+def _render(scene, params):
+    """Covariances from scales and rotations, projection and compositing of the test view:
+    rgb and depth ``[2, h, w, 3]``."""
+    out = rasterize(to_splats(params), scene.test[0].camera, background=scene.background,
+                    capacity=256, impl="xla")
+    return np.stack([np.asarray(out.rgb), np.asarray(out.depth)[..., None].repeat(3, -1)])
+
+
+def _baseline_fit(scene, params, steps=6):
+    """A few gradient-baseline steps (rasterizer, SSIM loss, Adam): losses and final params."""
+    extent = camera_extent([f.camera.position for f in scene.train])
+    config = TrainConfig(lr_decay_steps=steps, depth_weight=0.1, raster_capacity=256)
+    trainer = Trainer(config, extent=extent)
+    state = trainer.init(params, key=jax.random.key(1))
+    state, losses = trainer.train(state, scene.train, steps,
+                                  jnp.asarray(scene.background, jnp.float32))
+    return np.asarray(losses), state.params
+
+
+def test_render_unchanged_under_tf32(splat_scene, monkeypatch):
+    """Equal under emulated TF32; and the guard bites: with the products at default
+    precision (the protection removed) TF32 moves the render."""
+    reference = _render(*splat_scene)
+    with tf32.emulated_tf32():
+        emulated = _render(*splat_scene)
+    assert reference[0].max() > 0.3  # the object is in view
+    np.testing.assert_allclose(emulated, reference, atol=1e-5)
+    monkeypatch.setattr(precision, "PRODUCT_PRECISION", jax.lax.Precision.DEFAULT)
+    with tf32.emulated_tf32():
+        unprotected = _render(*splat_scene)
+    assert np.abs(unprotected - reference).max() > 1e-3
+
+
+def test_baseline_fit_unchanged_under_tf32(splat_scene):
+    ref_losses, ref_params = _baseline_fit(*splat_scene)
+    with tf32.emulated_tf32():
+        emu_losses, emu_params = _baseline_fit(*splat_scene)
+    moved = np.abs(np.asarray(ref_params.means - splat_scene[1].means)).max()
+    assert moved > 1e-3, moved  # the steps really change the splats
+    np.testing.assert_allclose(emu_losses, ref_losses, rtol=1e-5)
+    for name, emu, ref in zip(ref_params._fields, emu_params, ref_params, strict=True):
+        np.testing.assert_allclose(emu, ref, rtol=1e-5, atol=1e-6, err_msg=name)
