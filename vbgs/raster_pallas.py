@@ -1,6 +1,6 @@
 """The rasterizer's compositing as a Pallas kernel (``jax.experimental.pallas``), for GPUs.
 
-Same inputs and outputs as :func:`vbgs.raster.composite_tiles`, the XLA path: the
+Same inputs and outputs as :func:`vbgs.composite.composite_tiles`, the XLA path: the
 tiles' depth-sorted splat lists that :func:`vbgs.raster.tile_splats` gathers from the
 projection and :func:`vbgs.raster.tile_lists`. Only the compositing loop differs.
 
@@ -9,8 +9,8 @@ pixels as one block of lanes and its ``c`` splat slots (every splat parameter a
 ``[1, c]`` row, c a power of two), and walks the first ``count`` slots front to back
 in chunks of m = DEPTH_CHUNK splats (``fori_loop`` up to ``ceil(count / m)``: the
 early stop at the tile's count). Per chunk, with the rules of :mod:`vbgs.raster`
-(one formula in one place: :func:`~vbgs.raster.alpha_from_offsets`,
-:func:`~vbgs.raster.chunk_weights`, :func:`~vbgs.raster.transmittance`):
+(one formula in one place, :mod:`vbgs.composite`: :func:`~vbgs.composite.alpha_from_offsets`,
+:func:`~vbgs.composite.chunk_weights`, :func:`~vbgs.composite.transmittance`):
 
     α [p, m]               = alpha_from_offsets(p_u - u, p_v - v, a, b, c, o),
     log_before_i [p, m]    = Σ_{j<i} log(1 - α_j)    (cumsum minus the term itself),
@@ -23,7 +23,7 @@ a power of two; the slot axis is padded to one), so the kernel lowers to Triton 
 a GPU; elsewhere it runs with ``interpret=True`` (slow, for tests).
 
 Gradients. :func:`composite_tiles_pallas` is a ``jax.custom_vjp`` whose backward
-pass is the VJP of the XLA path (:func:`vbgs.raster.composite_tiles`) at the same
+pass is the VJP of the XLA path (:func:`vbgs.composite.composite_tiles`) at the same
 inputs: it recomputes the XLA forward to differentiate it, so the gradients are the
 XLA path's exactly, and a backward pass costs what it costs there.
 """
@@ -37,7 +37,7 @@ import jax.numpy as jnp
 from jax.experimental import pallas as pl
 from jax.experimental.pallas import triton as pl_triton
 
-from vbgs.raster import (
+from vbgs.composite import (
     DEPTH_CHUNK,
     TileSplats,
     alpha_from_offsets,
@@ -132,7 +132,7 @@ _composite.defvjp(_composite_fwd, _composite_bwd)
 def composite_tiles_pallas(tiles: TileSplats, *, n_tiles_x: int, tile: int,
                            interpret: bool = False):
     """Front-to-back compositing of every tile by the Pallas kernel: ``(log T [t, p],
-    C [t, p, 3], D [t, p])``, p = tile², as :func:`vbgs.raster.composite_tiles` returns.
+    C [t, p, 3], D [t, p])``, p = tile², as :func:`vbgs.composite.composite_tiles` returns.
     ``tile`` must be a power of two; ``interpret=True`` runs the kernel without a GPU.
     Differentiable through a custom VJP: the XLA path's VJP at the same inputs."""
     if tile <= 0 or tile & (tile - 1):
