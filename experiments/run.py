@@ -302,10 +302,11 @@ def _bench(args) -> dict:
                                          tuple(args.scenes), frames=args.frames,
                                          size=(args.sizes or [128])[0], search=args.search,
                                          progress=progress)
+        devices = []
         if args.devices:
-            rows += bench_stream.device_rows(args.devices, (args.components or [20000])[0],
-                                             args.scenes[0], frames=args.frames,
-                                             size=(args.sizes or [128])[0])
+            devices = bench_stream.device_rows(args.devices, (args.components or [20000])[0],
+                                               args.scenes[0], frames=args.frames,
+                                               size=(args.sizes or [128])[0])
         profile = _stream_profile(args.scenes[0], (args.components or [20000])[0],
                                   (args.sizes or [128])[0], args.search)
         command = " ".join(["python -m experiments.run bench stream --components",
@@ -314,6 +315,9 @@ def _bench(args) -> dict:
                            + (["--devices", *map(str, args.devices)] if args.devices else []))
         paths = bench.write_table(rows, args.out, "bench_stream", command=command)
         paths += bench.write_table(profile, args.out, "bench_stream_profile", command=command)
+        if devices:
+            paths += bench.write_table(devices, args.out, "bench_stream_devices",
+                                       command=command, note=bench_stream.DEVICE_NOTE)
         if not args.json:
             from tabulate import tabulate
 
@@ -321,8 +325,11 @@ def _bench(args) -> dict:
             print(tabulate(profile, headers="keys", floatfmt=".4g", tablefmt="github"))
             print(tabulate(bench_stream.speedups(rows), headers="keys", floatfmt=".3g",
                            tablefmt="github"))
+            if devices:
+                print("by device count (host devices share this machine's cores):")
+                print(tabulate(devices, headers="keys", floatfmt=".4g", tablefmt="github"))
         return {"rows": rows, "speedups": bench_stream.speedups(rows), "profile": profile,
-                "files": [str(p) for p in paths]}
+                "devices": devices, "files": [str(p) for p in paths]}
     elif args.target == "raster":
         from experiments.bench_raster import bench_rasterizer
 
