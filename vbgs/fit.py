@@ -100,7 +100,7 @@ def _fit_compiled(prior: Mixture, x, c, w, key, tol, min_count, *, iters: int, n
             key, sub = jax.random.split(key)
             state, rinfo = reassign_centred(state, x[:n], c[:n], info.point_loglik[:n], sub,
                                             min_count, colour_noise)
-            moved = moved + rinfo.n_moved
+            moved = moved + rinfo.n_moved.astype(moved.dtype)  # int64 under x64
         prev = trace[jnp.maximum(t - 1, 0)]
         converged = (t > 0) & (jnp.abs(trace[t] - prev) <= tol * jnp.abs(prev))
         return t + 1, state, key, trace, moved, converged
