@@ -7,9 +7,8 @@ Kept apart from :mod:`vbgs.model` because they combine the model with
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from typing import NamedTuple
-
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -87,7 +86,11 @@ def _fit_compiled(prior: Mixture, x, c, w, key, tol, min_count, *, iters: int, n
     """:func:`fit_steps` as one function: centred padded points ``x [size, d]``,
     ``c [size, 3]``, ``w [size]`` whose first ``n`` rows are the data. Returns the
     posterior, the ELBO trace ``[iters]`` (first ``count`` entries set), ``count``,
-    ``converged`` and the number of re-seeded components."""
+    ``converged`` and the number of re-seeded components. The stopping test
+    ``|elbo_t - elbo_{t-1}| <= tol |elbo_{t-1}|`` is made in the data's dtype (the host
+    loop makes it in float64 on the same values: they differ only when the change is
+    within rounding of the threshold). The prior is not returned (an input passed
+    through to the outputs made XLA:CPU hang, see the note in ``vbgs.model._update``)."""
     empty = start(prior).stats
 
     def body(carry):
