@@ -83,9 +83,10 @@ def _floatfmt(frame: pd.DataFrame) -> list[str]:
 
 
 def write_table(rows: list[dict], out_dir: str | Path, name: str, *, command: str | None = None,
-                settings: dict | None = None) -> list[Path]:
+                settings: dict | None = None, note: str | None = None) -> list[Path]:
     """``name.csv`` and ``name.md``: a markdown table headed by the machine line, the
-    ``command`` that made it and its ``settings`` (also CSV columns), when given. Rows
+    ``command`` that made it, its ``settings`` (also CSV columns) and a ``note`` on how to
+    read it, when given. Rows
     that dropped splat-tile overlaps are marked (``exact`` column, see
     :func:`mark_dropped`)."""
     out = Path(out_dir)
@@ -98,6 +99,8 @@ def write_table(rows: list[dict], out_dir: str | Path, name: str, *, command: st
         head.append(f"Command: `{command}`")
     if settings:
         head.append("Settings: " + ", ".join(f"{k} = {v}" for k, v in settings.items()))
+    if note:
+        head.append(note)
     if "exact" in frame and not frame["exact"].all():
         head.append("Rows with exact = False dropped splat-tile overlaps beyond the "
                     "rasterizer's tile capacity: their renders (and timings) are not exact.")

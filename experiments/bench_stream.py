@@ -182,23 +182,41 @@ def sharded_row(n_devices: int, k: int, scene_name: str, *, frames: int, size: i
             "devices": n_devices}
 
 
+DEVICE_NOTE = ("Rows by device count: the components are split over N devices (one process "
+               "each). On a CPU these are N host devices forced onto the machine's own cores "
+               "(XLA_FLAGS=--xla_force_host_platform_device_count=N): they share the same "
+               "cores, so more devices cannot be faster here; the rows show that the sharded "
+               "stream runs and what its collectives cost, not a multi-device speed-up.")
+
+
 def device_rows(counts, k: int, scene_name: str, *, frames: int, size: int,
                 estep: str = "sparse") -> list[dict]:
-    """One :func:`sharded_row` per device count, each in a fresh process with that many
-    host CPU devices (``XLA_FLAGS=--xla_force_host_platform_device_count=N``); on an
-    accelerator the process's own devices are used instead."""
+    """One :func:`sharded_row` per device count, each in a fresh process. On a CPU the
+    process gets that many host devices (:func:`vbgs.sharding.host_device_flags`, which
+    also keeps XLA:CPU's all-reduce from starving on a machine with fewer cores than
+    devices); on an accelerator the process's own devices are used."""
     import json
     import os
     import subprocess
     import sys
+    from pathlib import Path
 
+    from vbgs import sharding
+
+    root = str(Path(__file__).resolve().parents[1])  # this checkout's packages first
+    uneven = [n for n in counts if n < 1 or k % n]
+    if uneven:
+        raise ValueError(f"{k} components do not split evenly over {uneven} devices: use a "
+                         f"component count that every --devices value divides")
     rows = []
     for n in counts:
-        env = dict(os.environ)
+        env = {**os.environ,
+               "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
         if jax.default_backend() == "cpu":
-            env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") +
-                                f" --xla_force_host_platform_device_count={n}").strip()
-        code = ("import json, sys; from experiments.bench_stream import sharded_row; "
+            env["XLA_FLAGS"] = sharding.host_device_flags(n, env.get("XLA_FLAGS", ""))
+        code = ("import json; from experiments.bench_stream import sharded_row; "
+                "from vbgs.compilation import enable_persistent_cache; "
+                "enable_persistent_cache(); "  # as every CLI command (opt-out respected)
                 f"print(json.dumps(sharded_row({n}, {k}, {scene_name!r}, frames={frames}, "
                 f"size={size}, estep={estep!r})))")
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -7,8 +7,6 @@ import os
 import sys
 from pathlib import Path
 
-from tabulate import tabulate
-
 # Keys shown first in the human-readable summary, when present.
 _HEADLINE = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "components_used",
              "peak_memory_mb")
@@ -87,6 +85,8 @@ def print_result(command: str, result: dict, *, as_json: bool) -> None:
     if as_json:
         print(json.dumps(result, default=float))
         return
+    from tabulate import tabulate  # only for the readable summary (start-up time)
+
     if "rows" in result:
         print(tabulate(result["rows"], headers="keys", floatfmt=".4g", tablefmt="github"))
         for path in result.get("files", []):

@@ -15,14 +15,10 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from tqdm.auto import tqdm
 
 from experiments.init_schemes import oracle_start
 from vbgs import grow, model
 from vbgs.bound import StreamBound, batch_bound
-from vbgs.baseline import TrainConfig, count_live, params_from_prior
-from vbgs.baseline.densify import DEAD_OPACITY
-from vbgs.baseline.image import IMAGE_STEPS, fit_image, render_image_params
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.fit import fit, stream
 from vbgs.metrics import psnr, ssim
@@ -64,6 +60,14 @@ class ImageTask:
                              "init 'stream' grows its own: turn reassign off")
 
 
+@jax.jit
+def task_keys(seed) -> tuple[jax.Array, jax.Array]:
+    """The keys of the initialisation and of the fit: ``split(key(seed))``, compiled as
+    one function (eager, seeding, splitting and unpacking compile one each)."""
+    k_init, k_fit = jax.random.split(jax.random.key(seed))
+    return k_init, k_fit
+
+
 def image_prior(task: ImageTask, uv, rgb, key: jax.Array) -> model.Mixture:
     """The prior of a fit on all pixels ``uv [n, 2]``, ``rgb [n, 3]`` at once (for a batch
     fit the whole image is the first and only batch, so ``stream`` peeks at nothing)."""
@@ -80,6 +84,8 @@ def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.A
     (the image's size is the sensor's, known before any data); ``data`` and ``random``
     start from the whole image ``uv``, ``rgb`` (an oracle start). With ``reassign`` on,
     the bound's ``q_{t-1}`` is the posterior before the re-seeding (not after)."""
+    from tqdm.auto import tqdm
+
     shown = tqdm(batches, desc="patches", disable=not progress, leave=False)
     total = [StreamBound()]
 
@@ -113,16 +119,15 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
     img = load_image(task.image, task.size)
     h, w, _ = img.shape
     uv, rgb = image_to_points(img)
-    k_init, k_fit = jax.random.split(jax.random.key(task.seed))
+    k_init, k_fit = task_keys(task.seed)
     start = time.perf_counter()
     if task.stream == "none":
         prior = image_prior(task, uv, rgb, k_init)
-        bar = tqdm(total=task.iters, desc="CAVI", unit="it", disable=not progress, leave=False)
+        # one compiled function for all iterations (no per-iteration progress: a
+        # callback would run them one by one from the host)
         post, info = fit(prior, uv, rgb, iters=task.iters, config=task.prior,
-                         key=k_fit if task.reassign else None,
-                         callback=lambda *_: bar.update())
-        bar.close()
-        elbo, counts = info.elbo, post.alpha - prior.alpha
+                         key=k_fit if task.reassign else None)
+        elbo, counts = info.elbo, np.asarray(post.alpha) - np.asarray(prior.alpha)  # host
         extra = {}
     else:
         batches = list(patch_stream(img, task.patch, task.order, seed=task.seed))
@@ -150,17 +155,25 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
     }
 
 
-def run_gradient_image(task: ImageTask, *, steps: int = IMAGE_STEPS, progress: bool = False,
-                       config: TrainConfig | None = None) -> dict:
+def run_gradient_image(task: ImageTask, *, steps: int | None = None, progress: bool = False,
+                       config=None) -> dict:
     """Fit 2-D Gaussians to the task's image with Adam for ``steps`` steps (``task.iters``
     is ignored); same keys as :func:`experiments.image_task.run_image`, with the loss
-    trace under ``"loss"`` and ``"elbo": []``."""
+    trace under ``"loss"`` and ``"elbo": []``. ``config``: a
+    :class:`vbgs.baseline.TrainConfig` (its defaults when None)."""
+    from tqdm.auto import tqdm  # the baseline (optax) is imported only when it runs
+
+    from vbgs.baseline import TrainConfig, count_live, params_from_prior
+    from vbgs.baseline.densify import DEAD_OPACITY
+    from vbgs.baseline.image import IMAGE_STEPS, fit_image, render_image_params
+
+    steps = IMAGE_STEPS if steps is None else steps
     if not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     img = load_image(task.image, task.size)
     h, w, _ = img.shape
     uv, rgb = image_to_points(img)
-    k_init, k_fit = jax.random.split(jax.random.key(task.seed))  # as run_image splits
+    k_init, k_fit = task_keys(task.seed)  # as run_image splits
     prior = image_prior(task, uv, rgb, k_init)
     bar = tqdm(total=steps, desc="Adam", unit="step", disable=not progress, leave=False)
     start = time.perf_counter()

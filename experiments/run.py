@@ -25,7 +25,6 @@ from experiments.cli_common import (
     print_result,
 )
 from experiments.init_schemes import INIT_HELP, INITS
-from experiments.sweep.cli import add_report, add_sweep, run_report, run_sweep
 
 
 def _add_fit_image(sub):
@@ -305,10 +304,11 @@ def _bench(args) -> dict:
                                          tuple(args.scenes), frames=args.frames,
                                          size=(args.sizes or [128])[0], search=args.search,
                                          progress=progress)
+        devices = []
         if args.devices:
-            rows += bench_stream.device_rows(args.devices, (args.components or [20000])[0],
-                                             args.scenes[0], frames=args.frames,
-                                             size=(args.sizes or [128])[0])
+            devices = bench_stream.device_rows(args.devices, (args.components or [20000])[0],
+                                               args.scenes[0], frames=args.frames,
+                                               size=(args.sizes or [128])[0])
         profile = _stream_profile(args.scenes[0], (args.components or [20000])[0],
                                   (args.sizes or [128])[0], args.search)
         command = " ".join(["python -m experiments.run bench stream --components",
@@ -317,6 +317,9 @@ def _bench(args) -> dict:
                            + (["--devices", *map(str, args.devices)] if args.devices else []))
         paths = bench.write_table(rows, args.out, "bench_stream", command=command)
         paths += bench.write_table(profile, args.out, "bench_stream_profile", command=command)
+        if devices:
+            paths += bench.write_table(devices, args.out, "bench_stream_devices",
+                                       command=command, note=bench_stream.DEVICE_NOTE)
         if not args.json:
             from tabulate import tabulate
 
@@ -324,8 +327,11 @@ def _bench(args) -> dict:
             print(tabulate(profile, headers="keys", floatfmt=".4g", tablefmt="github"))
             print(tabulate(bench_stream.speedups(rows), headers="keys", floatfmt=".3g",
                            tablefmt="github"))
+            if devices:
+                print("by device count (host devices share this machine's cores):")
+                print(tabulate(devices, headers="keys", floatfmt=".4g", tablefmt="github"))
         return {"rows": rows, "speedups": bench_stream.speedups(rows), "profile": profile,
-                "files": [str(p) for p in paths]}
+                "devices": devices, "files": [str(p) for p in paths]}
     elif args.target == "raster":
         from experiments.bench_raster import bench_rasterizer, table_name
 
@@ -354,20 +360,43 @@ def _stream_profile(scene_name: str, k: int, size: int, search: str) -> list[dic
             for row in profile_frame(scene, _prior(scene, k), search=search)]
 
 
+def _sweep_cli(name: str):
+    """A function of :mod:`experiments.sweep.cli`, imported when first called (it
+    imports tqdm; start-up time that other commands do not need)."""
+
+    def call(*args):
+        from experiments.sweep import cli
+
+        return getattr(cli, name)(*args)
+
+    return call
+
+
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
-            "sweep": (add_sweep, run_sweep), "report": (add_report, run_report)}
+            "sweep": (_sweep_cli("add_sweep"), _sweep_cli("run_sweep")),
+            "report": (_sweep_cli("add_report"), _sweep_cli("run_report"))}
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The command-line parser; with ``only``, that command's options alone (building
+    every command's options imports what they list, e.g. the sweep backends: start-up
+    time that a fit does not need)."""
+    parser = argparse.ArgumentParser(prog="python -m experiments.run", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name, (add, _) in COMMANDS.items():
+        if only is None or name == only:
+            add(sub)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     try:  # building the parser imports modules: Ctrl-C there ends cleanly too
-        parser = argparse.ArgumentParser(prog="python -m experiments.run", description=__doc__,
-                                         formatter_class=argparse.RawDescriptionHelpFormatter)
-        sub = parser.add_subparsers(dest="command", required=True)
-        for add, _ in COMMANDS.values():
-            add(sub)
-        args = parser.parse_args(argv)
+        command = argv[0] if argv and argv[0] in COMMANDS else None  # else: all, for help
+        args = build_parser(command).parse_args(argv)
         from vbgs.compilation import CompileTimer, enable_persistent_cache
 
         enable_persistent_cache()  # opt out with VBGS_NO_COMPILE_CACHE=1

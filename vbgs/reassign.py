@@ -44,8 +44,13 @@ def _move_prior(prior: Mixture, moved, x_new, c_new) -> Mixture:
     return prior._replace(space=space, colour=colour)
 
 
-@partial(jax.jit, static_argnames=("colour_noise", "pool"))
-def _reassign(state: State, x, c, point_loglik, key, min_count, colour_noise: float, pool: int):
+@partial(jax.jit, static_argnames=("colour_noise",))
+def reassign_centred(state: State, x, c, point_loglik, key, min_count,
+                     colour_noise: float) -> tuple[State, ReassignInfo]:
+    """:func:`reassign` on centred positions ``x [n, d]`` (``xyz - origin``), colours
+    ``c [n, 3]`` and log-likelihoods ``[n]``, all on the device (compiled; callable
+    inside a compiled loop such as :func:`vbgs.fit.fit`'s)."""
+    pool = int(min(x.shape[0], state.prior.n_components))
     unused = state.stats.count < min_count  # [k]
     fresh = jnp.max(jnp.where(unused, fresh_loglik(state.posterior, colour_noise), -jnp.inf))
     poor = point_loglik < fresh  # [n]
@@ -81,6 +86,5 @@ def reassign(
     dtype = prior.alpha.dtype
     x = jnp.asarray(xyz, dtype) - prior.origin
     c = jnp.asarray(rgb, dtype)
-    pool = int(min(x.shape[0], prior.n_components))
-    return _reassign(state, x, c, jnp.asarray(point_loglik, dtype), key, min_count,
-                     float(colour_noise), pool)
+    return reassign_centred(state, x, c, jnp.asarray(point_loglik, dtype), key, min_count,
+                            float(colour_noise))

@@ -29,19 +29,22 @@ def _expected_colour(q: Mixture, x: jnp.ndarray, chunk: int) -> jnp.ndarray:
     return out.reshape(-1, 3)
 
 
-def expected_colour(q: Mixture, xy) -> jnp.ndarray:
+def expected_colour(q: Mixture, xy) -> np.ndarray:
     """``E[c | x] = sum_k p(k | x) E[mu_c,k]`` at positions ``xy [n, d]`` (world units),
     with ``p(k | x) = softmax_k(E[log pi_k] + E[log N(x | mu_k, Sigma_k)])`` — the
-    E-step's responsibilities with the colour left out."""
-    x = jnp.asarray(xy, q.alpha.dtype) - q.origin
+    E-step's responsibilities with the colour left out. Returns ``[n, 3]`` on the host
+    (centring, padding and slicing in numpy: eager device operations would each
+    compile)."""
+    dtype = np.dtype(q.alpha.dtype)
+    x = np.asarray(xy, dtype) - np.asarray(q.origin, dtype)  # [n, d]
     n = x.shape[0]
     size = bucket_size(n)
-    x = jnp.pad(x, ((0, size - n), (0, 0)))
+    x = np.pad(x, ((0, size - n), (0, 0)))
     chunk = chunk_size(size, q.n_components)
-    return _expected_colour(q, x, chunk)[:n]
+    return np.asarray(_expected_colour(q, x, chunk))[:n]
 
 
 def render_image(q: Mixture, height: int, width: int) -> np.ndarray:
     """Render a 2-D mixture fitted on pixel centres to an image ``[h, w, 3]`` in [0, 1]."""
     rgb = expected_colour(q, pixel_centres(height, width))
-    return np.clip(np.asarray(rgb), 0.0, 1.0).reshape(height, width, 3)
+    return np.clip(rgb, 0.0, 1.0).reshape(height, width, 3)

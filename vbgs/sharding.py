@@ -27,6 +27,16 @@ from vbgs.model import Mixture, State
 
 AXIS = "k"
 
+# XLA:CPU runs a step's independent operations concurrently on one intra-op thread pool
+# shared by all host devices of the process. A device waiting in an all-reduce holds a
+# pool thread; when the other devices' work is queued behind it (a pool of as many
+# threads as cores, fewer than the devices' concurrent work), the all-reduce never
+# completes and XLA aborts after 40 s ("all-reduce rendezvous timed out"). Seen with 2
+# host devices on this 2-core machine under load, and every time with one core
+# (``taskset -c 0``) from 20k components. Scheduling each device's operations one after
+# another (the concurrency-optimised scheduler off) removes the wait on the pool.
+HOST_DEVICE_XLA_FLAGS = ("--xla_cpu_enable_concurrency_optimized_scheduler=false",)
+
 
 def mesh(n_devices: int | None = None, devices=None) -> Mesh:
     """A one-axis mesh named ``"k"`` over the first ``n_devices`` devices (all by default)."""
@@ -36,6 +46,16 @@ def mesh(n_devices: int | None = None, devices=None) -> Mesh:
         raise ValueError(f"asked for {n} devices but {len(devices)} are available "
                          "(host CPUs: set XLA_FLAGS=--xla_force_host_platform_device_count=N)")
     return Mesh(np.asarray(devices[:n]), (AXIS,))
+
+
+def host_device_flags(n_devices: int, existing: str = "") -> str:
+    """``XLA_FLAGS`` for a process with ``n_devices`` host CPU devices: ``existing`` flags
+    plus the device count and :data:`HOST_DEVICE_XLA_FLAGS` (must be set before JAX
+    starts, so in a new process's environment)."""
+    flags = [f for f in existing.split() if not f.startswith(
+        "--xla_force_host_platform_device_count")]
+    return " ".join([*flags, f"--xla_force_host_platform_device_count={int(n_devices)}",
+                     *HOST_DEVICE_XLA_FLAGS])
 
 
 def _shard_mixture(q: Mixture, split: NamedSharding, whole: NamedSharding) -> Mixture:

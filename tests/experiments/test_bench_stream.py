@@ -4,7 +4,9 @@ import math
 
 import numpy as np
 
-from experiments.bench_stream import _prior, speedups, stream_row
+import pytest
+
+from experiments.bench_stream import _prior, device_rows, speedups, stream_row
 from vbgs.data.synthetic import object_scene
 
 
@@ -24,3 +26,18 @@ def test_speedups_pair_sparse_with_dense():
             {"scene": "room", "components": 10, "estep": "sparse", "s_per_frame": 0.5}]
     out = speedups(rows)
     assert len(out) == 1 and np.isclose(out[0]["sparse_over_dense"], 4.0)
+
+
+def test_device_rows_one_process_per_device_count():
+    # tiny: 4 frames of a 24 px object, 400 components split over 1 and 2 host devices
+    rows = device_rows([1, 2], 400, "object", frames=4, size=24)
+    assert [r["devices"] for r in rows] == [1, 2]
+    for r in rows:
+        assert r["components"] == 400 and r["frames"] == 4 and r["estep"] == "sparse"
+        assert r["padded"] >= r["points_per_frame"] > 0
+        assert math.isfinite(r["s_per_frame"]) and r["s_per_frame"] > 0
+
+
+def test_device_rows_refuse_an_uneven_split_before_starting_processes():
+    with pytest.raises(ValueError, match="do not split evenly over \\[4\\] devices"):
+        device_rows([1, 4], 402, "object", frames=2, size=24)

@@ -8,13 +8,14 @@ from pathlib import Path
 
 import pytest
 
+from vbgs.sharding import HOST_DEVICE_XLA_FLAGS, host_device_flags
+
 
 @pytest.fixture(scope="module")
 def sharded():
     root = Path(__file__).resolve().parents[2]
     path = os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")]))
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4",
-           "JAX_PLATFORMS": "cpu", "JAX_ENABLE_X64": "1", "PYTHONPATH": path}
+    env = {**os.environ, "XLA_FLAGS": host_device_flags(4), "JAX_PLATFORMS": "cpu", "JAX_ENABLE_X64": "1", "PYTHONPATH": path}
     out = subprocess.run([sys.executable, str(Path(__file__).with_name("sharded_check.py"))],
                          capture_output=True, text=True, env=env, cwd=root, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
@@ -31,3 +32,9 @@ def test_sharded_update_equals_one_device(sharded, mode):
 
 def test_uneven_split_refused(sharded):
     assert sharded["uneven_refused"]
+
+
+def test_host_device_flags_replace_the_count_and_keep_other_flags():
+    flags = host_device_flags(2, "--xla_dump_to=/tmp/x --xla_force_host_platform_device_count=8")
+    assert flags.split() == ["--xla_dump_to=/tmp/x", "--xla_force_host_platform_device_count=2",
+                             *HOST_DEVICE_XLA_FLAGS]

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 from skimage import data as skdata
-from skimage import io as skio
 from skimage.transform import resize
 
 from vbgs.data.streams import stream_order
@@ -66,6 +65,8 @@ def read_image_file(path: str | Path) -> np.ndarray:
     A file that does not decode (truncated, not an image, unsupported) raises
     ``ValueError`` naming the file, whatever the decoder raised.
     """
+    from skimage import io as skio  # imageio and its plugins: imported only for files
+
     path = Path(path)
     try:
         with warnings.catch_warnings():  # imageio's plugin notes on a bad file
