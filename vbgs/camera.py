@@ -19,6 +19,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+# Pixel (row, col) covers [col, col + 1) x [row, row + 1) in image coordinates.
+PIXEL_CENTRE_OFFSET = 0.5
+
 # Flip of the y and z camera axes: OpenGL/Blender camera frame <-> OpenCV frame.
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 
@@ -89,10 +92,25 @@ def opengl_to_opencv(pose_gl: np.ndarray) -> np.ndarray:
     return np.asarray(pose_gl, np.float64) @ _GL_TO_CV
 
 
+def pixel_centre(index):
+    """Image coordinate of the centre of pixel ``index``: ``index + 0.5``.
+
+    The one definition of pixel centres: column ``col`` -> ``u``, row ``row`` -> ``v``.
+    Works on ints, NumPy and JAX arrays (the dtype follows ``index``).
+    """
+    return index + PIXEL_CENTRE_OFFSET
+
+
+def pixel_centres(height: int, width: int, dtype=np.float32) -> np.ndarray:
+    """``(u, v)`` of every pixel centre in row-major order, ``[h * w, 2]``."""
+    v, u = pixel_centre(np.mgrid[0:height, 0:width].astype(dtype))  # [h, w] each
+    return np.stack([u.ravel(), v.ravel()], -1)
+
+
 def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """Image coordinates ``u, v`` of every pixel centre, each ``[height, width]``."""
-    v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float64) + 0.5
-    return u, v
+    """Image coordinates ``u, v`` of every pixel centre, each ``[height, width]`` float64."""
+    uv = pixel_centres(camera.height, camera.width, np.float64).reshape(camera.height, camera.width, 2)
+    return uv[..., 0], uv[..., 1]
 
 
 def valid_depth(depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:

@@ -74,7 +74,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.camera import Camera
+from vbgs.camera import Camera, pixel_centre
 from vbgs.splats import Splats, check_splats
 
 BLUR_VARIANCE = 0.3  # px², low-pass dilation added to every projected covariance
@@ -201,7 +201,7 @@ def _tile_pixels(tile_id, n_tiles_x, tile):
     """Pixel centres [tile², 2] as (u, v) of tile ``tile_id`` (row-major tile grid)."""
     ty, tx = tile_id // n_tiles_x, tile_id % n_tiles_x
     r, c = jnp.meshgrid(jnp.arange(tile), jnp.arange(tile), indexing="ij")
-    return jnp.stack([(tx * tile + c).ravel() + 0.5, (ty * tile + r).ravel() + 0.5], -1)
+    return pixel_centre(jnp.stack([(tx * tile + c).ravel(), (ty * tile + r).ravel()], -1))
 
 
 def _tile_ranges(lo, hi, n_tiles_x, n_tiles_y, tile):

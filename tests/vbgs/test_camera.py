@@ -6,6 +6,7 @@ from vbgs.camera import (
     from_fov,
     look_at,
     opengl_to_opencv,
+    pixel_centres,
     pixel_grid,
     project,
     unproject,
@@ -57,6 +58,24 @@ def test_pixel_centres_and_principal_point():
     uv, z = project(cam, np.array([[0.0, 0.0, 2.0]]))
     np.testing.assert_allclose(uv, [[2.0, 1.5]])
     assert z[0] == 2.0
+
+
+def test_every_pixel_grid_uses_the_one_centre_convention():
+    """camera.pixel_grid, camera.pixel_centres and the rasterizer's tile pixels agree."""
+    from vbgs.raster import _tile_pixels
+
+    h, w, tile = 6, 8, 4
+    uv = pixel_centres(h, w)  # [h * w, 2]
+    np.testing.assert_array_equal(uv[:3], [[0.5, 0.5], [1.5, 0.5], [2.5, 0.5]])
+    u, v = pixel_grid(Camera(1.0, 1.0, 0.0, 0.0, w, h, np.eye(4)))
+    np.testing.assert_array_equal(np.stack([u, v], -1).reshape(-1, 2), uv)
+    n_tiles_x = w // tile
+    for tile_id in range(n_tiles_x * 2):
+        got = np.asarray(_tile_pixels(tile_id, n_tiles_x, tile))  # [tile², 2]
+        ty, tx = divmod(tile_id, n_tiles_x)
+        want = uv.reshape(h, w, 2)[ty * tile:(ty + 1) * tile, tx * tile:(tx + 1) * tile]
+        valid = (got[:, 1] < h)  # the last tile row reaches past the image
+        np.testing.assert_array_equal(got[valid], want.reshape(-1, 2)[: valid.sum()])
 
 
 def test_opengl_to_opencv_flips_y_and_z_axes():

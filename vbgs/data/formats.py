@@ -38,7 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from vbgs.camera import Camera
+from vbgs.camera import Camera, pixel_centre
 from vbgs.data.blender import VAL_EVERY, load_blender, write_blender
 from vbgs.data.depth_png import read_depth_png
 from vbgs.data.scene import (
@@ -88,8 +88,8 @@ class Intrinsics(NamedTuple):
         return Camera(
             self.fx * sx,
             self.fy * sy,
-            (self.cx + 0.5) * sx,
-            (self.cy + 0.5) * sy,
+            pixel_centre(self.cx) * sx,
+            pixel_centre(self.cy) * sy,
             int(width),
             int(height),
             np.asarray(pose, np.float64),

@@ -15,6 +15,7 @@ from skimage import data as skdata
 from skimage import io as skio
 from skimage.transform import resize
 
+from vbgs.camera import pixel_centres
 from vbgs.data.streams import stream_order
 
 # Photos shipped inside scikit-image (no download needed).
@@ -99,12 +100,6 @@ def load_image(name_or_path: str | Path, size: int | tuple[int, int] | None = No
             raise ValueError(f"image size must be positive, got {size!r}")
         img = np.clip(resize(img, (h, w), anti_aliasing=True, order=1), 0, 1).astype(np.float32)
     return img
-
-
-def pixel_centres(height: int, width: int) -> np.ndarray:
-    """``(u, v)`` of every pixel centre in row-major order, ``[h * w, 2]`` float32."""
-    v, u = np.mgrid[0:height, 0:width].astype(np.float32) + 0.5
-    return np.stack([u.ravel(), v.ravel()], -1)
 
 
 def image_to_points(image) -> tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from skimage.transform import resize
 
-from vbgs.camera import Camera, unproject
+from vbgs.camera import Camera, pixel_centre, unproject
 from vbgs.data.images import read_image_file
 
 
@@ -241,8 +241,8 @@ def resize_frame(frame: Frame, size) -> Frame:
         return frame
     sx, sy = new_w / cam.width, new_h / cam.height
     rgb = resize(frame.rgb, (new_h, new_w), order=1, anti_aliasing=sx < 1 or sy < 1)
-    rows = np.minimum(((np.arange(new_h) + 0.5) / sy).astype(int), cam.height - 1)  # [new_h]
-    cols = np.minimum(((np.arange(new_w) + 0.5) / sx).astype(int), cam.width - 1)  # [new_w]
+    rows = np.minimum((pixel_centre(np.arange(new_h)) / sy).astype(int), cam.height - 1)  # [new_h]
+    cols = np.minimum((pixel_centre(np.arange(new_w)) / sx).astype(int), cam.width - 1)  # [new_w]
     depth = frame.depth[rows[:, None], cols[None, :]]
     camera = cam._replace(
         fx=cam.fx * sx, fy=cam.fy * sy, cx=cam.cx * sx, cy=cam.cy * sy, width=new_w, height=new_h

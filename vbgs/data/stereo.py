@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 from skimage import data as skdata
 
-from vbgs.camera import Camera
+from vbgs.camera import Camera, pixel_centre
 from vbgs.data.scene import Frame
 
 MOTORCYCLE_FOCAL = 994.978  # px, at the shipped 741 x 500 size
@@ -65,8 +65,8 @@ def stereo_motorcycle_frame() -> Frame:
     camera = Camera(
         MOTORCYCLE_FOCAL,
         MOTORCYCLE_FOCAL,
-        MOTORCYCLE_CX + 0.5,
-        MOTORCYCLE_CY + 0.5,
+        pixel_centre(MOTORCYCLE_CX),
+        pixel_centre(MOTORCYCLE_CY),
         int(width),
         int(height),
         np.eye(4),
