@@ -41,13 +41,13 @@ import numpy as np
 from vbgs.camera import Camera, pixel_centre
 from vbgs.data.blender import VAL_EVERY, load_blender, write_blender
 from vbgs.data.depth_png import read_depth_png
+from vbgs.data.images import read_rgb
 from vbgs.data.scene import (
     Frame,
     Scene,
     bounds_from_frames,
     hold_out,
     hold_out_validation,
-    read_rgb,
     require_some_depth,
     resize_frame,
     select,
@@ -70,6 +70,7 @@ __all__ = [
 
 REPLICA_DEPTH_SCALE = 6553.5
 TUM_DEPTH_SCALE = 5000.0
+_WHITE = (1.0, 1.0, 1.0)  # RGBA frames are composited onto white, as the Blender loader does by default
 
 
 class Intrinsics(NamedTuple):
@@ -166,7 +167,7 @@ def load_replica(
                 f"{images[i].name} has no depth image: expected "
                 f"{results / f'depth{images[i].name[5:-4]}.png'}"
             )
-        rgb = read_rgb(images[i])
+        rgb = read_rgb(images[i], background=_WHITE)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], poses[k])
         depth = read_depth_png(depths[i], depth_scale)
         frame = validate_frame(Frame(rgb, depth, cam), f"{images[i]} (depth {depths[i].name})")
@@ -266,7 +267,7 @@ def load_tum(
         values = [float(v) for v in pose_rows[jp]]
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = quaternion_to_matrix(*values[3:]), values[:3]
-        rgb = read_rgb(folder / rgb_rows[i][0])
+        rgb = read_rgb(folder / rgb_rows[i][0], background=_WHITE)
         depth = read_depth_png(folder / depth_rows[jd][0], depth_scale)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], pose)
         what = f"{folder / rgb_rows[i][0]} (depth {depth_rows[jd][0]})"

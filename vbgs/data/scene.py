@@ -17,13 +17,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from pathlib import Path
-
 import numpy as np
 from skimage.transform import resize
 
 from vbgs.camera import Camera, pixel_centre, unproject
-from vbgs.data.images import read_image_file
 
 
 class Frame(NamedTuple):
@@ -191,24 +188,6 @@ def hold_out_validation(frames: list, every: int | None) -> tuple[list, list]:
     return [f for f, v in zip(frames, val, strict=True) if not v], [
         f for f, v in zip(frames, val, strict=True) if v
     ]
-
-
-def read_rgb(path: str | Path, background=(1.0, 1.0, 1.0)) -> np.ndarray:
-    """Image file as float32 ``[h, w, 3]`` in [0, 1]; RGBA is composited onto ``background``."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"image not found: {path}")
-    img = read_image_file(path)
-    if img.dtype.kind in "ui":
-        img = img / (65535.0 if img.dtype == np.uint16 else 255.0)
-    if img.ndim == 2:
-        img = np.repeat(img[..., None], 3, -1)
-    if img.ndim != 3 or img.shape[-1] not in (3, 4):
-        raise ValueError(f"{path}: expected a grey, RGB or RGBA image, got shape {img.shape}")
-    if img.shape[-1] == 4:
-        alpha = img[..., 3:]
-        img = img[..., :3] * alpha + np.asarray(background, np.float64) * (1.0 - alpha)
-    return np.clip(img, 0.0, 1.0).astype(np.float32)
 
 
 def target_size(width: int, height: int, size) -> tuple[int, int]:
