@@ -29,6 +29,7 @@ from typing import Any
 
 from experiments.init_schemes import INITS
 from experiments.sweep.tasks import TASKS, TaskUnavailable
+from vbgs.baseline.replay import parse_replay
 
 
 class ConfigError(ValueError):
@@ -36,13 +37,12 @@ class ConfigError(ValueError):
 
 
 def _replay(value: str) -> str | None:
-    """none | full | fifo:K | reservoir:K with K >= 1; returns a problem or None."""
-    if value in ("none", "full"):
-        return None
-    kind, _, size = value.partition(":")
-    if kind in ("fifo", "reservoir") and size.isdigit() and int(size) >= 1:
-        return None
-    return "must be none, full, fifo:K or reservoir:K (K a positive integer)"
+    """The problem :func:`vbgs.baseline.replay.parse_replay` finds in a spec, or None."""
+    try:
+        parse_replay(value)
+    except (TypeError, ValueError) as err:
+        return str(err)
+    return None
 
 
 def _depth_model(value: str) -> str | None:
