@@ -26,7 +26,6 @@ from vbgs.baseline.image import IMAGE_STEPS, fit_image, render_image_params
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.fit import fit, stream
 from vbgs.metrics import psnr, ssim
-from vbgs.reassign import MIN_COUNT
 from vbgs.render import render_image
 
 
@@ -143,7 +142,7 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
         "psnr": psnr(render, img),
         "ssim": ssim(render, img),
         "seconds": seconds,
-        "components_used": int((np.asarray(counts) >= MIN_COUNT).sum()),
+        "components_used": int(model.used_components(np.asarray(counts)).sum()),
         "elbo": [float(e) for e in elbo],
         **extra,
         "images": {"target": img, "render": render},

@@ -85,6 +85,21 @@ class Mixture(NamedTuple):
         return self.origin.shape[0]
 
 
+# Points' worth of responsibility ``N_k = sum_n r_nk`` (= ``alpha_k - alpha0_k``) from
+# which a component counts as used; below it its weight is still at its prior.
+MIN_USED_COUNT = 0.5
+
+
+def used_components(counts, min_count: float = MIN_USED_COUNT):
+    """``used_k = (N_k >= min_count)``, ``[k]`` bool, from counts ``N [k]`` (NumPy or JAX).
+
+    The one "component used" rule: unused components are re-seeded
+    (:mod:`vbgs.reassign`), pruned from splats (:func:`vbgs.splats.from_posterior`)
+    and left out of the "components used" figures.
+    """
+    return counts >= min_count
+
+
 class State(NamedTuple):
     """What streaming carries from batch to batch: no data, only summed statistics."""
 

@@ -19,10 +19,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from vbgs.model import Mixture, State, _features, log_joint_weights, m_step
+from vbgs.model import MIN_USED_COUNT, Mixture, State, _features, log_joint_weights, m_step, used_components
 
-# Points' worth of responsibility below which a component counts as unused.
-MIN_COUNT = 0.5
+MIN_COUNT = MIN_USED_COUNT  # the model's "used" threshold, under the name callers already import
 
 
 class ReassignInfo(NamedTuple):
@@ -46,7 +45,7 @@ def _move_prior(prior: Mixture, moved, x_new, c_new) -> Mixture:
 
 @partial(jax.jit, static_argnames=("colour_noise", "pool"))
 def _reassign(state: State, x, c, point_loglik, key, min_count, colour_noise: float, pool: int):
-    unused = state.stats.count < min_count  # [k]
+    unused = ~used_components(state.stats.count, min_count)  # [k]
     fresh = jnp.max(jnp.where(unused, fresh_loglik(state.posterior, colour_noise), -jnp.inf))
     poor = point_loglik < fresh  # [n]
     priority = jnp.where(poor, jax.random.uniform(key, poor.shape), 2.0)
