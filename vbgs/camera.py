@@ -17,10 +17,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import numpy as np
 
-# Pixel (row, col) covers [col, col + 1) x [row, row + 1) in image coordinates.
-PIXEL_CENTRE_OFFSET = 0.5
+from vbgs.pixels import pixel_centres
 
 # Flip of the y and z camera axes: OpenGL/Blender camera frame <-> OpenCV frame.
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -31,6 +31,10 @@ class Camera(NamedTuple):
 
     fx, fy, cx, cy: intrinsics in pixels; width, height: image size in pixels;
     pose: ``[4, 4]`` camera-to-world transform (OpenCV axes).
+
+    A JAX pytree whose leaves are the intrinsics and the pose; ``width`` and
+    ``height`` are static (part of the tree's structure), so a camera passes through
+    ``jax.jit`` as one argument and a jitted function compiles once per image size.
     """
 
     fx: float
@@ -63,6 +67,19 @@ class Camera(NamedTuple):
         return self.pose[:3, 3]
 
 
+def _camera_children(cam: Camera):
+    keys = ("fx", "fy", "cx", "cy", "pose")
+    return tuple((jax.tree_util.GetAttrKey(k), getattr(cam, k)) for k in keys), (cam.width, cam.height)
+
+
+def _camera_from_children(sizes, children) -> Camera:
+    fx, fy, cx, cy, pose = children
+    return Camera(fx, fy, cx, cy, *sizes, pose)
+
+
+jax.tree_util.register_pytree_with_keys(Camera, _camera_children, _camera_from_children)
+
+
 def from_fov(width: int, height: int, fov_x: float, pose: np.ndarray) -> Camera:
     """A camera with square pixels and horizontal field of view ``fov_x`` (radians)."""
     f = 0.5 * width / np.tan(0.5 * fov_x)
@@ -90,21 +107,6 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
 def opengl_to_opencv(pose_gl: np.ndarray) -> np.ndarray:
     """Convert a camera-to-world pose with OpenGL/Blender camera axes to OpenCV axes."""
     return np.asarray(pose_gl, np.float64) @ _GL_TO_CV
-
-
-def pixel_centre(index):
-    """Image coordinate of the centre of pixel ``index``: ``index + 0.5``.
-
-    The one definition of pixel centres: column ``col`` -> ``u``, row ``row`` -> ``v``.
-    Works on ints, NumPy and JAX arrays (the dtype follows ``index``).
-    """
-    return index + PIXEL_CENTRE_OFFSET
-
-
-def pixel_centres(height: int, width: int, dtype=np.float32) -> np.ndarray:
-    """``(u, v)`` of every pixel centre in row-major order, ``[h * w, 2]``."""
-    v, u = pixel_centre(np.mgrid[0:height, 0:width].astype(dtype))  # [h, w] each
-    return np.stack([u.ravel(), v.ravel()], -1)
 
 
 def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:

@@ -74,7 +74,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.camera import Camera, pixel_centre
+from vbgs.camera import Camera
+from vbgs.pixels import pixel_centre
 from vbgs.splats import Splats, check_splats
 
 BLUR_VARIANCE = 0.3  # px², low-pass dilation added to every projected covariance

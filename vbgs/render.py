@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.camera import pixel_centres
+from vbgs.pixels import pixel_centres
 from vbgs.model import (Mixture, features, bucket_size, chunk_size, feature_logits,
                         log_joint_weights)
 from vbgs.precision import matmul

@@ -6,12 +6,12 @@ from vbgs.camera import (
     from_fov,
     look_at,
     opengl_to_opencv,
-    pixel_centres,
     pixel_grid,
     project,
     unproject,
     valid_depth,
 )
+from vbgs.pixels import pixel_centres
 
 
 def _camera(width=20, height=14):
@@ -122,3 +122,27 @@ def test_shape_errors(rgb_shape, depth_shape):
     cam = _camera()
     with pytest.raises(ValueError, match="expected rgb"):
         unproject(cam, np.zeros(rgb_shape, np.float32), np.ones(depth_shape, np.float32))
+
+
+def test_camera_is_a_pytree_with_static_size():
+    """Intrinsics and pose are leaves; width and height are static: a jitted function
+    takes the camera as one argument, keeps the sizes as ints, and compiles once per size."""
+    import jax
+    import jax.numpy as jnp
+
+    cam = _camera()
+    leaves = jax.tree_util.tree_leaves(cam)
+    assert len(leaves) == 5 and leaves[-1].shape == (4, 4)
+
+    @jax.jit
+    def centre_ray(c):
+        assert isinstance(c.width, int) and isinstance(c.height, int)
+        return jnp.stack([(c.width / 2 - c.cx) / c.fx, (c.height / 2 - c.cy) / c.fy])
+
+    np.testing.assert_allclose(centre_ray(cam), [(10 - 9.7) / 18.0, (7 - 7.4) / 17.0], rtol=1e-5)
+    centre_ray(cam._replace(fx=20.0, pose=np.eye(4)))  # new values: no new compile
+    assert centre_ray._cache_size() == 1
+    centre_ray(_camera(width=22))
+    assert centre_ray._cache_size() == 2
+    doubled = jax.tree_util.tree_map(lambda a: 2 * a, cam)
+    assert (doubled.fx, doubled.width, doubled.height) == (36.0, cam.width, cam.height)

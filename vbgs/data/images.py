@@ -15,7 +15,7 @@ from skimage import data as skdata
 from skimage import io as skio
 from skimage.transform import resize
 
-from vbgs.camera import pixel_centres
+from vbgs.pixels import pixel_centres
 from vbgs.data.streams import stream_order
 
 # Photos shipped inside scikit-image (no download needed).

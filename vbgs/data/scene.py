@@ -20,7 +20,8 @@ from typing import NamedTuple
 import numpy as np
 from skimage.transform import resize
 
-from vbgs.camera import Camera, pixel_centre, unproject
+from vbgs.camera import Camera, unproject
+from vbgs.pixels import pixel_centre
 
 
 class Frame(NamedTuple):

@@ -33,8 +33,9 @@ from __future__ import annotations
 import numpy as np
 from skimage import data as skdata
 
-from vbgs.camera import Camera, pixel_centre
+from vbgs.camera import Camera
 from vbgs.data.scene import Frame
+from vbgs.pixels import pixel_centre
 
 MOTORCYCLE_FOCAL = 994.978  # px, at the shipped 741 x 500 size
 MOTORCYCLE_CX = 311.193  # px, left camera, integer-centred pixels
