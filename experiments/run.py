@@ -235,7 +235,9 @@ def _add_depth_study(sub):
 
 def _depth_study(args) -> dict:
     from experiments.bench import write_table
-    from experiments.depth_study import run_depth_study, study_command, study_settings
+    from experiments.depth_study import require_onnx, run_depth_study, study_command, study_settings
+
+    require_onnx()  # before any work
 
     task_kw = dict(scene=args.scene, components=args.components, frames=args.frames,
                    size=args.size, init="data", steps_per_frame=args.steps_per_frame)
@@ -250,7 +252,8 @@ def _depth_study(args) -> dict:
 def _add_oracle(sub):
     p = sub.add_parser("oracle", help="splats from a view's ground truth, rendered back (the "
                                       "renderer's check, apart from any learner)")
-    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    p.add_argument("--scene", default="object",
+                   help="object | room | motorcycle (one real RGB-D view) | a dataset folder")
     add_choice(p, "--format", FORMAT)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--size", type=int, default=128, help="image size (longer side)")
@@ -383,7 +386,8 @@ def main(argv: list[str] | None = None) -> int:
         timer = CompileTimer()
         with timer:
             result = COMMANDS[args.command][1](args)
-    except (ValueError, TypeError, OSError) as err:  # OSError: a file that cannot be written
+    except (ValueError, TypeError, OSError, ImportError) as err:  # OSError: a file that cannot
+        # be written; ImportError: an optional dependency a command needs is missing
         return fail(err)
     except KeyboardInterrupt as err:  # Ctrl-C: one line, status 130, no traceback
         return interrupted(err)

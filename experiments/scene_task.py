@@ -116,6 +116,10 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
     learner_cls = LEARNERS[task.method]
     learner_cls.check(task)  # bad settings fail before any work
     scene, depth_report = prepare_scene(task)
+    if not scene.test:
+        raise ValueError(f"scene {task.scene!r} has no held-out test views to score a learner "
+                         f"on ({len(scene.train)} training view(s)); use it with the oracle "
+                         f"command, or pick a scene with more views")
     learner = learner_cls(task, scene)
     if task.protocol == "static" and "static" in learner_cls.PROTOCOLS:
         result = static_protocol(task, scene, learner, learner.static_frames(scene),

@@ -53,6 +53,7 @@ from vbgs.data.scene import (
     select,
     validate_frame,
 )
+from vbgs.data.stereo import REAL_SCENES
 from vbgs.data.synthetic import SCENES, make_scene
 from vbgs.pixels import pixel_centre
 
@@ -298,7 +299,9 @@ def detect_format(folder) -> str:
 
 
 def load_scene(path_or_name, format: str | None = None, **kw) -> Scene:
-    """A synthetic scene by name ("object", "room") or a dataset folder (format detected or given).
+    """A synthetic scene by name ("object", "room"), a real one-frame scene by name
+    ("motorcycle", :mod:`vbgs.data.stereo`; only ``size`` applies) or a dataset folder
+    (format detected or given).
 
     An existing folder wins over a synthetic name. The format is detected by
     :func:`detect_format` unless ``format`` ("blender", "replica", "tum") is given.
@@ -309,10 +312,12 @@ def load_scene(path_or_name, format: str | None = None, **kw) -> Scene:
     path = Path(path_or_name)
     if str(path_or_name) in SCENES and not path.is_dir():
         return make_scene(str(path_or_name), **kw)
+    if str(path_or_name) in REAL_SCENES and not path.is_dir():
+        return REAL_SCENES[str(path_or_name)](size=kw.get("size"))
     if not path.is_dir():
         raise FileNotFoundError(
-            f"{path_or_name!r} is neither a dataset folder nor a synthetic scene "
-            f"name ({', '.join(SCENES)})"
+            f"{path_or_name!r} is neither a dataset folder nor a built-in scene "
+            f"name ({', '.join([*SCENES, *REAL_SCENES])})"
         )
     format = format or detect_format(path)
     if format not in LOADERS:
