@@ -48,7 +48,8 @@ ESTEP = Choice(("dense", "sparse"), "sparse", "E-step over all components, or th
 FORMAT = Choice(("blender", "replica", "tum"), None,
                 "dataset layout of a scene folder (detected from the folder if left out)")
 PROTOCOL = Choice(("continual", "static"), "continual",
-                  "continual: one pass over the stream; static: all frames, shuffled steps")
+                  "continual: frames arrive one by one, once; static: every training frame "
+                  "from the start, --steps steps on frames drawn uniformly (gradient only)")
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")
