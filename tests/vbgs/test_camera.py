@@ -61,7 +61,7 @@ def test_pixel_centres_and_principal_point():
 
 
 def test_every_pixel_grid_uses_the_one_centre_convention():
-    """camera.pixel_grid, camera.pixel_centres and the rasterizer's tile pixels agree."""
+    """camera.pixel_grid, pixels.pixel_centres and the rasterizer's tile pixels agree."""
     from vbgs.raster import _tile_pixels
 
     h, w, tile = 6, 8, 4
