@@ -24,7 +24,7 @@ from depth.onnx_depth import DEFAULT_BATCH_SIZE, OnnxDepth
 from depth.presets import KINDS, PRESETS
 from depth.preview import preview_indices, save_preview
 from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
-from vbgs.data.images import read_image_file
+from vbgs.data.images import read_rgb
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 PREVIEW_NAME = "_preview.png"
@@ -77,21 +77,13 @@ def list_frames(folder: Path) -> list[Path]:
     return frames
 
 
-def read_rgb(path: Path) -> np.ndarray:
-    """An image file as float32 RGB ``[h, w, 3]`` in [0, 1] (grey repeated, alpha dropped)."""
+def read_frame(path: Path) -> np.ndarray:
+    """An input frame as float32 RGB ``[h, w, 3]`` in [0, 1] (alpha dropped); a file
+    that cannot be used is a :class:`CliError` naming it."""
     try:
-        img = read_image_file(path)
-    except ValueError as err:
+        return read_rgb(path)
+    except (OSError, TypeError, ValueError) as err:
         raise CliError(str(err)) from err
-    if img.ndim == 2:
-        img = np.repeat(img[..., None], 3, axis=-1)
-    elif img.ndim == 3 and img.shape[-1] in (2, 4):
-        img = np.repeat(img[..., :1], 3, axis=-1) if img.shape[-1] == 2 else img[..., :3]
-    if img.ndim != 3 or img.shape[-1] != 3:
-        raise CliError(f"{path}: expected an RGB or grey image, got shape {img.shape}")
-    if np.issubdtype(img.dtype, np.integer):
-        return (img / float(np.iinfo(img.dtype).max)).astype(np.float32)
-    return np.clip(img, 0.0, 1.0).astype(np.float32)
 
 
 def check_output_folder(folder: Path) -> None:
@@ -169,7 +161,7 @@ def fit_alignments(model: OnnxDepth, frames: list[Path], refs: dict[str, Path], 
     for path in frames:
         if path.stem not in refs:
             continue
-        rgb = read_rgb(path)
+        rgb = read_frame(path)
         try:
             ref = read_depth_png(refs[path.stem], scale=args.reference_scale)
         except (ValueError, FileNotFoundError) as err:
@@ -230,7 +222,7 @@ def run(args) -> dict:
     try:
         with tqdm(total=len(frames), unit="frame", disable=args.no_progress) as bar:
             for chunk in _batches(list(enumerate(frames)), model.batch_size):
-                rgbs = [read_rgb(path) for _, path in chunk]
+                rgbs = [read_frame(path) for _, path in chunk]
                 same = len({r.shape for r in rgbs}) == 1
                 preds = model.predict(rgbs) if same else [model.predict(r) for r in rgbs]
                 for (i, path), rgb, pred in zip(chunk, rgbs, preds, strict=True):

@@ -11,6 +11,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from vbgs.pixels import PIXEL_CENTRE_OFFSET, pixel_centre
+
 UINT8_MAX = 255.0
 RANGE_TOLERANCE = 1e-3  # float frames may stray this far outside [0, 1] (rounding)
 RGB = 3
@@ -138,7 +140,7 @@ def _axis_taps(n_in: int, n_out: int) -> tuple[np.ndarray, np.ndarray]:
     """
     ratio = n_in / n_out
     radius = max(1.0, ratio)
-    centre = (np.arange(n_out) + 0.5) * ratio - 0.5
+    centre = pixel_centre(np.arange(n_out)) * ratio - PIXEL_CENTRE_OFFSET  # [n_out] in input pixels
     taps = int(np.ceil(2 * radius)) + 1
     first = np.floor(centre - radius).astype(np.int64) + 1
     idx = first[:, None] + np.arange(taps)[None, :]

@@ -24,10 +24,21 @@ DISPARITY_SHIFT = 0.3
 DISPARITY_NOISE = 0.01
 
 
+def require_onnx():
+    """The ``onnx`` module, which builds the study's test model; a clear ImportError
+    naming the extra to install when it is missing."""
+    try:
+        import onnx
+    except ImportError as err:
+        raise ImportError("depth-study builds its test depth model with the 'onnx' package, "
+                          "which is not installed: pip install -e '.[depth-study]' "
+                          "(or pip install onnx)") from err
+    return onnx
+
+
 def write_lookup_model(task: SceneTask, path: Path) -> Path:
     """Save the distorted-depth test model for the task's training frames."""
-    import onnx
-
+    onnx = require_onnx()
     from depth.testing import depth_lookup_model
 
     scene = load_task_scene(task)

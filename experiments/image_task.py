@@ -17,12 +17,12 @@ import jax
 import numpy as np
 
 from experiments.init_schemes import oracle_start
+from experiments.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
 from vbgs import grow, model
 from vbgs.bound import StreamBound, batch_bound
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.fit import fit, stream
 from vbgs.metrics import psnr, ssim
-from vbgs.reassign import MIN_COUNT
 from vbgs.render import render_image
 
 
@@ -34,26 +34,25 @@ class ImageTask:
     size: int | None = 64
     components: int = 2000
     iters: int = 10
-    init: str = "stream"  # stream | data | random (see experiments.init_schemes)
+    init: str = INIT.default  # see experiments.init_schemes
     seed: int = 0
-    stream: str = "none"  # none | patches
-    order: str = "sequential"
-    assign: str = "prior"
+    stream: str = STREAM.default  # none | patches
+    order: str = ORDER.default
+    assign: str = ASSIGN.default
     patch: int = 8
     reassign: bool = True  # batch fits re-seed unused components (streams: opt-in)
-    method: str = "vbgs"  # vbgs | gradient
+    method: str = METHOD.default  # vbgs | gradient
     steps: int = 2000  # gradient baseline only: optimiser steps
     prior: model.PriorConfig = model.PriorConfig()
 
     def __post_init__(self):
-        if self.stream not in ("none", "patches"):
-            raise ValueError(f"stream must be 'none' or 'patches', got {self.stream!r}")
+        for name, choice in (("stream", STREAM), ("order", ORDER), ("assign", ASSIGN),
+                             ("method", METHOD)):
+            choice.check(name, getattr(self, name))
         if not isinstance(self.components, int) or self.components < 1:
             raise ValueError(f"components must be a positive integer, got {self.components!r}")
         if not isinstance(self.iters, int) or self.iters < 1:
             raise ValueError(f"iters must be a positive integer, got {self.iters!r}")
-        if self.method not in ("vbgs", "gradient"):
-            raise ValueError(f"unknown method {self.method!r}: use 'vbgs' or 'gradient'")
         oracle_start(self.init)  # a known scheme
         if self.init == "stream" and self.stream != "none" and self.reassign:
             raise ValueError("reassign moves unused components, but a stream started with "
@@ -148,7 +147,7 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
         "psnr": psnr(render, img),
         "ssim": ssim(render, img),
         "seconds": seconds,
-        "components_used": int((np.asarray(counts) >= MIN_COUNT).sum()),
+        "components_used": int(model.used_components(np.asarray(counts)).sum()),
         "elbo": [float(e) for e in elbo],
         **extra,
         "images": {"target": img, "render": render},

@@ -49,11 +49,11 @@ class OracleScore:
     """Scores of the oracle splats of one source view."""
 
     view: int  # source training frame
-    neighbour: int  # the neighbouring training frame rendered
+    neighbour: int  # the neighbouring training frame rendered (-1: a one-view scene)
     psnr_same: float  # dB over the whole source view
-    psnr_neighbour: float  # dB over the neighbour's covisible pixels
+    psnr_neighbour: float  # dB over the neighbour's covisible pixels (NaN: no neighbour)
     psnr_surround: float  # dB over the source view, with the surrounding frames' splats added
-    covisible: float  # fraction of the neighbour's pixels that are covisible
+    covisible: float  # fraction of the neighbour's pixels that are covisible (NaN: none)
     depth_l1_same: float  # mean |rendered - true| depth over valid pixels of the source view
 
 
@@ -103,28 +103,33 @@ def oracle_score(scene: Scene, view: int = 0, neighbour: int | None = None, *,
                  near: float = NEAR) -> OracleScore:
     """Oracle splats of training frame ``view`` against that frame, a neighbour (default
     the next training frame, or the previous one for the last) and the surroundings
-    (module docstring); ``near`` is the renderer's near plane."""
+    (module docstring); ``near`` is the renderer's near plane. A one-view scene (the
+    real motorcycle frame) gets the same-view scores only: NaN for the neighbour, and
+    the surround score equals the same-view one (no other frames)."""
     n = len(scene.train)
     if not 0 <= view < n:
         raise ValueError(f"view {view} is not a training frame (the scene has {n})")
-    if n < 2:
-        raise ValueError("the oracle check needs at least two training frames")
-    neighbour = (view + 1 if view + 1 < n else view - 1) if neighbour is None else neighbour
-    source, other = scene.train[view], scene.train[neighbour]
+    source = scene.train[view]
     splats = oracle_splats(source)
     if splats.count == 0:
         raise ValueError(f"training frame {view} has no valid depth: nothing to build splats from")
     rgb, depth = render_oracle(splats, source, scene.background, near)
+    same = psnr(rgb, source.rgb)
+    valid = valid_depth(source.depth)
+    depth_l1 = float(np.abs(depth - source.depth)[valid].mean())
+    if n == 1:
+        return OracleScore(view=view, neighbour=-1, psnr_same=same, psnr_neighbour=float("nan"),
+                           psnr_surround=same, covisible=float("nan"), depth_l1_same=depth_l1)
+    neighbour = (view + 1 if view + 1 < n else view - 1) if neighbour is None else neighbour
+    other = scene.train[neighbour]
     rgb_n, _ = render_oracle(splats, other, scene.background, near)
     mask = covisible_mask(source, other)
     around = sorted({(view + int(round(f * n))) % n for f in SURROUND} - {view, neighbour})
     everything = Splats(*(jnp.concatenate(parts) for parts in zip(
         splats, *(oracle_splats(scene.train[i]) for i in around), strict=True)))
     rgb_s, _ = render_oracle(everything, source, scene.background, near)
-    valid = valid_depth(source.depth)
     return OracleScore(
-        view=view, neighbour=neighbour, psnr_same=psnr(rgb, source.rgb),
+        view=view, neighbour=neighbour, psnr_same=same,
         psnr_neighbour=masked_psnr(rgb_n, other.rgb, mask), psnr_surround=psnr(rgb_s, source.rgb),
-        covisible=float(mask.mean()),
-        depth_l1_same=float(np.abs(depth - source.depth)[valid].mean()),
+        covisible=float(mask.mean()), depth_l1_same=depth_l1,
     )

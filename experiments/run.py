@@ -24,7 +24,20 @@ from experiments.cli_common import (
     meaningless_score_warning,
     print_result,
 )
-from experiments.init_schemes import INIT_HELP, INITS
+from experiments.settings import (
+    ASSIGN,
+    DEPTH_KIND,
+    ESTEP,
+    FORMAT,
+    INIT,
+    METHOD,
+    OPACITY_RULE,
+    ORDER,
+    PROTOCOL,
+    REPLAY_DEFAULT,
+    STREAM,
+    add_choice,
+)
 
 
 def _add_fit_image(sub):
@@ -33,15 +46,15 @@ def _add_fit_image(sub):
     p.add_argument("--size", type=int, default=64, help="resize to SIZE x SIZE (0: keep)")
     p.add_argument("--components", type=int, default=2000)
     p.add_argument("--iters", type=int, default=10, help="CAVI iterations (batch fits)")
-    p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
+    add_choice(p, "--init", INIT)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--stream", choices=["none", "patches"], default="none")
-    p.add_argument("--order", choices=["sequential", "shuffled", "reversed"], default="sequential")
-    p.add_argument("--assign", choices=["prior", "posterior"], default="prior")
+    add_choice(p, "--stream", STREAM)
+    add_choice(p, "--order", ORDER)
+    add_choice(p, "--assign", ASSIGN)
     p.add_argument("--patch", type=int, default=8, help="patch side for --stream patches")
     p.add_argument("--reassign", choices=["on", "off", "auto"], default="auto",
                    help="re-seed unused components (auto: on for batch fits, off for streams)")
-    p.add_argument("--method", choices=["vbgs", "gradient"], default="vbgs")
+    add_choice(p, "--method", METHOD)
     p.add_argument("--steps", type=int, default=2000, help="optimiser steps (gradient)")
     p.add_argument("--save", metavar="PNG", help="write target, render and error side by side")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
@@ -71,36 +84,33 @@ def _fit_image(args) -> dict:
 def _add_fit_scene(sub):
     p = sub.add_parser("fit-scene", help="learn a 3-D splat from a stream of RGB-D frames")
     p.add_argument("--scene", default="object", help="object | room | a dataset folder")
-    p.add_argument("--format", choices=["blender", "replica", "tum"], default=None,
-                   help="dataset layout (detected from the folder if left out)")
-    p.add_argument("--method", choices=["vbgs", "gradient"], default="vbgs")
+    add_choice(p, "--format", FORMAT)
+    add_choice(p, "--method", METHOD)
     p.add_argument("--components", type=int, default=20000, help="components / splat capacity")
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
     p.add_argument("--size", type=int, default=128, help="image size (longer side)")
-    p.add_argument("--order", choices=["sequential", "shuffled", "reversed"], default="sequential")
-    p.add_argument("--assign", choices=["prior", "posterior"], default="prior")
-    p.add_argument("--estep", choices=["dense", "sparse"], default="sparse")
+    add_choice(p, "--order", ORDER)
+    add_choice(p, "--assign", ASSIGN)
+    add_choice(p, "--estep", ESTEP)
     p.add_argument("--candidates", type=int, default=16, help="components per point (sparse)")
-    p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
+    add_choice(p, "--init", INIT)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--opacity", type=float, default=None, help="VBGS splat opacity")
     p.add_argument("--splat-scale", type=float, default=None,
                    help="VBGS splat covariance scale (sigma multiplier)")
-    p.add_argument("--replay", default="none", help="gradient: none | fifo:K | reservoir:K | full")
+    p.add_argument("--replay", default=REPLAY_DEFAULT, help="gradient: none | fifo:K | reservoir:K | full")
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--steps", type=int, default=3000, help="gradient, static protocol")
-    p.add_argument("--protocol", choices=["continual", "static"], default="continual")
+    add_choice(p, "--protocol", PROTOCOL)
     p.add_argument("--skip-margin", type=float, default=None, metavar="NATS",
                    help="VBGS: skip points explained within NATS of their component's peak")
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
-    p.add_argument("--depth-kind", choices=["metric", "inverse", "relative"], default="inverse")
+    add_choice(p, "--depth-kind", DEPTH_KIND)
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
     p.add_argument("--depth-align", default="auto",
                    help="auto | none | median | scale-shift | scale-shift-inverse")
-    p.add_argument("--opacity-rule", choices=["evidence", "constant"], default="evidence",
-                   help="VBGS splat opacity: per component from hit/pass-through rays "
-                        "(evidence) or the constant --opacity")
+    add_choice(p, "--opacity-rule", OPACITY_RULE)
     p.add_argument("--background", default="auto",
                    help="auto (estimated from the pixels without depth of the frames seen) "
                         "or R,G,B in [0, 1]")
@@ -146,15 +156,15 @@ def _add_tune(sub):
     p = sub.add_parser("tune", help="learn one stream, then score a grid of render settings "
                                     "on validation views; writes OUT/SCENE.csv and .md")
     p.add_argument("--scene", default="object", help="object | room | a dataset folder")
-    p.add_argument("--format", choices=["blender", "replica", "tum"], default=None)
-    p.add_argument("--method", choices=["vbgs", "gradient"], default="vbgs")
+    add_choice(p, "--format", FORMAT)
+    add_choice(p, "--method", METHOD)
     p.add_argument("--components", type=int, default=20000)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--val-views", type=int, default=4, help="validation views (at most)")
     p.add_argument("--size", type=int, default=128, help="image size (longer side)")
-    p.add_argument("--order", choices=["sequential", "shuffled", "reversed"], default="sequential")
-    p.add_argument("--assign", choices=["prior", "posterior"], default="prior")
-    p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
+    add_choice(p, "--order", ORDER)
+    add_choice(p, "--assign", ASSIGN)
+    add_choice(p, "--init", INIT)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--background", default="auto", help="auto or R,G,B in [0, 1]")
     p.add_argument("--grid", nargs="+", default=DEFAULT_GRID, metavar="NAME=V1,V2",
@@ -216,8 +226,7 @@ def _add_depth_study(sub):
     p.add_argument("--components", type=int, default=5000)
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--size", type=int, default=64)
-    p.add_argument("--methods", nargs="+", choices=["vbgs", "gradient"],
-                   default=["vbgs", "gradient"])
+    p.add_argument("--methods", nargs="+", choices=METHOD.values, default=list(METHOD.values))
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--out", default="results/depth_study")
     p.add_argument("--json", action="store_true")
@@ -225,7 +234,9 @@ def _add_depth_study(sub):
 
 def _depth_study(args) -> dict:
     from experiments.bench import write_table
-    from experiments.depth_study import run_depth_study, study_command, study_settings
+    from experiments.depth_study import require_onnx, run_depth_study, study_command, study_settings
+
+    require_onnx()  # before any work
 
     task_kw = dict(scene=args.scene, components=args.components, frames=args.frames,
                    size=args.size, init="data", steps_per_frame=args.steps_per_frame)
@@ -240,8 +251,9 @@ def _depth_study(args) -> dict:
 def _add_oracle(sub):
     p = sub.add_parser("oracle", help="splats from a view's ground truth, rendered back (the "
                                       "renderer's check, apart from any learner)")
-    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
-    p.add_argument("--format", choices=["blender", "replica", "tum"], default=None)
+    p.add_argument("--scene", default="object",
+                   help="object | room | motorcycle (one real RGB-D view) | a dataset folder")
+    add_choice(p, "--format", FORMAT)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--size", type=int, default=128, help="image size (longer side)")
     p.add_argument("--view", type=int, default=0, help="source training frame")
@@ -403,7 +415,8 @@ def main(argv: list[str] | None = None) -> int:
         timer = CompileTimer()
         with timer:
             result = COMMANDS[args.command][1](args)
-    except (ValueError, TypeError, OSError) as err:  # OSError: a file that cannot be written
+    except (ValueError, TypeError, OSError, ImportError) as err:  # OSError: a file that cannot
+        # be written; ImportError: an optional dependency a command needs is missing
         return fail(err)
     except KeyboardInterrupt as err:  # Ctrl-C: one line, status 130, no traceback
         return interrupted(err)

@@ -13,16 +13,26 @@ from pathlib import Path
 import numpy as np
 
 from experiments.init_schemes import oracle_start
-from experiments.learners import LEARNERS, METHODS
+from experiments.learners import LEARNERS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
+from experiments.settings import (
+    ASSIGN,
+    DEPTH_KIND,
+    ESTEP,
+    FORMAT,
+    INIT,
+    METHOD,
+    OPACITY_RULE,
+    ORDER,
+    PROTOCOL,
+    REPLAY_DEFAULT,
+)
 from vbgs import model
 from vbgs.background import parse_background
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
 from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
 
-PROTOCOLS = ("continual", "static")
-OPACITY_RULES = ("evidence", "constant")
 
 
 @dataclass(frozen=True)
@@ -30,32 +40,32 @@ class SceneTask:
     """Everything that defines one scene run."""
 
     scene: str = "object"
-    format: str | None = None
-    method: str = "vbgs"
+    format: str | None = FORMAT.default
+    method: str = METHOD.default
     components: int = 20000
     frames: int = 60
     n_test: int = 8
     n_val: int = 4  # validation views (tuning only: never scored by the protocol)
     size: int = 128
-    order: str = "sequential"
-    assign: str = "prior"
-    estep: str = "sparse"
+    order: str = ORDER.default
+    assign: str = ASSIGN.default
+    estep: str = ESTEP.default
     candidates: int = 16
-    init: str = "stream"  # stream | data | random (see experiments.init_schemes)
+    init: str = INIT.default  # see experiments.init_schemes
     seed: int = 0
-    opacity_rule: str = "evidence"  # evidence (per component, vbgs.opacity) | constant
+    opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
     splat_scale: float = VBGS_COV_SCALE
     depth_model: str | None = None
-    depth_kind: str = "inverse"
+    depth_kind: str = DEPTH_KIND.default
     depth_preset: str | None = None
     depth_align: str = "auto"
     background: str = "auto"  # auto (from pixels without depth, as frames arrive) | R,G,B
     # gradient baseline only (see experiments.learners.gradient_learner)
-    replay: str = "none"
+    replay: str = REPLAY_DEFAULT
     steps_per_frame: int = 50
     steps: int = 3000
-    protocol: str = "continual"  # continual | static
+    protocol: str = PROTOCOL.default
     # VBGS: skip points explained within this many nats (None: learn every point; vbgs.skip)
     skip_margin: float | None = None
     prior: model.PriorConfig = field(default_factory=model.PriorConfig)
@@ -67,15 +77,12 @@ class SceneTask:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if not isinstance(self.n_val, int) or self.n_val < 0:
             raise ValueError(f"n_val must be a non-negative integer, got {self.n_val!r}")
-        if self.method not in METHODS:
-            raise ValueError(f"unknown method {self.method!r}: use one of {METHODS}")
+        for name, choice in (("method", METHOD), ("protocol", PROTOCOL), ("order", ORDER),
+                             ("assign", ASSIGN), ("estep", ESTEP), ("format", FORMAT),
+                             ("depth_kind", DEPTH_KIND), ("opacity_rule", OPACITY_RULE)):
+            choice.check(name, getattr(self, name))
         oracle_start(self.init)  # a known scheme
-        if self.protocol not in PROTOCOLS:
-            raise ValueError(f"unknown protocol {self.protocol!r}: use one of {PROTOCOLS}")
         parse_background(self.background)  # fails on a malformed R,G,B
-        if self.opacity_rule not in OPACITY_RULES:
-            raise ValueError(f"unknown opacity rule {self.opacity_rule!r}: use one of "
-                             f"{OPACITY_RULES}")
 
 
 def load_task_scene(task: SceneTask) -> Scene:
@@ -109,6 +116,10 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
     learner_cls = LEARNERS[task.method]
     learner_cls.check(task)  # bad settings fail before any work
     scene, depth_report = prepare_scene(task)
+    if not scene.test:
+        raise ValueError(f"scene {task.scene!r} has no held-out test views to score a learner "
+                         f"on ({len(scene.train)} training view(s)); use it with the oracle "
+                         f"command, or pick a scene with more views")
     learner = learner_cls(task, scene)
     if task.protocol == "static" and "static" in learner_cls.PROTOCOLS:
         result = static_protocol(task, scene, learner, learner.static_frames(scene),

@@ -42,7 +42,7 @@ def expected_loglik(q: model.Mixture, xyz, rgb, *, config: model.PriorConfig = m
                     n_candidates: int = candidates.DEFAULT_CANDIDATES) -> float:
     """``sum_n log sum_k exp(l_nk)`` of the batch ``xyz [n, d]``, ``rgb [n, 3]`` under
     ``q`` (sparse: over each point's candidates, a lower bound on the dense value)."""
-    _, info = model.update(model.start(q), xyz, rgb, assign="prior", config=config, estep=estep,
+    _, info = model.update(model.start(q, config), xyz, rgb, assign="prior", estep=estep,
                            n_candidates=n_candidates)
     return float(info.elbo)
 

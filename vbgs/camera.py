@@ -17,7 +17,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import jax
 import numpy as np
+
+from vbgs.pixels import pixel_centres
 
 # Flip of the y and z camera axes: OpenGL/Blender camera frame <-> OpenCV frame.
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -28,6 +31,10 @@ class Camera(NamedTuple):
 
     fx, fy, cx, cy: intrinsics in pixels; width, height: image size in pixels;
     pose: ``[4, 4]`` camera-to-world transform (OpenCV axes).
+
+    A JAX pytree whose leaves are the intrinsics and the pose; ``width`` and
+    ``height`` are static (part of the tree's structure), so a camera passes through
+    ``jax.jit`` as one argument and a jitted function compiles once per image size.
     """
 
     fx: float
@@ -60,6 +67,19 @@ class Camera(NamedTuple):
         return self.pose[:3, 3]
 
 
+def _camera_children(cam: Camera):
+    keys = ("fx", "fy", "cx", "cy", "pose")
+    return tuple((jax.tree_util.GetAttrKey(k), getattr(cam, k)) for k in keys), (cam.width, cam.height)
+
+
+def _camera_from_children(sizes, children) -> Camera:
+    fx, fy, cx, cy, pose = children
+    return Camera(fx, fy, cx, cy, *sizes, pose)
+
+
+jax.tree_util.register_pytree_with_keys(Camera, _camera_children, _camera_from_children)
+
+
 def from_fov(width: int, height: int, fov_x: float, pose: np.ndarray) -> Camera:
     """A camera with square pixels and horizontal field of view ``fov_x`` (radians)."""
     f = 0.5 * width / np.tan(0.5 * fov_x)
@@ -90,9 +110,9 @@ def opengl_to_opencv(pose_gl: np.ndarray) -> np.ndarray:
 
 
 def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-    """Image coordinates ``u, v`` of every pixel centre, each ``[height, width]``."""
-    v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float64) + 0.5
-    return u, v
+    """Image coordinates ``u, v`` of every pixel centre, each ``[height, width]`` float64."""
+    uv = pixel_centres(camera.height, camera.width, np.float64).reshape(camera.height, camera.width, 2)
+    return uv[..., 0], uv[..., 1]
 
 
 def valid_depth(depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.pixels import pixel_centre
 from vbgs.precision import matmul
 
 ALPHA_MAX = 0.99  # clamp on a single splat's alpha (keeps 1 - α > 0 for the gradients)
@@ -87,8 +88,8 @@ def tile_pixel_coords(tile_id, n_tiles_x, tile):
     row-major pixels within the tile), from an iota (also inside a Pallas kernel)."""
     lane = jax.lax.broadcasted_iota(jnp.int32, (tile * tile,), 0)
     ty, tx = tile_id // n_tiles_x, tile_id % n_tiles_x
-    u = (tx * tile + lane % tile).astype(jnp.float32) + 0.5
-    v = (ty * tile + lane // tile).astype(jnp.float32) + 0.5
+    u = pixel_centre((tx * tile + lane % tile).astype(jnp.float32))
+    v = pixel_centre((ty * tile + lane // tile).astype(jnp.float32))
     return u, v
 
 

@@ -133,17 +133,15 @@ def fit_steps(
     :func:`vbgs.reassign.reassign` (the slow, obvious reference of the compiled fit;
     ``callback(t, state, info)`` observes each iteration)."""
     _check_iters(iters)
-    empty = start(prior).stats
-    state = start(prior)
+    state = start(prior, config)
+    empty = state.stats
     trace, moved, converged = [], 0, False
     for t in range(iters):
-        state, info = update(State(state.prior, state.posterior, empty), xyz, rgb,
-                             assign="posterior", config=config)
+        state, info = update(state._replace(stats=empty), xyz, rgb, assign="posterior")
         trace.append(float(info.elbo))
         if key is not None:
             key, sub = jax.random.split(key)
-            state, rinfo = reassign(state, xyz, rgb, info.point_loglik, key=sub,
-                                     colour_noise=config.colour_noise)
+            state, rinfo = reassign(state, xyz, rgb, info.point_loglik, key=sub)
             moved += int(rinfo.n_moved)
         if callback is not None:
             callback(t, state, info)
@@ -179,7 +177,7 @@ def stream(
     model changes every batch and each goes through :func:`update`. ``estep`` and
     ``n_candidates`` are as in :func:`update`.
     """
-    state = start(prior)
+    state = start(prior, config)
     step = None if key is not None else Stepper(prior, assign=assign, config=config,
                                                  estep=estep, n_candidates=n_candidates)
     for i, (xyz, rgb) in enumerate(batches):
@@ -189,11 +187,10 @@ def stream(
                 info = Info(info.elbo, np.asarray(info.point_loglik)[: len(xyz)])
         else:
             key, sub = jax.random.split(key)
-            _, scored = update(state, xyz, rgb, assign=assign, config=config, estep=estep,
+            _, scored = update(state, xyz, rgb, assign=assign, estep=estep,
                                n_candidates=n_candidates)
-            state, _ = reassign(state, xyz, rgb, scored.point_loglik, key=sub,
-                                colour_noise=config.colour_noise)
-            state, info = update(state, xyz, rgb, assign=assign, config=config, estep=estep,
+            state, _ = reassign(state, xyz, rgb, scored.point_loglik, key=sub)
+            state, info = update(state, xyz, rgb, assign=assign, estep=estep,
                                  n_candidates=n_candidates)
         if callback is not None:
             callback(i, state, info)

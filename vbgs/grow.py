@@ -210,7 +210,7 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     dtype = prior.alpha.dtype
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha))
-    return (State(new_prior, m_step(new_prior, state.stats), state.stats),
+    return (state._replace(prior=new_prior, posterior=m_step(new_prior, state.stats)),
             GrowInfo(n_new, n_ground, int(active.sum()) + n_new))
 
 

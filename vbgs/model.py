@@ -65,6 +65,10 @@ class PriorConfig:
                 raise ValueError(f"PriorConfig.{name} must be a positive finite number, got {value!r}")
 
 
+# A config is part of a State's structure, not an array: jit sees it as static.
+jax.tree_util.register_static(PriorConfig)
+
+
 class Mixture(NamedTuple):
     """Parameters of the whole mixture; the prior and the posterior share this type.
 
@@ -85,12 +89,34 @@ class Mixture(NamedTuple):
         return self.origin.shape[0]
 
 
+# Points' worth of responsibility ``N_k = sum_n r_nk`` (= ``alpha_k - alpha0_k``) from
+# which a component counts as used; below it its weight is still at its prior.
+MIN_USED_COUNT = 0.5
+
+
+def used_components(counts, min_count: float = MIN_USED_COUNT):
+    """``used_k = (N_k >= min_count)``, ``[k]`` bool, from counts ``N [k]`` (NumPy or JAX).
+
+    The one "component used" rule: unused components are re-seeded
+    (:mod:`vbgs.reassign`), pruned from splats (:func:`vbgs.splats.from_posterior`)
+    and left out of the "components used" figures.
+    """
+    return counts >= min_count
+
+
 class State(NamedTuple):
-    """What streaming carries from batch to batch: no data, only summed statistics."""
+    """What streaming carries from batch to batch: no data, only summed statistics.
+
+    ``config``: the hyperparameters the state was started with (:func:`start`), static
+    under jit; :func:`update` uses them and refuses a different config. None marks an
+    unbound state (started without a config, or rebuilt field by field): then each
+    :func:`update` call's ``config`` applies, default :class:`PriorConfig`.
+    """
 
     prior: Mixture
     posterior: Mixture
     stats: Stats
+    config: PriorConfig | None = None
 
 
 class Info(NamedTuple):
@@ -264,8 +290,16 @@ def bucket_size(n: int) -> int:
     return -(-n // step) * step
 
 
-def _features(x: jnp.ndarray, c: jnp.ndarray | None) -> jnp.ndarray:
-    """``phi = [vec(x x^T), x, c, 1]`` per point, ``[n, d*d + d (+ 3) + 1]``."""
+def features(x: jnp.ndarray, c: jnp.ndarray | None) -> jnp.ndarray:
+    """``phi = [vec(x x^T), x, c, 1]`` per point, ``[n, d*d + d (+ 3) + 1]``.
+
+    ``x [n, d]`` positions (about the mixture's origin), ``c [n, 3]`` colours or None.
+    The log-joint of point n under component k is linear in these features,
+    ``l_nk = phi_n . w_k - |c_n|^2 / (2 sigma_c^2)`` with ``w_k`` from
+    :func:`log_joint_weights` (the colour-norm term is the same for every k), and the
+    sufficient statistics are their responsibility-weighted sums
+    ``sum_n r_nk phi_n`` (:func:`moments_to_stats`).
+    """
     parts = [(x[:, :, None] * x[:, None, :]).reshape(x.shape[0], -1), x]
     if c is not None:
         parts.append(c)
@@ -340,7 +374,7 @@ def pad_points(x: jnp.ndarray, c: jnp.ndarray, size: int):
 
 
 def moments_to_stats(acc: jnp.ndarray, d: int) -> Stats:
-    """Split summed ``r_nk phi_n`` rows ``[k, F]`` (see :func:`_features`) into Stats."""
+    """Split summed ``r_nk phi_n`` rows ``[k, F]`` (see :func:`features`) into Stats."""
     k = acc.shape[0]
     return Stats(
         count=acc[:, -1],
@@ -383,7 +417,7 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
 
     def one_chunk(acc, batch):
         xb, cb, wb, candb = batch
-        phi = _features(xb, cb)  # [chunk, F]
+        phi = features(xb, cb)  # [chunk, F]
         if candb is None:
             logits = feature_logits(phi, reference) - inv2var * jnp.sum(cb**2, -1, keepdims=True)
         else:
@@ -427,9 +461,26 @@ def kl(q: Mixture, p: Mixture, colour_noise: float) -> jnp.ndarray:
 # ------------------------------------------------------------------ update and fit
 
 
-def start(prior: Mixture) -> State:
-    """The state before any data: posterior = prior, no statistics."""
-    return State(prior, prior, expfam.zero_stats(prior.n_components, prior.dim, prior.alpha.dtype))
+def start(prior: Mixture, config: PriorConfig | None = None) -> State:
+    """The state before any data: posterior = prior, no statistics, bound to ``config``
+    (the hyperparameters every :func:`update` of this state uses; None: unbound)."""
+    stats = expfam.zero_stats(prior.n_components, prior.dim, prior.alpha.dtype)
+    return State(prior, prior, stats, config)
+
+
+def bound_config(state: State, config: PriorConfig | None = None) -> PriorConfig:
+    """The hyperparameters an update of ``state`` uses: the state's own, else ``config``,
+    else the defaults. A ``config`` that differs from the state's is refused: it would
+    silently change the likelihood in the middle of a stream."""
+    if state.config is None:
+        return PriorConfig() if config is None else config
+    if config is not None and config != state.config:
+        raise ValueError(
+            f"config {config} differs from the one this state was started with "
+            f"({state.config}); start a new state with model.start(prior, config) to "
+            "change hyperparameters, or leave config out"
+        )
+    return state.config
 
 
 @partial(jax.jit, static_argnames=("assign", "colour_noise", "chunk"))
@@ -450,7 +501,7 @@ def update(
     rgb,
     *,
     assign: Assign = "prior",
-    config: PriorConfig = PriorConfig(),
+    config: PriorConfig | None = None,
     estep: EStep = "dense",
     n_candidates: int = candidates.DEFAULT_CANDIDATES,
 ) -> tuple[State, Info]:
@@ -461,7 +512,10 @@ def update(
     posterior (online variational Bayes, order-dependent). No data are kept.
     ``estep="sparse"`` scores each point against its ``n_candidates`` nearest
     components only (:mod:`vbgs.candidates`); ``"dense"`` against all of them.
+    ``config``: only needed for an unbound state (see :class:`State` and
+    :func:`bound_config`); a bound state's own config is used and a different one refused.
     """
+    config = bound_config(state, config)
     if assign not in ("prior", "posterior"):
         raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
     if estep not in ("dense", "sparse"):
@@ -481,4 +535,4 @@ def update(
         chunk = chunk_size(size, state.prior.n_components)
     posterior, stats, info = _update(state, x, c, w, cand, assign, float(config.colour_noise),
                                      chunk)
-    return State(state.prior, posterior, stats), Info(info.elbo, info.point_loglik[:n])
+    return state._replace(posterior=posterior, stats=stats), Info(info.elbo, info.point_loglik[:n])

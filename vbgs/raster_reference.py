@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbgs.camera import Camera
+from vbgs.camera import Camera, pixel_grid
 from vbgs.raster import (
     ALPHA_MAX,
     ALPHA_MIN,
@@ -89,7 +89,7 @@ def render_reference(splats: Splats, camera: Camera, *, background=(0.0, 0.0, 0.
     opacities = np.asarray(splats.opacities, np.float64)
     background = np.broadcast_to(np.asarray(background, np.float64), (3,))
     h, w = int(camera.height), int(camera.width)
-    v, u = np.mgrid[0:h, 0:w] + 0.5
+    u, v = pixel_grid(camera)  # [h, w] each
     trans, rgb, dep = np.ones((h, w)), np.zeros((h, w, 3)), np.zeros((h, w))
     for i in sorted(np.flatnonzero(keep), key=lambda i: depth[i]):
         d = np.stack([u - uv[i, 0], v - uv[i, 1]], -1)  # [h, w, 2]

@@ -19,10 +19,18 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from vbgs.model import Mixture, State, _features, log_joint_weights, m_step
+from vbgs.model import (
+    MIN_USED_COUNT,
+    Mixture,
+    State,
+    bound_config,
+    features,
+    log_joint_weights,
+    m_step,
+    used_components,
+)
 
-# Points' worth of responsibility below which a component counts as unused.
-MIN_COUNT = 0.5
+MIN_COUNT = MIN_USED_COUNT  # the model's "used" threshold, under the name callers already import
 
 
 class ReassignInfo(NamedTuple):
@@ -33,7 +41,7 @@ class ReassignInfo(NamedTuple):
 
 def fresh_loglik(q: Mixture, colour_noise: float) -> jnp.ndarray:
     """``l_kk``: each component's log-joint at its own spatial and colour means, ``[k]``."""
-    phi = _features(q.space.mean, q.colour.mean)  # [k, F]
+    phi = features(q.space.mean, q.colour.mean)  # [k, F]
     own = jnp.sum(phi * log_joint_weights(q, colour_noise), -1)
     return own - 0.5 * jnp.sum(q.colour.mean**2, -1) / colour_noise**2
 
@@ -51,7 +59,7 @@ def reassign_centred(state: State, x, c, point_loglik, key, min_count,
     ``c [n, 3]`` and log-likelihoods ``[n]``, all on the device (compiled; callable
     inside a compiled loop such as :func:`vbgs.fit.fit`'s)."""
     pool = int(min(x.shape[0], state.prior.n_components))
-    unused = state.stats.count < min_count  # [k]
+    unused = ~used_components(state.stats.count, min_count)  # [k]
     fresh = jnp.max(jnp.where(unused, fresh_loglik(state.posterior, colour_noise), -jnp.inf))
     poor = point_loglik < fresh  # [n]
     priority = jnp.where(poor, jax.random.uniform(key, poor.shape), 2.0)
@@ -65,7 +73,7 @@ def reassign_centred(state: State, x, c, point_loglik, key, min_count,
         return jnp.where(moved.reshape((-1,) + (1,) * (a.ndim - 1)), 0.0, a)
 
     stats = jax.tree_util.tree_map(clear, state.stats)
-    return State(prior, m_step(prior, stats), stats), ReassignInfo(moved, moved.sum(), poor.sum())
+    return state._replace(prior=prior, posterior=m_step(prior, stats), stats=stats), ReassignInfo(moved, moved.sum(), poor.sum())
 
 
 def reassign(
@@ -75,13 +83,16 @@ def reassign(
     point_loglik,
     *,
     key: jax.Array,
-    colour_noise: float,
+    colour_noise: float | None = None,
     min_count: float = MIN_COUNT,
 ) -> tuple[State, ReassignInfo]:
     """Move unused components onto poorly explained points of the batch
     ``xyz [n, d]``, ``rgb [n, 3]``, given each point's log-likelihood ``[n]`` under the
     model (``Info.point_loglik`` of an update). At most one component per point;
-    deterministic under ``key``."""
+    deterministic under ``key``. ``colour_noise``: the state's bound config's when left
+    out (:func:`vbgs.model.bound_config`)."""
+    if colour_noise is None:
+        colour_noise = bound_config(state).colour_noise
     prior = state.prior
     dtype = prior.alpha.dtype
     x = jnp.asarray(xyz, dtype) - prior.origin

@@ -11,8 +11,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.data.images import pixel_centres
-from vbgs.model import (Mixture, _features, bucket_size, chunk_size, feature_logits,
+from vbgs.pixels import pixel_centres
+from vbgs.model import (Mixture, features, bucket_size, chunk_size, feature_logits,
                         log_joint_weights)
 from vbgs.precision import matmul
 
@@ -22,7 +22,7 @@ def _expected_colour(q: Mixture, x: jnp.ndarray, chunk: int) -> jnp.ndarray:
     weights = log_joint_weights(q, colour_noise=None)  # [k, F]
 
     def one_chunk(xb):
-        logits = feature_logits(_features(xb, None), weights)  # [chunk, k], full float32
+        logits = feature_logits(features(xb, None), weights)  # [chunk, k], full float32
         return matmul(jax.nn.softmax(logits, -1), q.colour.mean)  # [chunk, 3]
 
     out = jax.lax.map(one_chunk, x.reshape(-1, chunk, x.shape[-1]))

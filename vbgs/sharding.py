@@ -73,9 +73,10 @@ def shard_state(state: State, on: Mesh) -> State:
         raise ValueError(f"{k} components do not split evenly over {n} devices: "
                          f"use a multiple of {n} components")
     split, whole = NamedSharding(on, P(AXIS)), NamedSharding(on, P())
-    return State(_shard_mixture(state.prior, split, whole),
-                 _shard_mixture(state.posterior, split, whole),
-                 jax.tree_util.tree_map(lambda a: jax.device_put(a, split), state.stats))
+    return state._replace(prior=_shard_mixture(state.prior, split, whole),
+                          posterior=_shard_mixture(state.posterior, split, whole),
+                          stats=jax.tree_util.tree_map(lambda a: jax.device_put(a, split),
+                                                       state.stats))
 
 
 def shard_prior(prior: Mixture, on: Mesh) -> Mixture:

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from vbgs.model import Mixture, _features, bucket_size, log_joint_weights
+from vbgs.model import Mixture, bucket_size, features, log_joint_weights
 from vbgs.reassign import fresh_loglik
 
 MIN_COUNT = 2.0  # points' worth of data a component needs before it can explain a point
@@ -33,7 +33,7 @@ MIN_COUNT = 2.0  # points' worth of data a component needs before it can explain
 @jax.jit
 def _scores(q: Mixture, x, c, nearest, colour_noise):
     weights = log_joint_weights(q, colour_noise)  # [k, F]
-    own = jnp.sum(_features(x, c) * weights[nearest], -1) - 0.5 * jnp.sum(c**2, -1) / colour_noise**2
+    own = jnp.sum(features(x, c) * weights[nearest], -1) - 0.5 * jnp.sum(c**2, -1) / colour_noise**2
     return own, fresh_loglik(q, colour_noise)[nearest]
 
 

@@ -277,7 +277,7 @@ def mixture_geometry(mixture) -> tuple[jax.Array, jax.Array]:
 
 
 def from_posterior(posterior, prior, *, opacity: float = VBGS_OPACITY,
-                   cov_scale: float = VBGS_COV_SCALE, min_count: float = 0.5,
+                   cov_scale: float = VBGS_COV_SCALE, min_count: float | None = None,
                    drop_unused: bool = True, opacities=None) -> Splats:
     """Splats from a fitted 3-D VBGS mixture (``vbgs.model.Mixture``).
 
@@ -285,7 +285,8 @@ def from_posterior(posterior, prior, *, opacity: float = VBGS_OPACITY,
     cov_scale^2 Psi_k / (nu_k - 4)``; colours: ``E[mu_c,k]`` clipped to [0, 1];
     opacities: per component ``opacities [k]`` when given (e.g. from evidence,
     :mod:`vbgs.opacity`), else the constant ``opacity``. Components that received less
-    than ``min_count`` points' worth of data (``alpha_k - alpha0_k``) never saw the
+    than ``min_count`` points' worth of data (``alpha_k - alpha0_k``; default
+    :data:`vbgs.model.MIN_USED_COUNT`, :func:`vbgs.model.used_components`) never saw the
     scene: they are pruned, or with ``drop_unused=False`` kept with opacity 0 (the
     rasterizer skips them), so that the splat count, and with it the compiled
     renderer, stays the same while a stream is learned.
@@ -293,7 +294,10 @@ def from_posterior(posterior, prior, *, opacity: float = VBGS_OPACITY,
     means, covs = mixture_geometry(posterior)
     if not (0.0 < opacity <= 1.0) or cov_scale <= 0:
         raise ValueError(f"opacity must be in (0, 1] and cov_scale > 0, got {opacity}, {cov_scale}")
-    used = (posterior.alpha - prior.alpha) >= min_count
+    from vbgs.model import MIN_USED_COUNT, used_components  # local, as mixture_geometry
+
+    used = used_components(posterior.alpha - prior.alpha,
+                           MIN_USED_COUNT if min_count is None else min_count)  # [k]
     chosen = opacity if opacities is None else jnp.clip(jnp.asarray(opacities), 0.0, 1.0)
     splats = Splats(
         means=means,

@@ -170,5 +170,5 @@ class Stepper:
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)
         posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)
-        return State(state.prior, posterior, stats), info
+        return state._replace(posterior=posterior, stats=stats), info
 

@@ -27,8 +27,20 @@ from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any
 
-from experiments.init_schemes import INITS
+from experiments.settings import (
+    ASSIGN,
+    DEPTH_KIND,
+    ESTEP,
+    FORMAT,
+    INIT,
+    METHOD,
+    OPACITY_RULE,
+    ORDER,
+    PROTOCOL,
+    STREAM,
+)
 from experiments.sweep.tasks import TASKS, TaskUnavailable
+from vbgs.baseline.replay import parse_replay
 
 
 class ConfigError(ValueError):
@@ -36,13 +48,12 @@ class ConfigError(ValueError):
 
 
 def _replay(value: str) -> str | None:
-    """none | full | fifo:K | reservoir:K with K >= 1; returns a problem or None."""
-    if value in ("none", "full"):
-        return None
-    kind, _, size = value.partition(":")
-    if kind in ("fifo", "reservoir") and size.isdigit() and int(size) >= 1:
-        return None
-    return "must be none, full, fifo:K or reservoir:K (K a positive integer)"
+    """The problem :func:`vbgs.baseline.replay.parse_replay` finds in a spec, or None."""
+    try:
+        parse_replay(value)
+    except (TypeError, ValueError) as err:
+        return str(err)
+    return None
 
 
 def _depth_model(value: str) -> str | None:
@@ -71,26 +82,26 @@ _INT, _STR = (int,), (str,)
 SETTINGS: dict[str, Spec] = {
     "task": Spec(_STR, "which task runs the cell", tuple(TASKS)),
     "dataset": Spec(_STR, "photo name, synthetic scene (object, room) or a dataset path"),
-    "method": Spec(_STR, "vbgs, or the gradient 3DGS baseline", ("vbgs", "gradient")),
+    "method": Spec(_STR, METHOD.help, METHOD.values),
     "size": Spec(_INT, "image side / frame width in pixels", minimum=1),
     "components": Spec(_INT, "mixture components (capacity)", minimum=1),
     "iters": Spec(_INT, "CAVI iterations of a batch image fit", minimum=1),
     "init": Spec(_STR, "component initialisation (data, random: oracle starts on a stream)",
-                 INITS),
+                 INIT.values),
     "seed": Spec(_INT, "random seed", minimum=0),
-    "stream": Spec(_STR, "image fit on all pixels, or a stream of patches",
-                   ("none", "patches")),
-    "order": Spec(_STR, "stream order", ("sequential", "shuffled", "reversed")),
-    "assign": Spec(_STR, "responsibilities under the prior or the current posterior",
-                   ("prior", "posterior")),
+    "stream": Spec(_STR, STREAM.help, STREAM.values),
+    "order": Spec(_STR, ORDER.help, ORDER.values),
+    "assign": Spec(_STR, ASSIGN.help, ASSIGN.values),
     "patch": Spec(_INT, "patch side for image patch streams", minimum=1),
     "reassign": Spec((bool, str), "re-seed unused components (auto: batch fits only)",
                      (True, False, "auto")),
     "replay": Spec(_STR, "replay buffer of the gradient baseline", check=_replay),
-    "estep": Spec(_STR, "E-step over all components, or the few nearby",
-                  ("dense", "sparse")),
+    "estep": Spec(_STR, ESTEP.help, ESTEP.values),
     "frames": Spec(_INT, "frames streamed from a scene", minimum=1),
-    "format": Spec(_STR, "dataset format of a scene path"),
+    "format": Spec(_STR, FORMAT.help, FORMAT.values),
+    "protocol": Spec(_STR, PROTOCOL.help, PROTOCOL.values),
+    "opacity_rule": Spec(_STR, OPACITY_RULE.help, OPACITY_RULE.values),
+    "depth_kind": Spec(_STR, DEPTH_KIND.help, DEPTH_KIND.values),
     "steps_per_frame": Spec(_INT, "optimisation steps per streamed frame", minimum=1),
     "steps": Spec(_INT, "optimisation steps", minimum=1),
     "depth_model": Spec(_STR, "\"sensor\" depth, or an .onnx model estimating it",

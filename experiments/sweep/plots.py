@@ -21,6 +21,8 @@ from matplotlib.ticker import (  # noqa: E402
     NullFormatter,
 )
 
+from vbgs.data.images import read_rgb  # noqa: E402
+
 # Settings that tell lines apart (when they vary); the others are averaged over.
 LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth")
 MAX_RENDERS_PER_ROW, MAX_RENDER_ROWS = 10, 10
@@ -168,14 +170,9 @@ def plot_forgetting(records: list[dict], path: Path):
     return _save(fig, path, "Forgetting: quality of the first views as the stream goes on"), ""
 
 
-def _image(path: Path):
-    return plt.imread(path) if path.is_file() else None
-
-
-def _rgb(image: np.ndarray) -> np.ndarray:
-    """An image read back from PNG as float RGB ``[h, w, 3]`` (alpha dropped)."""
-    image = np.asarray(image, np.float32)
-    return np.repeat(image[..., None], 3, -1) if image.ndim == 2 else image[..., :3]
+def _image(path: Path) -> np.ndarray | None:
+    """A saved render as float RGB ``[h, w, 3]``, or None when the cell saved none."""
+    return read_rgb(path) if path.is_file() else None
 
 
 def plot_renders(df: pd.DataFrame, style: list[str], out: Path, path: Path):
@@ -195,7 +192,7 @@ def plot_renders(df: pd.DataFrame, style: list[str], out: Path, path: Path):
             best = line.sort_values(keys, ascending=[False, True][:len(keys)]).iloc[0]
             render = _image(out / "renders" / f"{best['key']}.png")
             if render is not None:
-                picked.append((best, _rgb(render)))
+                picked.append((best, render))
         if not picked:
             continue
         target = _image(out / "renders" / f"{picked[0][0]['key']}.target.png")
@@ -207,11 +204,11 @@ def plot_renders(df: pd.DataFrame, style: list[str], out: Path, path: Path):
         strip = picked[0][1].shape[1] > 1.5 * picked[0][1].shape[0]
         if strip:
             if target is not None:
-                rows.append((f"{task}: {dataset}, ground truth", _rgb(target), None))
+                rows.append((f"{task}: {dataset}, ground truth", target, None))
             rows += [(caption(row), render, None) for row, render in picked[:MAX_RENDER_ROWS]]
         else:
             shown = picked[:MAX_RENDERS_PER_ROW]
-            images = ([_rgb(target)] if target is not None else []) + [r for _, r in shown]
+            images = ([target] if target is not None else []) + [r for _, r in shown]
             captions = (["target"] if target is not None else []) + [
                 caption(row).replace(": ", "\n").replace(", ", "\n") for row, _ in shown]
             rows.append((f"{task}: {dataset}", images, captions))

@@ -57,7 +57,10 @@ def test_paper_config_parses():
         ({"dataset": ["/no/such/photo.png"]}, "grid[0].dataset: '/no/such/photo.png' is "
                                               "neither a built-in dataset"),
         ({"task": ["video"]}, "grid[0].task: must be one of image, scene, got 'video'"),
-        ({"replay": ["fifo:0"]}, "grid[0].replay: must be none, full, fifo:K or reservoir:K"),
+        ({"replay": ["fifo:0"]}, "grid[0].replay: replay 'fifo:0' needs a size: write fifo:K"),
+        ({"replay": ["reservoir"]}, "grid[0].replay: replay 'reservoir' needs a size"),
+        ({"replay": ["full:3"]}, "grid[0].replay: replay 'full' takes no size"),
+        ({"replay": ["lifo:3"]}, "grid[0].replay: unknown replay 'lifo:3'"),
         ({"depth_model": ["model.pt"]}, "grid[0].depth_model: must be \"sensor\" or the path"),
         ({"seed": []}, "grid[0].seed: an empty list gives no cells"),
         ({"seed": [0, 0]}, "grid[0].seed: repeats a value"),

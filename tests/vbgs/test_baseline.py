@@ -35,6 +35,7 @@ from vbgs.baseline.image import (
     render_sparse,
 )
 from vbgs.baseline.loss import depth_loss, ssim_of
+from vbgs.baseline.train import ADAM
 from vbgs.camera import unproject
 from vbgs.data.synthetic import object_scene
 from vbgs.metrics import SSIM_SIGMA
@@ -193,8 +194,9 @@ def test_relocation_by_gradient_score_and_moment_reset():
     dist = np.linalg.norm(np.asarray(new.means)[4:8] - np.asarray(params.means)[2], axis=-1)
     assert np.all(dist < 5 * 0.05)
     opt_state = make_optimizer(TrainConfig(), 1.0).init(trainable(params))
-    adam = opt_state[0]._replace(mu=jax.tree.map(jnp.ones_like, opt_state[0].mu))
-    reset = reset_moments((adam, *opt_state[1:]), changed)[0]
+    adam = opt_state[ADAM]._replace(mu=jax.tree.map(jnp.ones_like, opt_state[ADAM].mu))
+    opt_state[ADAM] = adam
+    reset = reset_moments(opt_state, changed)[ADAM]
     mu = np.asarray(reset.mu.means)
     assert np.all(mu[np.asarray(changed)] == 0) and np.all(mu[~np.asarray(changed)] == 1)
 

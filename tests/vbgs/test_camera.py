@@ -11,6 +11,7 @@ from vbgs.camera import (
     unproject,
     valid_depth,
 )
+from vbgs.pixels import pixel_centres
 
 
 def _camera(width=20, height=14):
@@ -59,6 +60,24 @@ def test_pixel_centres_and_principal_point():
     assert z[0] == 2.0
 
 
+def test_every_pixel_grid_uses_the_one_centre_convention():
+    """camera.pixel_grid, pixels.pixel_centres and the rasterizer's tile pixels agree."""
+    from vbgs.composite import tile_pixel_coords
+
+    h, w, tile = 6, 8, 4
+    uv = pixel_centres(h, w)  # [h * w, 2]
+    np.testing.assert_array_equal(uv[:3], [[0.5, 0.5], [1.5, 0.5], [2.5, 0.5]])
+    u, v = pixel_grid(Camera(1.0, 1.0, 0.0, 0.0, w, h, np.eye(4)))
+    np.testing.assert_array_equal(np.stack([u, v], -1).reshape(-1, 2), uv)
+    n_tiles_x = w // tile
+    for tile_id in range(n_tiles_x * 2):
+        got = np.stack([np.asarray(a) for a in tile_pixel_coords(tile_id, n_tiles_x, tile)], -1)
+        ty, tx = divmod(tile_id, n_tiles_x)
+        want = uv.reshape(h, w, 2)[ty * tile:(ty + 1) * tile, tx * tile:(tx + 1) * tile]
+        valid = (got[:, 1] < h)  # the last tile row reaches past the image
+        np.testing.assert_array_equal(got[valid], want.reshape(-1, 2)[: valid.sum()])
+
+
 def test_opengl_to_opencv_flips_y_and_z_axes():
     rng = np.random.default_rng(1)
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
@@ -103,3 +122,27 @@ def test_shape_errors(rgb_shape, depth_shape):
     cam = _camera()
     with pytest.raises(ValueError, match="expected rgb"):
         unproject(cam, np.zeros(rgb_shape, np.float32), np.ones(depth_shape, np.float32))
+
+
+def test_camera_is_a_pytree_with_static_size():
+    """Intrinsics and pose are leaves; width and height are static: a jitted function
+    takes the camera as one argument, keeps the sizes as ints, and compiles once per size."""
+    import jax
+    import jax.numpy as jnp
+
+    cam = _camera()
+    leaves = jax.tree_util.tree_leaves(cam)
+    assert len(leaves) == 5 and leaves[-1].shape == (4, 4)
+
+    @jax.jit
+    def centre_ray(c):
+        assert isinstance(c.width, int) and isinstance(c.height, int)
+        return jnp.stack([(c.width / 2 - c.cx) / c.fx, (c.height / 2 - c.cy) / c.fy])
+
+    np.testing.assert_allclose(centre_ray(cam), [(10 - 9.7) / 18.0, (7 - 7.4) / 17.0], rtol=1e-5)
+    centre_ray(cam._replace(fx=20.0, pose=np.eye(4)))  # new values: no new compile
+    assert centre_ray._cache_size() == 1
+    centre_ray(_camera(width=22))
+    assert centre_ray._cache_size() == 2
+    doubled = jax.tree_util.tree_map(lambda a: 2 * a, cam)
+    assert (doubled.fx, doubled.width, doubled.height) == (36.0, cam.width, cam.height)

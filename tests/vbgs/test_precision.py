@@ -22,8 +22,8 @@ from vbgs.data.images import image_to_points, load_image
 from vbgs.data.synthetic import object_scene
 from vbgs.fit import fit
 from vbgs.metrics import psnr
+from vbgs.model import used_components
 from vbgs.raster import rasterize
-from vbgs.reassign import MIN_COUNT
 from vbgs.render import render_image
 
 _spec = importlib.util.spec_from_file_location("tf32", Path(__file__).with_name("tf32.py"))
@@ -38,7 +38,7 @@ def _fit_image():
     uv, rgb = image_to_points(img)
     prior = model.init(uv, rgb, K, key=jax.random.key(0), scheme="data")
     post, _ = fit(prior, uv, rgb, iters=ITERS)
-    used = int(((post.alpha - prior.alpha) >= MIN_COUNT).sum())
+    used = int(used_components(post.alpha - prior.alpha).sum())
     return psnr(render_image(post, SIZE, SIZE), img), used
 
 

@@ -72,3 +72,23 @@ def test_one_poor_point_takes_one_component_and_none_moves_without_poor_points()
                        colour_noise=NOISE)
     assert not bool(ri.moved.any()) and int(ri.n_poor) == 0
     np.testing.assert_array_equal(new.prior.space.mean, state.prior.space.mean)
+
+
+def test_used_threshold_is_the_models_for_reassign_and_splats():
+    """A count of 0.5 (model.MIN_USED_COUNT) is used: reassign leaves it and splats keep
+    it; 0.49 is unused: reassign may move it and splats give it opacity 0."""
+    from vbgs.splats import from_posterior
+
+    assert model.used_components(np.array([0.0, 0.49, 0.5, 3.0])).tolist() == [False, False, True, True]
+    state, info, xyz, rgb = _toy(1)
+    counts = state.stats.count.at[1].set(0.5).at[2].set(0.49)
+    state = state._replace(stats=state.stats._replace(count=counts))
+    _, ri = reassign(state, xyz, rgb, info.point_loglik, key=jax.random.key(0), colour_noise=NOISE)
+    assert ri.moved.tolist() == [False, False, True]
+
+    means = jnp.asarray([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    prior = model.make_prior(means, jnp.full((4, 3), 0.5), jnp.zeros(3), ell=1.0)
+    post = prior._replace(alpha=prior.alpha + jnp.asarray([0.0, 0.49, 0.5, 3.0]))
+    splats = from_posterior(post, prior, drop_unused=False)
+    assert (np.asarray(splats.opacities) > 0).tolist() == [False, False, True, True]
+    assert from_posterior(post, prior).means.shape == (2, 3)

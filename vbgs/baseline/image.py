@@ -31,7 +31,7 @@ import optax
 from vbgs.baseline.loss import image_loss
 from vbgs.baseline.params import Params, colours, rotation_matrices, trainable
 from vbgs.baseline.train import TrainConfig, Trainer
-from vbgs.data.images import pixel_centres
+from vbgs.pixels import pixel_centres
 from vbgs.precision import mat_vec, matmul
 
 IMAGE_STEPS = 2000  # default number of Adam steps for an image fit

@@ -40,6 +40,7 @@ from vbgs.raster import DEFAULT_CAPACITY, DEFAULT_TILE, rasterize
 CAMERA_EXTENT_MARGIN = 1.1  # 3DGS enlarges the camera radius by 10%
 ADAM_EPS = 1e-15  # 3DGS's Adam epsilon
 STEP_CACHE_SIZE = 8  # compiled steps kept for reuse by later trainers
+ADAM, LEARNING_RATES = "adam", "learning_rates"  # stage names of the optimiser state
 
 
 @dataclass(frozen=True)
@@ -106,54 +107,57 @@ def scale_by_learning_rates(rates: Params) -> optax.GradientTransformation:
 
 
 def make_optimizer(config: TrainConfig, extent: float) -> optax.GradientTransformation:
-    """Adam with the per-parameter 3DGS learning rates, over :func:`trainable` params."""
-    return optax.chain(optax.scale_by_adam(eps=config.adam_eps),
-                       scale_by_learning_rates(learning_rates(config, extent)))
+    """Adam with the per-parameter 3DGS learning rates, over :func:`trainable` params.
+
+    Its state is a dict by stage name: ``opt_state[ADAM]`` holds Adam's moments."""
+    return optax.named_chain((ADAM, optax.scale_by_adam(eps=config.adam_eps)),
+                             (LEARNING_RATES, scale_by_learning_rates(learning_rates(config, extent))))
 
 
 def reset_moments(opt_state, rows: jax.Array):
     """Zero Adam's first and second moments of the rows ``rows [K]`` (bool)."""
-    adam, rest = opt_state[0], opt_state[1:]
+    adam = opt_state[ADAM]
 
     def zero(x):
         return jnp.where(rows.reshape((-1,) + (1,) * (x.ndim - 1)), 0.0, x)
 
-    adam = adam._replace(mu=jax.tree.map(zero, adam.mu), nu=jax.tree.map(zero, adam.nu))
-    return (adam, *rest)
+    out = opt_state.copy()  # the same mapping type (an OrderedDict): the same pytree structure
+    out[ADAM] = adam._replace(mu=jax.tree.map(zero, adam.mu), nu=jax.tree.map(zero, adam.nu))
+    return out
 
 
 def gradient_score(opt_state) -> jax.Array:
     """``sqrt(Σ_d ν_means)`` per row ``[K]``: Adam's running RMS of the position gradient."""
-    return jnp.sqrt(jnp.sum(opt_state[0].nu.means, axis=-1))
+    return jnp.sqrt(jnp.sum(opt_state[ADAM].nu.means, axis=-1))
 
 
 class FrameArrays(NamedTuple):
-    """A frame as the step consumes it: arrays only, float32."""
+    """A frame as the step consumes it: device arrays, float32, and its camera (a pytree
+    whose width and height are static)."""
 
     rgb: jax.Array  # [h, w, 3]
     depth: jax.Array  # [h, w] 0 = invalid
-    fx: jax.Array  # []
-    fy: jax.Array
-    cx: jax.Array
-    cy: jax.Array
-    pose: jax.Array  # [4, 4] camera-to-world
+    camera: Camera  # intrinsics [] each and pose [4, 4] as float32 arrays
 
 
 def frame_arrays(frame) -> FrameArrays:
     """A :class:`vbgs.data.scene.Frame` (rgb, depth, camera) as :class:`FrameArrays`."""
+    if isinstance(frame, FrameArrays):
+        return frame
     cam = frame.camera
     f32 = jnp.float32
-    return FrameArrays(jnp.asarray(frame.rgb, f32), jnp.asarray(frame.depth, f32),
-                       *(jnp.asarray(v, f32) for v in (cam.fx, cam.fy, cam.cx, cam.cy)),
-                       jnp.asarray(cam.pose, f32))
+    camera = cam._replace(**{k: jnp.asarray(getattr(cam, k), f32)
+                             for k in ("fx", "fy", "cx", "cy", "pose")})
+    return FrameArrays(jnp.asarray(frame.rgb, f32), jnp.asarray(frame.depth, f32), camera)
 
 
 def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, on_trace=None):
-    """The jitted ``step(params, opt_state, rgb, depth, fx, fy, cx, cy, pose, background) ->
-    (params, opt_state, loss)``: render over ``background [3]`` (an argument, so a
-    background that is re-estimated as frames arrive costs no recompile),
-    :func:`vbgs.baseline.loss.frame_loss`, one optimiser update. ``on_trace()``
-    (optional) is called each time it is traced."""
+    """The jitted ``step(params, opt_state, rgb, depth, camera, background) ->
+    (params, opt_state, loss)`` (``*frame_arrays(frame)`` gives rgb, depth, camera):
+    render over ``background [3]`` (an argument, so a background that is re-estimated
+    as frames arrive costs no recompile), :func:`vbgs.baseline.loss.frame_loss`, one
+    optimiser update; one compile per image size (the camera's static width and
+    height). ``on_trace()`` (optional) is called each time it is traced."""
 
     def loss_fn(theta: Params, active, rgb, depth, camera: Camera, background):
         out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
@@ -162,11 +166,9 @@ def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, o
                           depth_weight=config.depth_weight)
 
     @jax.jit
-    def step(params: Params, opt_state, rgb, depth, fx, fy, cx, cy, pose, background):
+    def step(params: Params, opt_state, rgb, depth, camera: Camera, background):
         if on_trace is not None:
             on_trace()
-        height, width = rgb.shape[:2]  # static: one compile per image size
-        camera = Camera(fx, fy, cx, cy, int(width), int(height), pose)
         theta = trainable(params)
         loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
                                                   background)
@@ -227,8 +229,7 @@ class Trainer:
         state and the losses ``[n_steps]``."""
         if not frames:
             raise ValueError("no frames to train on")
-        arrays = [f if isinstance(f, tuple) and not hasattr(f, "camera") else frame_arrays(f)
-                  for f in frames]
+        arrays = [frame_arrays(f) if hasattr(f, "camera") else f for f in frames]
         key, sub = jax.random.split(state.key)
         picks = np.asarray(jax.random.randint(sub, (n_steps,), 0, len(arrays)))
         state = state._replace(key=key)

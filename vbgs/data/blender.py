@@ -42,12 +42,12 @@ from skimage import io as skio
 
 from vbgs.camera import Camera, opengl_to_opencv
 from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
+from vbgs.data.images import read_rgb
 from vbgs.data.scene import (
     Frame,
     Scene,
     bounds_from_frames,
     hold_out_validation,
-    read_rgb,
     require_some_depth,
     resize_frame,
     select,
@@ -157,7 +157,7 @@ def _load_split(path: Path, keep, size, background, depth_scale, require_depth) 
             raise FileNotFoundError(
                 f"{what}: image {entry['file_path']!r} not found (looked for {candidates[0]})"
             )
-        rgb = read_rgb(image, background)  # [h, w, 3]
+        rgb = read_rgb(image, background=background)  # [h, w, 3]
         pose_gl = np.asarray(entry["transform_matrix"], np.float64)
         if pose_gl.shape != (4, 4):
             raise ValueError(f"{what}: transform_matrix must be 4x4, got shape {pose_gl.shape}")

@@ -41,19 +41,21 @@ import numpy as np
 from vbgs.camera import Camera
 from vbgs.data.blender import VAL_EVERY, load_blender, write_blender
 from vbgs.data.depth_png import read_depth_png
+from vbgs.data.images import read_rgb
 from vbgs.data.scene import (
     Frame,
     Scene,
     bounds_from_frames,
     hold_out,
     hold_out_validation,
-    read_rgb,
     require_some_depth,
     resize_frame,
     select,
     validate_frame,
 )
+from vbgs.data.stereo import REAL_SCENES
 from vbgs.data.synthetic import SCENES, make_scene
+from vbgs.pixels import pixel_centre
 
 __all__ = [
     "REPLICA_INTRINSICS",
@@ -70,6 +72,7 @@ __all__ = [
 
 REPLICA_DEPTH_SCALE = 6553.5
 TUM_DEPTH_SCALE = 5000.0
+_WHITE = (1.0, 1.0, 1.0)  # RGBA frames are composited onto white, as the Blender loader does by default
 
 
 class Intrinsics(NamedTuple):
@@ -88,8 +91,8 @@ class Intrinsics(NamedTuple):
         return Camera(
             self.fx * sx,
             self.fy * sy,
-            (self.cx + 0.5) * sx,
-            (self.cy + 0.5) * sy,
+            pixel_centre(self.cx) * sx,
+            pixel_centre(self.cy) * sy,
             int(width),
             int(height),
             np.asarray(pose, np.float64),
@@ -166,7 +169,7 @@ def load_replica(
                 f"{images[i].name} has no depth image: expected "
                 f"{results / f'depth{images[i].name[5:-4]}.png'}"
             )
-        rgb = read_rgb(images[i])
+        rgb = read_rgb(images[i], background=_WHITE)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], poses[k])
         depth = read_depth_png(depths[i], depth_scale)
         frame = validate_frame(Frame(rgb, depth, cam), f"{images[i]} (depth {depths[i].name})")
@@ -266,7 +269,7 @@ def load_tum(
         values = [float(v) for v in pose_rows[jp]]
         pose = np.eye(4)
         pose[:3, :3], pose[:3, 3] = quaternion_to_matrix(*values[3:]), values[:3]
-        rgb = read_rgb(folder / rgb_rows[i][0])
+        rgb = read_rgb(folder / rgb_rows[i][0], background=_WHITE)
         depth = read_depth_png(folder / depth_rows[jd][0], depth_scale)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], pose)
         what = f"{folder / rgb_rows[i][0]} (depth {depth_rows[jd][0]})"
@@ -296,7 +299,9 @@ def detect_format(folder) -> str:
 
 
 def load_scene(path_or_name, format: str | None = None, **kw) -> Scene:
-    """A synthetic scene by name ("object", "room") or a dataset folder (format detected or given).
+    """A synthetic scene by name ("object", "room"), a real one-frame scene by name
+    ("motorcycle", :mod:`vbgs.data.stereo`; only ``size`` applies) or a dataset folder
+    (format detected or given).
 
     An existing folder wins over a synthetic name. The format is detected by
     :func:`detect_format` unless ``format`` ("blender", "replica", "tum") is given.
@@ -307,10 +312,12 @@ def load_scene(path_or_name, format: str | None = None, **kw) -> Scene:
     path = Path(path_or_name)
     if str(path_or_name) in SCENES and not path.is_dir():
         return make_scene(str(path_or_name), **kw)
+    if str(path_or_name) in REAL_SCENES and not path.is_dir():
+        return REAL_SCENES[str(path_or_name)](size=kw.get("size"))
     if not path.is_dir():
         raise FileNotFoundError(
-            f"{path_or_name!r} is neither a dataset folder nor a synthetic scene "
-            f"name ({', '.join(SCENES)})"
+            f"{path_or_name!r} is neither a dataset folder nor a built-in scene "
+            f"name ({', '.join([*SCENES, *REAL_SCENES])})"
         )
     format = format or detect_format(path)
     if format not in LOADERS:

@@ -14,6 +14,7 @@ import numpy as np
 from skimage import data as skdata
 from skimage.transform import resize
 
+from vbgs.pixels import pixel_centres
 from vbgs.data.streams import stream_order
 
 # Photos shipped inside scikit-image (no download needed).
@@ -24,17 +25,19 @@ BUNDLED = (
 )
 
 
-def as_rgb(image, *, source: str = "image") -> np.ndarray:
+def as_rgb(image, *, source: str = "image", background=None) -> np.ndarray:
     """Validate and convert an image to float32 RGB ``[h, w, 3]`` in [0, 1].
 
-    Accepts grey ``[h, w]``, ``[h, w, 1]``, RGB or RGBA (alpha dropped); integers are
-    scaled by their dtype's maximum, floats must already lie in [0, 1].
+    Accepts grey ``[h, w]``, ``[h, w, 1]``, grey + alpha ``[h, w, 2]``, RGB or RGBA;
+    integers are scaled by their dtype's maximum, floats must already lie in [0, 1].
+    Alpha ``a`` is dropped when ``background`` is None, else composited:
+    ``rgb = a * rgb + (1 - a) * background``.
     """
     img = np.asarray(image)
     if img.dtype == bool:
         img = img.astype(np.float32)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
+    if img.ndim == 3 and img.shape[2] in (1, 2):  # grey, grey + alpha
+        img = np.concatenate([np.repeat(img[..., :1], 3, axis=2), img[..., 1:]], axis=2)
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=2)
     if img.ndim != 3 or img.shape[2] not in (3, 4):
@@ -43,10 +46,9 @@ def as_rgb(image, *, source: str = "image") -> np.ndarray:
         )
     if img.shape[0] == 0 or img.shape[1] == 0:
         raise ValueError(f"{source}: image is empty (shape {img.shape})")
-    img = img[..., :3]
     if np.issubdtype(img.dtype, np.integer):
-        return (img.astype(np.float64) / np.iinfo(img.dtype).max).astype(np.float32)
-    if not np.issubdtype(img.dtype, np.floating):
+        img = img.astype(np.float64) / np.iinfo(img.dtype).max
+    elif not np.issubdtype(img.dtype, np.floating):
         raise TypeError(f"{source}: pixels must be integers or floats, got dtype {img.dtype}")
     bad = ~np.isfinite(img)
     if bad.any():
@@ -56,7 +58,24 @@ def as_rgb(image, *, source: str = "image") -> np.ndarray:
             f"{source}: float pixels must lie in [0, 1], got [{img.min():.3g}, {img.max():.3g}]; "
             "divide by 255 for 8-bit data"
         )
-    return img.astype(np.float32)
+    if img.shape[2] == 4 and background is not None:
+        alpha = img[..., 3:].astype(np.float64)  # [h, w, 1]
+        bg = np.broadcast_to(np.asarray(background, np.float64), (3,))
+        img = np.clip(img[..., :3] * alpha + bg * (1.0 - alpha), 0.0, 1.0)
+    return img[..., :3].astype(np.float32)
+
+
+def read_rgb(path: str | Path, *, background=None) -> np.ndarray:
+    """An image file as float32 RGB ``[h, w, 3]`` in [0, 1]: the one image reader.
+
+    :func:`read_image_file` decodes, :func:`as_rgb` converts (alpha dropped, or
+    composited onto ``background``). A missing file raises ``FileNotFoundError``,
+    an undecodable or unusable one ``ValueError``, each naming the file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"image not found: {path}")
+    return as_rgb(read_image_file(path), source=str(path), background=background)
 
 
 def read_image_file(path: str | Path) -> np.ndarray:
@@ -93,19 +112,13 @@ def load_image(name_or_path: str | Path, size: int | tuple[int, int] | None = No
                 f"image {name!r} is neither a bundled photo ({', '.join(BUNDLED)}) nor an "
                 "existing file"
             )
-        img = as_rgb(read_image_file(path), source=str(path))
+        img = read_rgb(path)
     if size is not None:
         h, w = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
         if h < 1 or w < 1:
             raise ValueError(f"image size must be positive, got {size!r}")
         img = np.clip(resize(img, (h, w), anti_aliasing=True, order=1), 0, 1).astype(np.float32)
     return img
-
-
-def pixel_centres(height: int, width: int) -> np.ndarray:
-    """``(u, v)`` of every pixel centre in row-major order, ``[h * w, 2]`` float32."""
-    v, u = np.mgrid[0:height, 0:width].astype(np.float32) + 0.5
-    return np.stack([u.ravel(), v.ravel()], -1)
 
 
 def image_to_points(image) -> tuple[np.ndarray, np.ndarray]:

@@ -17,13 +17,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from pathlib import Path
-
 import numpy as np
 from skimage.transform import resize
 
 from vbgs.camera import Camera, unproject
-from vbgs.data.images import read_image_file
+from vbgs.pixels import pixel_centre
 
 
 class Frame(NamedTuple):
@@ -193,24 +191,6 @@ def hold_out_validation(frames: list, every: int | None) -> tuple[list, list]:
     ]
 
 
-def read_rgb(path: str | Path, background=(1.0, 1.0, 1.0)) -> np.ndarray:
-    """Image file as float32 ``[h, w, 3]`` in [0, 1]; RGBA is composited onto ``background``."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"image not found: {path}")
-    img = read_image_file(path)
-    if img.dtype.kind in "ui":
-        img = img / (65535.0 if img.dtype == np.uint16 else 255.0)
-    if img.ndim == 2:
-        img = np.repeat(img[..., None], 3, -1)
-    if img.ndim != 3 or img.shape[-1] not in (3, 4):
-        raise ValueError(f"{path}: expected a grey, RGB or RGBA image, got shape {img.shape}")
-    if img.shape[-1] == 4:
-        alpha = img[..., 3:]
-        img = img[..., :3] * alpha + np.asarray(background, np.float64) * (1.0 - alpha)
-    return np.clip(img, 0.0, 1.0).astype(np.float32)
-
-
 def target_size(width: int, height: int, size) -> tuple[int, int]:
     """Output ``(width, height)`` for a requested ``size``.
 
@@ -241,8 +221,8 @@ def resize_frame(frame: Frame, size) -> Frame:
         return frame
     sx, sy = new_w / cam.width, new_h / cam.height
     rgb = resize(frame.rgb, (new_h, new_w), order=1, anti_aliasing=sx < 1 or sy < 1)
-    rows = np.minimum(((np.arange(new_h) + 0.5) / sy).astype(int), cam.height - 1)  # [new_h]
-    cols = np.minimum(((np.arange(new_w) + 0.5) / sx).astype(int), cam.width - 1)  # [new_w]
+    rows = np.minimum((pixel_centre(np.arange(new_h)) / sy).astype(int), cam.height - 1)  # [new_h]
+    cols = np.minimum((pixel_centre(np.arange(new_w)) / sx).astype(int), cam.width - 1)  # [new_w]
     depth = frame.depth[rows[:, None], cols[None, :]]
     camera = cam._replace(
         fx=cam.fx * sx, fy=cam.fy * sy, cx=cam.cx * sx, cy=cam.cy * sy, width=new_w, height=new_h

@@ -26,6 +26,12 @@ comes out between 2.11 m (motorcycle front) and 5.02 m (back wall), median 2.75 
 Middlebury principal points count pixel centres at integer coordinates; the
 library puts centres at ``col + 0.5`` (:mod:`vbgs.camera`), so 0.5 is added.
 The pose is the identity: the left camera defines the world frame.
+
+:func:`motorcycle_scene` wraps the frame as a one-view :class:`Scene` named
+``motorcycle``, loadable by name (:func:`vbgs.data.formats.load_scene`): the
+renderer's oracle check on real RGB-D data is
+``python -m experiments.run oracle --scene motorcycle``. With a single view it has
+no held-out test views, so learners cannot be scored on it.
 """
 
 from __future__ import annotations
@@ -34,7 +40,8 @@ import numpy as np
 from skimage import data as skdata
 
 from vbgs.camera import Camera
-from vbgs.data.scene import Frame
+from vbgs.data.scene import Frame, Scene, bounds_from_frames, resize_frame
+from vbgs.pixels import pixel_centre
 
 MOTORCYCLE_FOCAL = 994.978  # px, at the shipped 741 x 500 size
 MOTORCYCLE_CX = 311.193  # px, left camera, integer-centred pixels
@@ -65,11 +72,23 @@ def stereo_motorcycle_frame() -> Frame:
     camera = Camera(
         MOTORCYCLE_FOCAL,
         MOTORCYCLE_FOCAL,
-        MOTORCYCLE_CX + 0.5,
-        MOTORCYCLE_CY + 0.5,
+        pixel_centre(MOTORCYCLE_CX),
+        pixel_centre(MOTORCYCLE_CY),
         int(width),
         int(height),
         np.eye(4),
     )
     depth = disparity_to_depth(disp, MOTORCYCLE_FOCAL, MOTORCYCLE_BASELINE, MOTORCYCLE_DOFFS)
     return Frame((left[..., :3] / 255.0).astype(np.float32), depth, camera)
+
+
+def motorcycle_scene(size=None) -> Scene:
+    """The motorcycle frame as a one-view scene: ``train`` holds the frame (resized to
+    ``size``, see :func:`vbgs.data.scene.target_size`), ``test`` and ``val`` are empty."""
+    frame = stereo_motorcycle_frame()
+    if size is not None:
+        frame = resize_frame(frame, size)
+    return Scene("motorcycle", [frame], [], bounds_from_frames([frame]))
+
+
+REAL_SCENES = {"motorcycle": motorcycle_scene}  # real frames loadable by name

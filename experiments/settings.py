@@ -1,0 +1,63 @@
+"""The categorical task settings, declared once: their choices, default and help.
+
+Read by the task dataclasses (field defaults and checks), by the CLI (argparse
+``choices`` and ``default``, :func:`add_choice`) and by the sweep validation
+(:data:`experiments.sweep.config.SETTINGS`), so the three cannot drift apart. The
+start schemes live in :mod:`experiments.init_schemes` and are wrapped here.
+
+Kept light to import (no JAX): the CLI builds its parsers from it before any task
+module is loaded. Choices that a library module also lists (stream orders, depth
+kinds) are taken from that module; the learners' and dataset formats' tables are
+heavier to import, and a test holds :data:`METHOD` and :data:`FORMAT` equal to them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from depth.presets import KINDS as DEPTH_KINDS
+from experiments.init_schemes import INIT_HELP, INITS
+from vbgs.data.streams import ORDERS
+
+
+@dataclass(frozen=True)
+class Choice:
+    """A setting that takes one of ``values``; ``default`` is None or one of them."""
+
+    values: tuple[str, ...]
+    default: str | None
+    help: str
+
+    def __post_init__(self):
+        if self.default is not None and self.default not in self.values:
+            raise ValueError(f"default {self.default!r} is not one of {self.values}")
+
+    def check(self, name: str, value) -> None:
+        """Refuse a value that is not a choice, naming the setting and the choices."""
+        if value not in self.values and not (value is None and self.default is None):
+            raise ValueError(f"unknown {name} {value!r}: use one of {', '.join(self.values)}")
+
+
+METHOD = Choice(("vbgs", "gradient"), "vbgs", "vbgs, or the gradient 3DGS baseline")
+INIT = Choice(INITS, INITS[0], INIT_HELP)
+ORDER = Choice(ORDERS, "sequential", "stream order")
+ASSIGN = Choice(("prior", "posterior"), "prior",
+                "responsibilities under the prior or the current posterior")
+STREAM = Choice(("none", "patches"), "none", "image fit on all pixels, or a stream of patches")
+ESTEP = Choice(("dense", "sparse"), "sparse", "E-step over all components, or the few nearby")
+FORMAT = Choice(("blender", "replica", "tum"), None,
+                "dataset layout of a scene folder (detected from the folder if left out)")
+PROTOCOL = Choice(("continual", "static"), "continual",
+                  "continual: frames arrive one by one, once; static: every training frame "
+                  "from the start, --steps steps on frames drawn uniformly (gradient only)")
+OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
+                      "VBGS splat opacity: per component from hit/pass-through rays "
+                      "(evidence) or the constant --opacity")
+DEPTH_KIND = Choice(DEPTH_KINDS, "inverse", "what the depth model outputs")
+REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
+
+
+def add_choice(parser, flag: str, choice: Choice, help: str | None = None) -> None:
+    """``parser.add_argument(flag)`` with the choices and default of ``choice``."""
+    parser.add_argument(flag, choices=choice.values, default=choice.default,
+                        help=choice.help if help is None else help)
