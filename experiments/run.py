@@ -102,6 +102,9 @@ def _add_fit_scene(sub):
     p.add_argument("--opacity-rule", choices=["evidence", "constant"], default="evidence",
                    help="VBGS splat opacity: per component from hit/pass-through rays "
                         "(evidence) or the constant --opacity")
+    p.add_argument("--colour-rule", choices=["fit", "posterior"], default="fit",
+                   help="VBGS splat colours: fitted to the training pixels (fit, chosen on "
+                        "validation views by `tune`) or the posterior colour means")
     p.add_argument("--background", default="auto",
                    help="auto (estimated from the pixels without depth of the frames seen) "
                         "or R,G,B in [0, 1]")
@@ -123,7 +126,7 @@ def _fit_scene(args) -> dict:
                      protocol=args.protocol, depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
                      depth_align=args.depth_align, background=args.background,
-                     opacity_rule=args.opacity_rule,
+                     opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      skip_margin=args.skip_margin, **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "

@@ -23,6 +23,7 @@ from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
 
 PROTOCOLS = ("continual", "static")
 OPACITY_RULES = ("evidence", "constant")
+COLOUR_RULES = ("fit", "posterior")
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,9 @@ class SceneTask:
     opacity_rule: str = "evidence"  # evidence (per component, vbgs.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
     splat_scale: float = VBGS_COV_SCALE
+    # VBGS splat colours: fitted to the training pixels (vbgs.colour_fit) | the posterior
+    # colour means. Chosen on validation views by `python -m experiments.run tune`.
+    colour_rule: str = "fit"
     depth_model: str | None = None
     depth_kind: str = "inverse"
     depth_preset: str | None = None
@@ -76,6 +80,9 @@ class SceneTask:
         if self.opacity_rule not in OPACITY_RULES:
             raise ValueError(f"unknown opacity rule {self.opacity_rule!r}: use one of "
                              f"{OPACITY_RULES}")
+        if self.colour_rule not in COLOUR_RULES:
+            raise ValueError(f"unknown colour rule {self.colour_rule!r}: use one of "
+                             f"{COLOUR_RULES}")
 
 
 def load_task_scene(task: SceneTask) -> Scene:

@@ -108,3 +108,18 @@ def test_unseen_components_keep_their_posterior_colour_and_bad_input_is_refused(
     frame = views(two_splats(TRUE), 1)[0]
     with pytest.raises(ValueError, match="frame rgb has shape"):
         colour_fit.frame_terms(two_splats(GREY), frame.camera, frame.rgb[:10], BG)
+
+
+def test_from_posterior_takes_given_colours_clipped():
+    from vbgs import model
+    from vbgs.splats import from_posterior
+
+    rng = np.random.default_rng(0)
+    xyz, rgb = rng.uniform(-1, 1, (200, 3)), rng.uniform(0, 1, (200, 3))
+    prior = model.init(xyz, rgb, 4, key=jax.random.PRNGKey(0), scheme="data")
+    state, _ = model.update(model.start(prior), xyz, rgb)
+    given = np.array([[0.2, 0.4, 0.6], [1.5, -0.1, 0.5], [0.0, 1.0, 0.3], [0.9, 0.8, 0.7]])
+    out = from_posterior(state.posterior, prior, drop_unused=False, colours=given)
+    np.testing.assert_allclose(out.colours, np.clip(given, 0, 1), atol=1e-7)
+    default = from_posterior(state.posterior, prior, drop_unused=False)
+    np.testing.assert_allclose(default.colours, np.clip(state.posterior.colour.mean, 0, 1))
