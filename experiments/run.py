@@ -8,6 +8,7 @@ Commands:
   depth-study sensor depth against estimated depth (RGB-only path), per method
   tune        choose render settings on validation views (never test views); writes a table
   oracle      render splats built from a view's ground truth: is the renderer right here?
+  colour-gap  the streamed (lumped) colour fit against exact least squares (a diagnostic)
   bench       benchmarks: image, estep, raster, depth
 """
 
@@ -264,6 +265,40 @@ def _oracle(args) -> dict:
     return {"scene": args.scene, **asdict(oracle_score(load_task_scene(task), args.view))}
 
 
+def _add_colour_gap(sub):
+    p = sub.add_parser("colour-gap", help="held-out scores of the streamed colour fit against "
+                                          "exact least squares and the posterior colours")
+    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    p.add_argument("--format", choices=["blender", "replica", "tum"], default=None)
+    p.add_argument("--components", type=int, default=20000)
+    p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
+    p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
+    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--iterations", type=int, default=30, help="conjugate-gradient iterations")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _colour_gap(args) -> dict:
+    from experiments.colour_gap import colour_gap
+    from experiments.scene_task import SceneTask, load_task_scene
+
+    if args.test_views < 1 or args.iterations < 1:
+        raise ValueError(f"--test-views and --iterations must be at least 1, got "
+                         f"{args.test_views} and {args.iterations}")
+    task = SceneTask(scene=args.scene, format=args.format, components=args.components,
+                     frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
+                     init=args.init, seed=args.seed)
+    check_fewer_components(args.components, args.frames * args.size**2,
+                           f"at most {args.frames} frames x {args.size}x{args.size}",
+                           "use fewer --components, a larger --size or more --frames")
+    gap = colour_gap(task, load_task_scene(task), iterations=args.iterations,
+                     progress=sys.stderr.isatty())
+    return {"scene": args.scene, "components": args.components, "frames": args.frames,
+            "size": args.size, "init": args.init, **gap}
+
+
 def _add_bench(sub):
     p = sub.add_parser("bench", help="benchmarks; figures are printed and written as CSV/markdown")
     p.add_argument("target", choices=["image", "estep", "stream", "raster", "depth"],
@@ -355,6 +390,7 @@ def _stream_profile(scene_name: str, k: int, size: int, search: str) -> list[dic
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
+            "colour-gap": (_add_colour_gap, _colour_gap),
             "sweep": (add_sweep, run_sweep), "report": (add_report, run_report)}
 
 

@@ -19,6 +19,7 @@ from vbgs import model
 from vbgs.background import parse_background
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
+from vbgs.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
 
 PROTOCOLS = ("continual", "static")
@@ -50,6 +51,7 @@ class SceneTask:
     # VBGS splat colours: fitted to the training pixels (vbgs.colour_fit) | the posterior
     # colour means. Chosen on validation views by `python -m experiments.run tune`.
     colour_rule: str = "fit"
+    colour_ridge: float = COLOUR_RIDGE  # pixels' worth of weight on the posterior colour (fit)
     depth_model: str | None = None
     depth_kind: str = "inverse"
     depth_preset: str | None = None
@@ -80,6 +82,9 @@ class SceneTask:
         if self.opacity_rule not in OPACITY_RULES:
             raise ValueError(f"unknown opacity rule {self.opacity_rule!r}: use one of "
                              f"{OPACITY_RULES}")
+        if not self.colour_ridge > 0:
+            raise ValueError(f"colour_ridge must be > 0 (pixels' worth of weight on the "
+                             f"posterior colour), got {self.colour_ridge!r}")
         if self.colour_rule not in COLOUR_RULES:
             raise ValueError(f"unknown colour rule {self.colour_rule!r}: use one of "
                              f"{COLOUR_RULES}")

@@ -51,6 +51,8 @@ FIT_FIELDS = frozenset({
 # render settings (the fit's blending weights are rendered with them), so while it is
 # gathered the stream is learned once per combination of the other grid settings.
 GATHERED = {"colour_rule": "fit"}
+# Render settings that only the final solve reads, never what is gathered: no re-learning.
+SOLVE_ONLY = frozenset({"colour_ridge"})
 
 
 def parse_grid(specs: list[str], task) -> dict[str, list]:
@@ -112,7 +114,8 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
     LEARNERS[task.method].check(task)
     gather = {name: value for name, value in GATHERED.items()
               if name in grid or getattr(task, name, None) == value}
-    relearn = {name: values for name, values in grid.items() if gather and name not in gather}
+    relearn = {name: values for name, values in grid.items()
+               if gather and name not in gather and name not in SOLVE_ONLY}
     rows = []
     for fixed in settings(relearn):  # [{}] when nothing is gathered: one stream in all
         learner, background = learn_once(replace(task, **fixed, **gather), scene,

@@ -110,17 +110,18 @@ class VbgsLearner:
         the splats of the posterior that has just learned it (no background: black)."""
         if self.task.colour_rule != "fit":
             return
-        self.colour = colour_fit.observe(self.colour, self._posterior_splats(), frame.camera,
+        self.colour = colour_fit.observe(self.colour, self.posterior_splats(), frame.camera,
                                          frame.rgb, 0.0 if background is None else background)
         jax.block_until_ready(self.colour.rhs)
 
     def splats(self, drop_unused: bool = False) -> Splats:
         colours = None
         if self.task.colour_rule == "fit":
-            colours = colour_fit.solve(self.colour, self.state.posterior.colour.mean)
-        return self._posterior_splats(drop_unused, colours)
+            colours = colour_fit.solve(self.colour, self.state.posterior.colour.mean,
+                                       ridge=self.task.colour_ridge)
+        return self.posterior_splats(drop_unused, colours)
 
-    def _posterior_splats(self, drop_unused: bool = False, colours=None) -> Splats:
+    def posterior_splats(self, drop_unused: bool = False, colours=None) -> Splats:
         """The posterior's splats (opacity by the task's rule), with ``colours`` [k, 3]
         in place of the posterior colour means when given."""
         evidence = self.task.opacity_rule == "evidence"

@@ -114,7 +114,8 @@ def test_tune_refuses_bad_input_before_any_work(extra, message, tmp_path, capsys
     assert not (tmp_path / "t").exists()
 
 
-def test_colour_rule_is_gathered_while_streaming_and_each_rule_equals_a_fresh_stream():
+def test_colour_rule_is_gathered_while_streaming_and_each_rule_equals_a_fresh_stream(
+        monkeypatch):
     """The colour least squares is gathered while the stream is learned (whatever the
     task's own rule), so both colour rules are tuned from one stream; each row equals a
     learner streamed anew under that rule."""
