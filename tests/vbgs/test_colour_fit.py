@@ -115,7 +115,8 @@ def test_from_posterior_takes_given_colours_clipped():
     from vbgs.splats import from_posterior
 
     rng = np.random.default_rng(0)
-    xyz, rgb = rng.uniform(-1, 1, (200, 3)), rng.uniform(0, 1, (200, 3))
+    xyz = rng.uniform(-1, 1, (200, 3)).astype(np.float32)  # [n, 3]
+    rgb = rng.uniform(0, 1, (200, 3)).astype(np.float32)
     prior = model.init(xyz, rgb, 4, key=jax.random.PRNGKey(0), scheme="data")
     state, _ = model.update(model.start(prior), xyz, rgb)
     given = np.array([[0.2, 0.4, 0.6], [1.5, -0.1, 0.5], [0.0, 1.0, 0.3], [0.9, 0.8, 0.7]])
