@@ -29,8 +29,8 @@ from vbgs import colour_fit
 
 
 def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> dict:
-    """Held-out PSNR/SSIM of each colouring (module docstring), the CG iterations run
-    and the seconds the exact solve took."""
+    """Held-out PSNR/SSIM of each colouring (module docstring, all with the task's
+    ``colour_ridge``), the CG iterations run and the seconds the exact solve took."""
     learner, background = learn_once(replace(task, colour_rule="fit"), scene,
                                      progress=progress)
     base = learner.posterior_splats()  # [k] splats with the posterior colours
@@ -39,13 +39,14 @@ def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> 
     for frame in scene.train:
         final = colour_fit.observe(final, base, frame.camera, frame.rgb, background)
     start = time.perf_counter()
-    exact, iters = colour_fit.exact_colours(base, scene.train, background, c_post,
+    ridge = task.colour_ridge
+    exact, iters = colour_fit.exact_colours(base, scene.train, background, c_post, ridge=ridge,
                                             iterations=iterations)
     exact_seconds = time.perf_counter() - start
     colourings = {
         "posterior": c_post,
-        "lumped_stream": colour_fit.solve(learner.colour, c_post),
-        "lumped_final": colour_fit.solve(final, c_post),
+        "lumped_stream": colour_fit.solve(learner.colour, c_post, ridge),
+        "lumped_final": colour_fit.solve(final, c_post, ridge),
         "exact": jnp.clip(exact, 0.0, 1.0),
     }
     out = {"cg_iterations": iters, "exact_seconds": exact_seconds}

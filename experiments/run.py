@@ -277,6 +277,8 @@ def _add_colour_gap(sub):
     p.add_argument("--init", choices=INITS, default=INITS[0], help=INIT_HELP)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--iterations", type=int, default=30, help="conjugate-gradient iterations")
+    p.add_argument("--ridge", type=float, default=None,
+                   help="colour ridge in pixels (default: the task's, vbgs.colour_fit.RIDGE)")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
@@ -289,14 +291,15 @@ def _colour_gap(args) -> dict:
                          f"{args.test_views} and {args.iterations}")
     task = SceneTask(scene=args.scene, format=args.format, components=args.components,
                      frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
-                     init=args.init, seed=args.seed)
+                     init=args.init, seed=args.seed,
+                     **({} if args.ridge is None else {"colour_ridge": args.ridge}))
     check_fewer_components(args.components, args.frames * args.size**2,
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
     gap = colour_gap(task, load_task_scene(task), iterations=args.iterations,
                      progress=sys.stderr.isatty())
     return {"scene": args.scene, "components": args.components, "frames": args.frames,
-            "size": args.size, "init": args.init, **gap}
+            "size": args.size, "init": args.init, "ridge": task.colour_ridge, **gap}
 
 
 def _add_bench(sub):
