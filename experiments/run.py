@@ -8,6 +8,7 @@ Commands:
   depth-study sensor depth against estimated depth (RGB-only path), per method
   tune        choose render settings on validation views (never test views); writes a table
   oracle      render splats built from a view's ground truth: is the renderer right here?
+  colour-gap  the streamed (lumped) colour fit against exact least squares (a diagnostic)
   bench       benchmarks: image, estep, raster, depth
 """
 
@@ -26,6 +27,7 @@ from experiments.cli_common import (
 )
 from experiments.settings import (
     ASSIGN,
+    COLOUR_RULE,
     DEPTH_KIND,
     ESTEP,
     FORMAT,
@@ -111,6 +113,7 @@ def _add_fit_scene(sub):
     p.add_argument("--depth-align", default="auto",
                    help="auto | none | median | scale-shift | scale-shift-inverse")
     add_choice(p, "--opacity-rule", OPACITY_RULE)
+    add_choice(p, "--colour-rule", COLOUR_RULE)
     p.add_argument("--background", default="auto",
                    help="auto (estimated from the pixels without depth of the frames seen) "
                         "or R,G,B in [0, 1]")
@@ -132,7 +135,7 @@ def _fit_scene(args) -> dict:
                      protocol=args.protocol, depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
                      depth_align=args.depth_align, background=args.background,
-                     opacity_rule=args.opacity_rule,
+                     opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      skip_margin=args.skip_margin, **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
@@ -272,6 +275,43 @@ def _oracle(args) -> dict:
     return {"scene": args.scene, **asdict(oracle_score(load_task_scene(task), args.view))}
 
 
+def _add_colour_gap(sub):
+    p = sub.add_parser("colour-gap", help="held-out scores of the streamed colour fit against "
+                                          "exact least squares and the posterior colours")
+    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    add_choice(p, "--format", FORMAT)
+    p.add_argument("--components", type=int, default=20000)
+    p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
+    p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
+    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    add_choice(p, "--init", INIT)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--iterations", type=int, default=30, help="conjugate-gradient iterations")
+    p.add_argument("--ridge", type=float, default=None,
+                   help="colour ridge in pixels (default: the task's, vbgs.colour_fit.RIDGE)")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _colour_gap(args) -> dict:
+    from experiments.colour_gap import colour_gap
+    from experiments.scene_task import SceneTask, load_task_scene
+
+    if args.test_views < 1 or args.iterations < 1:
+        raise ValueError(f"--test-views and --iterations must be at least 1, got "
+                         f"{args.test_views} and {args.iterations}")
+    task = SceneTask(scene=args.scene, format=args.format, components=args.components,
+                     frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
+                     init=args.init, seed=args.seed,
+                     **({} if args.ridge is None else {"colour_ridge": args.ridge}))
+    check_fewer_components(args.components, args.frames * args.size**2,
+                           f"at most {args.frames} frames x {args.size}x{args.size}",
+                           "use fewer --components, a larger --size or more --frames")
+    gap = colour_gap(task, load_task_scene(task), iterations=args.iterations,
+                     progress=sys.stderr.isatty())
+    return {"scene": args.scene, "components": args.components, "frames": args.frames,
+            "size": args.size, "init": args.init, "ridge": task.colour_ridge, **gap}
+
+
 def _add_bench(sub):
     p = sub.add_parser("bench", help="benchmarks; figures are printed and written as CSV/markdown")
     p.add_argument("target", choices=["image", "estep", "stream", "raster", "depth"],
@@ -387,6 +427,7 @@ def _sweep_cli(name: str):
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
+            "colour-gap": (_add_colour_gap, _colour_gap),
             "sweep": (_sweep_cli("add_sweep"), _sweep_cli("run_sweep")),
             "report": (_sweep_cli("add_report"), _sweep_cli("run_report"))}
 

@@ -17,6 +17,7 @@ from experiments.learners import LEARNERS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
 from experiments.settings import (
     ASSIGN,
+    COLOUR_RULE,
     DEPTH_KIND,
     ESTEP,
     FORMAT,
@@ -30,9 +31,9 @@ from experiments.settings import (
 from vbgs import model
 from vbgs.background import parse_background
 from vbgs.data.formats import load_scene
+from vbgs.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.data.scene import Scene
 from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
-
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,10 @@ class SceneTask:
     opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
     splat_scale: float = VBGS_COV_SCALE
+    # VBGS splat colours: fitted to the training pixels (vbgs.colour_fit) | the posterior
+    # colour means. Chosen on validation views by `python -m experiments.run tune`.
+    colour_rule: str = COLOUR_RULE.default
+    colour_ridge: float = COLOUR_RIDGE  # pixels' worth of weight on the posterior colour (fit)
     depth_model: str | None = None
     depth_kind: str = DEPTH_KIND.default
     depth_preset: str | None = None
@@ -79,10 +84,14 @@ class SceneTask:
             raise ValueError(f"n_val must be a non-negative integer, got {self.n_val!r}")
         for name, choice in (("method", METHOD), ("protocol", PROTOCOL), ("order", ORDER),
                              ("assign", ASSIGN), ("estep", ESTEP), ("format", FORMAT),
-                             ("depth_kind", DEPTH_KIND), ("opacity_rule", OPACITY_RULE)):
+                             ("depth_kind", DEPTH_KIND), ("opacity_rule", OPACITY_RULE),
+                             ("colour_rule", COLOUR_RULE)):
             choice.check(name, getattr(self, name))
         oracle_start(self.init)  # a known scheme
         parse_background(self.background)  # fails on a malformed R,G,B
+        if not self.colour_ridge > 0:
+            raise ValueError(f"colour_ridge must be > 0 (pixels' worth of weight on the "
+                             f"posterior colour), got {self.colour_ridge!r}")
 
 
 def load_task_scene(task: SceneTask) -> Scene:

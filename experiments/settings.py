@@ -53,6 +53,9 @@ PROTOCOL = Choice(("continual", "static"), "continual",
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")
+COLOUR_RULE = Choice(("fit", "posterior"), "fit",
+                     "VBGS splat colours: fitted to the training pixels (fit, chosen on "
+                     "validation views by `tune`) or the posterior colour means")
 DEPTH_KIND = Choice(DEPTH_KINDS, "inverse", "what the depth model outputs")
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 

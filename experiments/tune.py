@@ -6,7 +6,10 @@ chosen here, on the scene's validation views (``Scene.val``), never on its test 
 
 The stream is learned once; each setting of the grid then only re-renders: a shallow
 copy of the learner gets the task with that setting (``dataclasses.replace``) and its
-``splats()`` are scored by :func:`experiments.protocol.evaluate_validation`. So a grid
+``splats()`` are scored by :func:`experiments.protocol.evaluate_validation`. Data a
+learner gathers for a render setting (:data:`GATHERED`, the colour fit) depend on the
+other render settings: while it is gathered, the stream is learned once per
+combination of the other grid settings. So a grid
 parameter must be a task field the learner reads at render time: fields that change
 the fit itself (:data:`FIT_FIELDS`) are refused. The grid is given by name
 (``--grid splat_scale=0.5,0.7,1.0 opacity=0.5,0.9``), so a new render setting needs
@@ -40,6 +43,16 @@ FIT_FIELDS = frozenset({
     "depth_preset", "depth_align", "background", "replay", "steps_per_frame", "steps",
     "protocol", "prior", "opacity_rule",
 })
+
+# Render settings whose data a learner gathers while learning, under one value only (the
+# VBGS learner gathers the colour least squares only under colour_rule "fit"; the
+# "posterior" rule needs nothing gathered). The stream is learned under that value and
+# every value of the grid is rendered from it. What is gathered depends on the other
+# render settings (the fit's blending weights are rendered with them), so while it is
+# gathered the stream is learned once per combination of the other grid settings.
+GATHERED = {"colour_rule": "fit"}
+# Render settings that only the final solve reads, never what is gathered: no re-learning.
+SOLVE_ONLY = frozenset({"colour_ridge"})
 
 
 def parse_grid(specs: list[str], task) -> dict[str, list]:
@@ -99,14 +112,21 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
         raise ValueError(f"scene {scene.name!r} has no validation views to tune on; "
                          f"use --val-views >= 1")
     LEARNERS[task.method].check(task)
-    learner, background = learn_once(task, scene, progress=progress)
+    gather = {name: value for name, value in GATHERED.items()
+              if name in grid or getattr(task, name, None) == value}
+    relearn = {name: values for name, values in grid.items()
+               if gather and name not in gather and name not in SOLVE_ONLY}
     rows = []
-    for setting in settings(grid):
-        view = copy.copy(learner)  # shares the learned state; only the render settings differ
-        view.task = replace(task, **setting)
-        ev = evaluate_validation(view.splats(), scene, background)
-        rows.append({**setting, "val_psnr": ev.psnr, "val_ssim": ev.ssim,
-                     "val_depth_l1": ev.depth_l1})
+    for fixed in settings(relearn):  # [{}] when nothing is gathered: one stream in all
+        learner, background = learn_once(replace(task, **fixed, **gather), scene,
+                                          progress=progress)
+        for rendered in settings({n: v for n, v in grid.items() if n not in fixed}):
+            setting = {name: {**fixed, **rendered}[name] for name in grid}
+            view = copy.copy(learner)  # shares the learned state; only render settings differ
+            view.task = replace(task, **setting)
+            ev = evaluate_validation(view.splats(), scene, background)
+            rows.append({**setting, "val_psnr": ev.psnr, "val_ssim": ev.ssim,
+                         "val_depth_l1": ev.depth_l1})
     return sorted(rows, key=lambda r: -np.nan_to_num(r["val_psnr"], nan=-np.inf))
 
 

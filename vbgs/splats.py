@@ -278,11 +278,13 @@ def mixture_geometry(mixture) -> tuple[jax.Array, jax.Array]:
 
 def from_posterior(posterior, prior, *, opacity: float = VBGS_OPACITY,
                    cov_scale: float = VBGS_COV_SCALE, min_count: float | None = None,
-                   drop_unused: bool = True, opacities=None) -> Splats:
+                   drop_unused: bool = True, opacities=None, colours=None) -> Splats:
     """Splats from a fitted 3-D VBGS mixture (``vbgs.model.Mixture``).
 
     means: ``E[mu_k]`` in world units; covs: ``cov_scale^2 E[Sigma_k] =
-    cov_scale^2 Psi_k / (nu_k - 4)``; colours: ``E[mu_c,k]`` clipped to [0, 1];
+    cov_scale^2 Psi_k / (nu_k - 4)``; colours: per component ``colours [k, 3]`` when
+    given (e.g. fitted to the picture, :mod:`vbgs.colour_fit`), else ``E[mu_c,k]``,
+    clipped to [0, 1];
     opacities: per component ``opacities [k]`` when given (e.g. from evidence,
     :mod:`vbgs.opacity`), else the constant ``opacity``. Components that received less
     than ``min_count`` points' worth of data (``alpha_k - alpha0_k``; default
@@ -302,7 +304,8 @@ def from_posterior(posterior, prior, *, opacity: float = VBGS_OPACITY,
     splats = Splats(
         means=means,
         covs=cov_scale**2 * covs,
-        colours=jnp.clip(posterior.colour.mean, 0.0, 1.0),
+        colours=jnp.clip(posterior.colour.mean if colours is None else jnp.asarray(colours),
+                         0.0, 1.0),
         opacities=jnp.where(used, chosen, 0.0).astype(posterior.alpha.dtype),
     )
     return prune(splats, np.asarray(used)) if drop_unused else splats

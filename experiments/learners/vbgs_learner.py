@@ -5,6 +5,13 @@ learned, adds components where the frame shows ground the model has no component
 (:func:`vbgs.grow.grow`); the first frame fixes the cell side by getting
 FIRST_FRAME_SHARE of the capacity. ``data`` and ``random`` start from the prior of
 :func:`experiments.learners.start.scene_prior` (an oracle start).
+
+With ``task.colour_rule == "fit"`` each frame also adds its terms of the colour
+least squares (:mod:`vbgs.colour_fit`), its blending weights W_f rendered from the
+posterior just after the frame's update: the model that learned the frame is the
+best one to say which components paint its pixels, and under stream init a component
+grown late has rows from the frames that arrived after it only, as it should.
+:meth:`VbgsLearner.splats` solves for the colours.
 """
 
 from __future__ import annotations
@@ -13,7 +20,7 @@ import jax
 
 from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import SceneResult, frame_points
-from vbgs import grow, model, opacity, skip
+from vbgs import colour_fit, grow, model, opacity, skip
 from vbgs.bound import StreamBound, batch_bound
 from vbgs.data.scene import Frame, Scene
 from vbgs.splats import Splats, from_posterior, mixture_geometry
@@ -35,6 +42,7 @@ class VbgsLearner:
         self.step_prior: model.Mixture | None = None  # the reference the stepper was built for
         self.prior_geometry = None  # means and covariances of that reference (evidence)
         self.evidence = opacity.no_evidence(task.components)
+        self.colour = colour_fit.no_frames(task.components)  # colour normal equations
         self.bound = StreamBound()
         self._last: tuple | None = None  # (q before the frame, xyz, rgb) for diagnose
         self.points_seen = self.points_skipped = self.frames_skipped = 0
@@ -89,18 +97,38 @@ class VbgsLearner:
             if not keep.any():
                 self.frames_skipped += 1
                 self._last = None
+                self._observe_colour(frame, background)
                 return
             xyz, rgb = xyz[keep], rgb[keep]
         self._last = (self.state.posterior, xyz, rgb)
         self.state, _ = self.step(self.state, xyz, rgb)
         jax.block_until_ready(self.state.stats.count)
+        self._observe_colour(frame, background)
+
+    def _observe_colour(self, frame: Frame, background) -> None:
+        """Add the frame's colour least-squares terms (``colour_rule == "fit"``), against
+        the splats of the posterior that has just learned it (no background: black)."""
+        if self.task.colour_rule != "fit":
+            return
+        self.colour = colour_fit.observe(self.colour, self.posterior_splats(), frame.camera,
+                                         frame.rgb, 0.0 if background is None else background)
+        jax.block_until_ready(self.colour.rhs)
 
     def splats(self, drop_unused: bool = False) -> Splats:
+        colours = None
+        if self.task.colour_rule == "fit":
+            colours = colour_fit.solve(self.colour, self.state.posterior.colour.mean,
+                                       ridge=self.task.colour_ridge)
+        return self.posterior_splats(drop_unused, colours)
+
+    def posterior_splats(self, drop_unused: bool = False, colours=None) -> Splats:
+        """The posterior's splats (opacity by the task's rule), with ``colours`` [k, 3]
+        in place of the posterior colour means when given."""
         evidence = self.task.opacity_rule == "evidence"
         return from_posterior(self.state.posterior, self.prior, opacity=self.task.opacity,
                               cov_scale=self.task.splat_scale, drop_unused=drop_unused,
                               opacities=opacity.expected_opacity(self.evidence) if evidence
-                              else None)
+                              else None, colours=colours)
 
     def diagnose(self, frame: Frame) -> None:
         """Add the last frame's streaming bound ``B_t`` (:mod:`vbgs.bound`; untimed) over

@@ -29,6 +29,7 @@ from typing import Any
 
 from experiments.settings import (
     ASSIGN,
+    COLOUR_RULE,
     DEPTH_KIND,
     ESTEP,
     FORMAT,
@@ -101,6 +102,7 @@ SETTINGS: dict[str, Spec] = {
     "format": Spec(_STR, FORMAT.help, FORMAT.values),
     "protocol": Spec(_STR, PROTOCOL.help, PROTOCOL.values),
     "opacity_rule": Spec(_STR, OPACITY_RULE.help, OPACITY_RULE.values),
+    "colour_rule": Spec(_STR, COLOUR_RULE.help, COLOUR_RULE.values),
     "depth_kind": Spec(_STR, DEPTH_KIND.help, DEPTH_KIND.values),
     "steps_per_frame": Spec(_INT, "optimisation steps per streamed frame", minimum=1),
     "steps": Spec(_INT, "optimisation steps", minimum=1),

@@ -103,3 +103,19 @@ def test_ctrl_c_is_one_line_and_status_130(monkeypatch, capsys):
     monkeypatch.setattr(image_task, "run_image", interrupted)
     assert main(IMAGE) == 130
     assert capsys.readouterr().err == "interrupted\n"
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--iterations", "0"], "--iterations must be at least 1"),
+    (["--ridge", "0"], "colour_ridge must be > 0"),
+])
+def test_colour_gap_refuses_bad_input_before_any_work(extra, message, capsys, monkeypatch):
+    import experiments.colour_gap as colour_gap
+
+    def gap(*a, **k):
+        raise AssertionError("the diagnostic started before the input was checked")
+
+    monkeypatch.setattr(colour_gap, "colour_gap", gap)
+    err = _refused(["colour-gap", "--components", "100", "--frames", "2", "--size", "16",
+                    *extra], capsys)
+    assert message in err

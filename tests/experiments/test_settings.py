@@ -48,6 +48,7 @@ def test_fit_image_reassign_auto_matches_the_task_default():
                                          ("format", settings.FORMAT),
                                          ("protocol", settings.PROTOCOL),
                                          ("opacity_rule", settings.OPACITY_RULE),
+                                         ("colour_rule", settings.COLOUR_RULE),
                                          ("depth_kind", settings.DEPTH_KIND)])
 def test_sweep_validation_and_cli_take_the_same_choices(key, choice):
     assert SETTINGS[key].choices == choice.values

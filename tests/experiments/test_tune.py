@@ -112,3 +112,22 @@ def test_tune_refuses_bad_input_before_any_work(extra, message, tmp_path, capsys
     err = capsys.readouterr().err
     assert err.startswith("error: ") and message in err and err.count("\n") == 1
     assert not (tmp_path / "t").exists()
+
+
+def test_colour_rule_is_gathered_while_streaming_and_each_rule_equals_a_fresh_stream(
+        monkeypatch):
+    """The colour least squares is gathered while the stream is learned (whatever the
+    task's own rule), so both colour rules are tuned from one stream; each row equals a
+    learner streamed anew under that rule."""
+    scene = load_task_scene(TINY)
+    base = replace(TINY, colour_rule="posterior")
+    rows = tune(base, scene, {"colour_rule": ["fit", "posterior"]})
+    for row in rows:
+        task = replace(TINY, colour_rule=row["colour_rule"])
+        learner = VbgsLearner(task, scene)
+        order = stream_order(len(scene.train), task.order, seed=task.seed)
+        for _, frame, background in stream_frames(task, scene, order):
+            learner.learn(frame, background)
+        fresh = evaluate_validation(learner.splats(), scene, background)
+        assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
+    assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # the rule changes the picture
