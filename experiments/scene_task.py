@@ -57,8 +57,8 @@ class SceneTask:
     opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
     splat_scale: float = VBGS_COV_SCALE
-    # VBGS splat colours: fitted to the training pixels (vbgs.colour_fit) | the posterior
-    # colour means. Chosen on validation views by `python -m experiments.run tune`.
+    # VBGS splat colours: the posterior colour means | fitted to the training pixels
+    # (vbgs.colour_fit; why off by default: experiments.settings.COLOUR_RULE)
     colour_rule: str = COLOUR_RULE.default
     colour_ridge: float = COLOUR_RIDGE  # pixels' worth of weight on the posterior colour (fit)
     depth_model: str | None = None
