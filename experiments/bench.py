@@ -26,8 +26,10 @@ def machine() -> str:
             cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
     except (OSError, StopIteration):
         pass
+    backend = jax.default_backend()
+    device = "" if backend == "cpu" else f" ({jax.devices()[0].device_kind})"  # e.g. NVIDIA H100
     return (f"{cpu}, {os.cpu_count()} cores, {platform.system()}, Python "
-            f"{platform.python_version()}, jax {jax.__version__} on {jax.default_backend()}")
+            f"{platform.python_version()}, jax {jax.__version__} on {backend}{device}")
 
 
 def _block(tree):

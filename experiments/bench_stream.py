@@ -24,6 +24,14 @@ from vbgs.compilation import CompileTimer
 PROFILE_REPEATS = 3
 
 
+def table_name() -> str:
+    """The results file on this backend: ``bench_stream`` on the CPU (the committed
+    table), ``bench_stream_<backend>`` elsewhere, so a GPU run never overwrites the CPU
+    figures (the table's machine line names the device, :func:`experiments.bench.machine`)."""
+    backend = jax.default_backend()
+    return "bench_stream" if backend == "cpu" else f"bench_stream_{backend}"
+
+
 def _prior(scene, k: int, seed: int = 0):
     from experiments.protocol import frame_points
 

@@ -367,10 +367,11 @@ def _bench(args) -> dict:
                             *map(str, components), "--scenes", *args.scenes, "--frames",
                             str(args.frames), "--sizes", str(sizes[0]), "--search", args.search]
                            + (["--devices", *map(str, args.devices)] if args.devices else []))
-        paths = bench.write_table(rows, args.out, "bench_stream", command=command)
-        paths += bench.write_table(profile, args.out, "bench_stream_profile", command=command)
+        name = bench_stream.table_name()
+        paths = bench.write_table(rows, args.out, name, command=command)
+        paths += bench.write_table(profile, args.out, f"{name}_profile", command=command)
         if devices:
-            paths += bench.write_table(devices, args.out, "bench_stream_devices",
+            paths += bench.write_table(devices, args.out, f"{name}_devices",
                                        command=command, note=bench_stream.DEVICE_NOTE)
         if not args.json:
             from tabulate import tabulate

@@ -41,3 +41,12 @@ def test_device_rows_one_process_per_device_count():
 def test_device_rows_refuse_an_uneven_split_before_starting_processes():
     with pytest.raises(ValueError, match="do not split evenly over \\[4\\] devices"):
         device_rows([1, 4], 402, "object", frames=2, size=24)
+
+
+def test_a_gpu_run_writes_its_own_table(monkeypatch):
+    """The committed CPU table is never overwritten by a run on another backend."""
+    from experiments import bench_stream
+
+    assert bench_stream.table_name() == "bench_stream"  # the CPU
+    monkeypatch.setattr(bench_stream.jax, "default_backend", lambda: "gpu")
+    assert bench_stream.table_name() == "bench_stream_gpu"
