@@ -19,10 +19,15 @@ def test_nan_and_inf_pixels():
         as_rgb(img)
 
 
-@pytest.mark.parametrize("shape", [(8,), (8, 8, 2), (8, 8, 5), (2, 8, 8, 3), (0, 4, 3)])
+@pytest.mark.parametrize("shape", [(8,), (8, 8, 6), (8, 8, 5), (2, 8, 8, 3), (0, 4, 3)])
 def test_wrong_image_shapes(shape):
     with pytest.raises(ValueError, match="shape|empty"):
         as_rgb(np.zeros(shape, np.float32))
+
+
+def test_grey_with_alpha_is_read_as_grey_rgb():
+    grey_alpha = np.stack([np.full((2, 2), 0.25), np.ones((2, 2))], -1).astype(np.float32)
+    np.testing.assert_array_equal(as_rgb(grey_alpha), np.full((2, 2, 3), 0.25, np.float32))
 
 
 def test_wrong_dtypes_and_ranges():

@@ -42,7 +42,8 @@ def as_rgb(image, *, source: str = "image", background=None) -> np.ndarray:
         img = np.repeat(img[..., None], 3, axis=2)
     if img.ndim != 3 or img.shape[2] not in (3, 4):
         raise ValueError(
-            f"{source}: expected an image of shape [h, w], [h, w, 3] or [h, w, 4], got {img.shape}"
+            f"{source}: expected an image of shape [h, w] or [h, w, C] with C = 1 (grey), "
+            f"2 (grey + alpha), 3 (RGB) or 4 (RGBA), got {img.shape}"
         )
     if img.shape[0] == 0 or img.shape[1] == 0:
         raise ValueError(f"{source}: image is empty (shape {img.shape})")
