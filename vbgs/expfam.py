@@ -234,9 +234,10 @@ def dirichlet_posterior(alpha0: jnp.ndarray, stats: Stats) -> jnp.ndarray:
     return alpha0 + stats.count
 
 
-def dirichlet_expected_log(alpha: jnp.ndarray) -> jnp.ndarray:
-    """``E[log pi_k] = psi(alpha_k) - psi(sum alpha)``."""
-    return digamma(alpha) - digamma(alpha.sum())
+def dirichlet_expected_log(alpha: jnp.ndarray, total: jnp.ndarray | None = None) -> jnp.ndarray:
+    """``E[log pi_k] = psi(alpha_k) - psi(sum alpha)``; ``total``: the sum over the whole
+    Dirichlet when ``alpha`` holds only some of its components (default ``alpha.sum()``)."""
+    return digamma(alpha) - digamma(alpha.sum() if total is None else total)
 
 
 def dirichlet_mean(alpha: jnp.ndarray) -> jnp.ndarray:

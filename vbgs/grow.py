@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from vbgs.model import Mixture, PriorConfig, State, check_points, m_step, make_prior, start
+from vbgs.model import Mixture, PriorConfig, State, check_points_host, m_step, make_prior, start
 from vbgs.model import update as model_update
 
 # Concentration of an empty slot: E[log pi] = digamma(1e-6) ~ -1e6, no responsibility.
@@ -53,6 +53,7 @@ class GrowInfo(NamedTuple):
     n_new: int  # components allocated by this call
     n_ground: int  # of which on new ground (level-0 cells without a component)
     n_active: int  # active components after the call
+    slots: np.ndarray  # [n_new] the slots filled (the rows of the prior that changed)
 
 
 def is_active(prior: Mixture) -> np.ndarray:
@@ -116,6 +117,9 @@ def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixt
     return prior._replace(space=space, colour=colour, alpha=put(prior.alpha, alpha))
 
 
+_m_step = jax.jit(m_step)  # eager, its many small ops dispatch one by one (~0.1 s at K=20k)
+
+
 class Growth(NamedTuple):
     """The growth rule's settings, fixed on the first batch (hyperparameters, not state).
 
@@ -152,15 +156,25 @@ def host_rng(key: jax.Array) -> np.random.Generator:
     return np.random.default_rng(np.asarray(jax.random.key_data(key)).ravel().tolist())
 
 
+def cell_ids(cells: np.ndarray) -> np.ndarray:
+    """``[n]`` labels 0, 1, ... of the distinct rows of integer cell coordinates
+    ``cells [n, d]`` (equal rows, equal labels). The rows are packed into one int64 each
+    when their box allows (a 1-D unique sorts far faster than a unique over rows)."""
+    lo = cells.min(0)
+    span = cells.max(0) - lo + 1
+    if np.prod(span.astype(np.float64)) >= 2.0**62:  # too wide to pack: unique over rows
+        return np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
+    key = np.ravel_multi_index(tuple((cells - lo).T), tuple(int(v) for v in span))
+    return np.unique(key, return_inverse=True)[1].reshape(-1)
+
+
 def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
           quota: int) -> np.ndarray:
     """Up to ``quota`` points of ``x [n, d]`` (indices), one per cell of side ``cell``
     that holds none of ``taken [m, d]``, cells taken in the random ``order [n]``."""
     if quota <= 0:
         return np.zeros(0, np.int64)
-    cells = cell_index(np.concatenate([taken, x]), cell)
-    _, ids = np.unique(cells, axis=0, return_inverse=True)
-    ids = ids.reshape(-1)
+    ids = cell_ids(cell_index(np.concatenate([taken, x]), cell))
     occupied = np.zeros(ids.max() + 1, bool)
     occupied[ids[: len(taken)]] = True
     point_ids = ids[len(taken):]
@@ -196,7 +210,7 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``."""
-    xyz, rgb = check_points(xyz, rgb)
+    xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     prior = state.prior
     active = is_active(prior)
     empty = np.flatnonzero(~active)
@@ -205,13 +219,13 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     chosen, n_ground = select(x, taken, len(empty), rule, key=key)
     n_new = len(chosen)
     if n_new == 0:
-        return state, GrowInfo(0, 0, int(active.sum()))
+        return state, GrowInfo(0, 0, int(active.sum()), empty[:0])
     slots = empty[:n_new]
     dtype = prior.alpha.dtype
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha))
-    return (state._replace(prior=new_prior, posterior=m_step(new_prior, state.stats)),
-            GrowInfo(n_new, n_ground, int(active.sum()) + n_new))
+    return (state._replace(prior=new_prior, posterior=_m_step(new_prior, state.stats)),
+            GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots))
 
 
 def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,

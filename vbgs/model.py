@@ -324,11 +324,14 @@ class Terms(NamedTuple):
     const: jnp.ndarray  # [k]
 
 
-def component_terms(q: Mixture, colour_noise: float | None) -> Terms:
-    """The centred-form terms of :class:`Terms` for the assigning model ``q``."""
+def component_terms(q: Mixture, colour_noise: float | None,
+                    alpha_total: jnp.ndarray | None = None) -> Terms:
+    """The centred-form terms of :class:`Terms` for the assigning model ``q``;
+    ``alpha_total``: ``sum_k alpha_k`` of the whole mixture when ``q`` holds only some of
+    its rows (``E[log pi_k]`` needs it; default ``q.alpha.sum()``)."""
     prec, _, const = expfam.niw_loglik_coefficients(q.space._replace(mean=jnp.zeros_like(
         q.space.mean)))  # about the component's own mean: no -1/2 m^T P m term
-    const = const + expfam.dirichlet_expected_log(q.alpha)
+    const = const + expfam.dirichlet_expected_log(q.alpha, alpha_total)
     colour_mean = None
     if colour_noise is not None:
         _, c_const = expfam.colour_loglik_coefficients(
@@ -337,7 +340,8 @@ def component_terms(q: Mixture, colour_noise: float | None) -> Terms:
     return Terms(q.space.mean, prec, colour_mean, const)
 
 
-def log_joint_weights(q: Mixture, colour_noise: float | None) -> jnp.ndarray:
+def log_joint_weights(q: Mixture, colour_noise: float | None,
+                      alpha_total: jnp.ndarray | None = None) -> jnp.ndarray:
     """``W [k, F]`` with ``l_nk = phi_n . W_k - |c_n|^2 / (2 sigma_c^2)`` where
     ``l_nk = E[log pi_k] + E[log N(x_n|mu_k,Sigma_k)] (+ E[log N(c_n|mu_c,k, sigma_c^2)])``:
     the centred form of :class:`Terms` expanded into features, ``W_k = [-1/2 vec(P_k),
@@ -346,8 +350,9 @@ def log_joint_weights(q: Mixture, colour_noise: float | None) -> jnp.ndarray:
     The feature form cancels large terms, so products with it must run at full float32
     precision (:func:`feature_logits`). With ``colour_noise=None`` the colour term is
     left out (responsibilities given the position only, as the image renderer needs).
+    ``alpha_total`` as in :func:`component_terms`.
     """
-    t = component_terms(q, colour_noise)
+    t = component_terms(q, colour_noise, alpha_total)
     k = t.prec.shape[0]
     pm = mat_vec(t.prec, t.mean)  # [k, d]
     const = t.const - 0.5 * jnp.sum(t.mean * pm, -1)

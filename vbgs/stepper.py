@@ -14,6 +14,15 @@ inside the compiled function) or from a host KD-tree over the fixed means
 host and device share memory and the tree is faster, and the grid on an accelerator
 unless building it would be costly (:data:`vbgs.grid.MAX_BUILD_COST`).
 
+A stream whose reference grows (:mod:`vbgs.grow` fills empty slots of the fixed
+capacity K) keeps its stepper: :meth:`Stepper.grow` recomputes the terms of the filled
+rows only (padded to a power of two, so a few small functions compile per stream) and
+shifts every other row's ``E[log pi_k]`` by the change of ``psi(sum_k alpha_k)``; the
+terms keep their ``[K, ...]`` shapes, so the compiled step is not recompiled. Such a
+stepper is built with ``grows=True`` and searches candidates with the host KD-tree
+(rebuilt on growth): the grid's layout is a static argument planned from the means,
+and re-planning it would recompile the step.
+
 Under posterior assignment the terms are recomputed inside the compiled function from
 the current posterior and the candidates come from a KD-tree over the current means,
 rebuilt every batch, because the means move.
@@ -30,6 +39,7 @@ from typing import Literal, NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.scipy.special import digamma
 
 from vbgs import candidates, expfam, grid, model
 from vbgs.model import Assign, EStep, Info, Mixture, PriorConfig, State
@@ -53,24 +63,62 @@ class StepConfig(NamedTuple):
 
 
 class Fixed(NamedTuple):
-    """Arrays built once per stream under prior assignment (None otherwise)."""
+    """Arrays built once per stream under prior assignment (None otherwise); arguments
+    of the compiled step, so new values of the same shapes (growth) do not recompile it."""
 
     reference: object  # [k, F] feature weights (dense) or model.Terms (sparse)
-    kl: jnp.ndarray  # KL(prior || prior), a scalar (0 up to rounding)
+    kl: jnp.ndarray  # KL(prior || prior) = 0 exactly (computing it would add only rounding)
     lists: grid.CellLists | None
 
 
-def _reference(q: Mixture, estep: str, colour_noise: float):
+# Rows recomputed on growth go in blocks of this many (the last padded), so the row
+# update compiles once per stream (each block size would compile it again, ~3 s).
+ROW_BLOCK = 512
+
+
+def _reference(q: Mixture, estep: str, colour_noise: float, alpha_total=None):
     if estep == "dense":
-        return model.log_joint_weights(q, colour_noise)
-    return model.component_terms(q, colour_noise)
+        return model.log_joint_weights(q, colour_noise, alpha_total)
+    return model.component_terms(q, colour_noise, alpha_total)
 
 
 @partial(jax.jit, static_argnames=("estep", "colour_noise"))
 def _prior_terms(prior: Mixture, estep: str, colour_noise: float):
-    """The prior's E-step terms and ``KL(prior || prior)``, compiled as one function
-    (eager, their many small ops would each compile)."""
-    return _reference(prior, estep, colour_noise), model.kl(prior, prior, colour_noise)
+    """The prior's E-step terms, compiled as one function (eager, their many small ops
+    would each compile)."""
+    return _reference(prior, estep, colour_noise)
+
+
+def _take_rows(q: Mixture, rows) -> Mixture:
+    """The components ``rows [m]`` of ``q`` (the origin is shared)."""
+    take = partial(jax.tree.map, lambda a: a[rows])
+    return Mixture(take(q.space), take(q.colour), q.alpha[rows], q.origin)
+
+
+@partial(jax.jit, static_argnames=("estep", "colour_noise"))
+def _grown_terms(reference, old_alpha, prior: Mixture, rows, estep: str, colour_noise: float):
+    """The E-step terms of ``prior`` from those of a reference with concentrations
+    ``old_alpha [k]`` that differs from it only in ``rows [m]`` (repeats allowed).
+
+    The rows are recomputed; every other row keeps its terms except ``E[log pi_k] =
+    psi(alpha_k) - psi(sum alpha)``, which moves by ``psi(sum old_alpha) -
+    psi(sum alpha)`` (the constant of :class:`vbgs.model.Terms`, the last column of the
+    dense feature weights)."""
+    total = prior.alpha.sum()
+    shift = digamma(old_alpha.sum()) - digamma(total)
+    fresh = _reference(_take_rows(prior, rows), estep, colour_noise, total)
+    if estep == "dense":  # [k, F]
+        return reference.at[:, -1].add(shift).at[rows].set(fresh)
+    shifted = reference._replace(const=reference.const + shift)
+    return jax.tree.map(lambda a, f: a.at[rows].set(f), shifted, fresh)
+
+
+def row_blocks(rows) -> list[np.ndarray]:
+    """``rows [m]`` in blocks of :data:`ROW_BLOCK`, the last padded by repeating its first
+    entry (setting a row twice to the same value is harmless); none when m = 0."""
+    rows = np.asarray(rows, np.int32).reshape(-1)
+    blocks = [rows[i:i + ROW_BLOCK] for i in range(0, len(rows), ROW_BLOCK)]
+    return [np.concatenate([b, np.full(ROW_BLOCK - len(b), b[0], np.int32)]) for b in blocks]
 
 
 @partial(jax.jit, static_argnames=("config",))
@@ -105,12 +153,16 @@ class Stepper:
     ``max_points``: the most points a batch will hold, if known; batches are padded to
     a size that only grows (the first batch's bucket, or ``max_points``'s), so a stream
     of similar frames compiles one function.
+
+    ``grows``: the reference will grow (:meth:`grow`); candidates then come from the
+    host KD-tree (see the module docstring).
     """
 
     def __init__(self, prior: Mixture, *, assign: Assign = "prior",
                  config: PriorConfig = PriorConfig(), estep: EStep = "dense",
                  n_candidates: int = candidates.DEFAULT_CANDIDATES,
-                 max_points: int | None = None, search: Search = "auto"):
+                 max_points: int | None = None, search: Search = "auto",
+                 grows: bool = False):
         if assign not in ("prior", "posterior"):
             raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
         if estep not in ("dense", "sparse"):
@@ -122,12 +174,18 @@ class Stepper:
             raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
         if search not in ("auto", "grid", "kdtree"):
             raise ValueError(f"unknown candidate search {search!r}: use 'auto', 'grid' or 'kdtree'")
-        # the grid is built once, so it serves only a fixed assigning model
-        search = search if assign == "prior" and estep == "sparse" else "kdtree"
+        if grows and search == "grid":
+            raise ValueError("a growing reference cannot use the grid search (its layout is "
+                             "planned from the means): use search='kdtree' or 'auto'")
+        # the grid is built once, so it serves only a fixed assigning model; on a CPU the
+        # host KD-tree reads the device's own memory (the grid is not even planned)
+        fixed_sparse = assign == "prior" and estep == "sparse" and not grows
+        if not fixed_sparse or (search == "auto" and jax.default_backend() == "cpu"):
+            search = "kdtree"
         spec = grid.plan(prior.space.mean, self.n_candidates) if search != "kdtree" else None
-        if search == "auto":  # on a CPU the host KD-tree reads the device's own memory
+        if search == "auto":
             cheap = grid.build_cost(prior.space.mean, spec) <= grid.MAX_BUILD_COST
-            search = "grid" if jax.default_backend() != "cpu" and cheap else "kdtree"
+            search = "grid" if cheap else "kdtree"
         self.search = search
         self.spec, self.fixed, self._tree = None, None, None
         if assign == "prior":
@@ -137,9 +195,34 @@ class Stepper:
                 lists = grid.build(prior.space.mean, self.spec)
             elif estep == "sparse":
                 self._tree = candidates.means_tree(prior.space.mean)
-            self.fixed = Fixed(*_prior_terms(prior, estep, self.colour_noise), lists)
+            self.fixed = Fixed(_prior_terms(prior, estep, self.colour_noise),
+                               jnp.zeros((), prior.alpha.dtype), lists)
         self.size = model.bucket_size(max_points) if max_points else 0
         self._origin = np.asarray(prior.origin)
+
+    def grow(self, prior: Mixture, rows) -> None:
+        """Take the grown reference ``prior``, which differs from the stepper's only in
+        the components ``rows [m]`` (the slots :func:`vbgs.grow.grow` filled): their terms
+        are recomputed, the other rows' ``E[log pi_k]`` shifted (:func:`_grown_terms`),
+        the KD-tree rebuilt; the compiled step is reused."""
+        if self.spec is not None:
+            raise ValueError("this stepper searches a grid planned from the means: build it "
+                             "with grows=True to let its reference grow")
+        if prior.n_components != self.prior.n_components or prior.dim != self.prior.dim:
+            raise ValueError(f"the grown reference has {prior.n_components} {prior.dim}-D "
+                             f"components, the stepper {self.prior.n_components} "
+                             f"{self.prior.dim}-D ones: growth fills slots, it adds none")
+        blocks = row_blocks(rows)
+        if self.fixed is not None and blocks:
+            reference, old_alpha = self.fixed.reference, self.prior.alpha
+            for block in blocks:  # after the first block the sum of alpha is the new one
+                reference = _grown_terms(reference, old_alpha, prior, jax.device_put(block),
+                                         self.estep, self.colour_noise)
+                old_alpha = prior.alpha
+            self.fixed = self.fixed._replace(reference=reference)
+            if self._tree is not None:
+                self._tree = candidates.means_tree(prior.space.mean)
+        self.prior = prior
 
     def padded_size(self, n: int) -> int:
         """The size batches of ``n`` points are padded to: it only grows, and when it

@@ -38,8 +38,8 @@ class VbgsLearner:
         self.key = init_key(task)
         self.rule: grow.Growth | None = None
         self.state = None if task.init == "stream" else model.start(scene_prior(task, scene))
-        self.step: Stepper | None = None  # compiled update, rebuilt when the reference grows
-        self.step_prior: model.Mixture | None = None  # the reference the stepper was built for
+        self.step: Stepper | None = None  # compiled update, told when the reference grows
+        self.step_prior: model.Mixture | None = None  # the reference the stepper holds
         self.prior_geometry = None  # means and covariances of that reference (evidence)
         self.evidence = opacity.no_evidence(task.components)
         self.colour = colour_fit.no_frames(task.components)  # colour normal equations
@@ -54,22 +54,35 @@ class VbgsLearner:
             raise ValueError("the stream has not started: no frame has arrived yet")
         return self.state.prior
 
-    def _reference_changed(self) -> bool:
-        """Whether the stepper must be rebuilt: none yet, or the reference model grew."""
-        return self.step is None or self.step_prior is not self.state.prior
+    def _sync_stepper(self, grown) -> None:
+        """Build the stepper on the first frame; after growth (the slots ``grown``) hand it
+        the grown reference (:meth:`vbgs.stepper.Stepper.grow`: no recompilation)."""
+        t = self.task
+        if self.step is None:
+            self.step = Stepper(self.state.prior, assign=t.assign, config=t.prior,
+                                estep=t.estep, n_candidates=t.candidates,
+                                grows=t.init == "stream")
+        elif self.step_prior is not self.state.prior:
+            self.step.grow(self.state.prior, grown)
+        else:
+            return
+        self.step_prior = self.state.prior
+        self.prior_geometry = mixture_geometry(self.state.prior)
 
     @staticmethod
     def check(task) -> None:
         """Nothing to check beyond the task's own validation."""
 
-    def _grow(self, xyz, rgb) -> None:
+    def _grow(self, xyz, rgb):
+        """Fill empty slots on the frame's poorly explained points; the slots filled."""
         t = self.task
         if self.state is None:
             self.rule = grow.calibrate(xyz, t.components, FIRST_FRAME_SHARE * t.components,
                                        refine=REFINE_SHARE)
             self.state = grow.start_empty(xyz, t.components, self.rule.cell, t.prior)
         self.key, sub = jax.random.split(self.key)
-        self.state, _ = grow.grow(self.state, xyz, rgb, self.rule, key=sub, config=t.prior)
+        self.state, info = grow.grow(self.state, xyz, rgb, self.rule, key=sub, config=t.prior)
+        return info.slots
 
     def learn(self, frame: Frame, background=None) -> None:
         """Grow (stream init), then one conjugate update with the frame's points. The
@@ -77,13 +90,8 @@ class VbgsLearner:
         part here."""
         xyz, rgb = frame_points(frame)
         t = self.task
-        if t.init == "stream":
-            self._grow(xyz, rgb)
-        if self._reference_changed():  # the compiled stepper holds the reference's terms
-            self.step_prior = self.state.prior
-            self.prior_geometry = mixture_geometry(self.state.prior)
-            self.step = Stepper(self.state.prior, assign=t.assign, config=t.prior,
-                                estep=t.estep, n_candidates=t.candidates)
+        grown = self._grow(xyz, rgb) if t.init == "stream" else None
+        self._sync_stepper(grown)  # the compiled stepper holds the reference's terms
         if t.opacity_rule == "evidence":  # the whole depth map, skipped points or not, read
             # against the model that assigns the points
             geometry = (self.prior_geometry if t.assign == "prior"

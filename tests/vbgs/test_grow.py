@@ -106,3 +106,17 @@ def test_patch_stream_from_empty_slots_uses_the_budget_in_both_modes():
         assert used >= 480, (assign, used)
         assert db > 26.0, (assign, db)
     assert results["posterior"][0] >= results["prior"][0] - 0.3
+
+
+def test_cell_ids_label_equal_cells_alike_packed_or_not():
+    rng = np.random.default_rng(0)
+    cells = rng.integers(-3, 4, (500, 3))
+    got = grow.cell_ids(cells)
+    want = np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
+    # a bijection between the labels: same cell <=> same label
+    assert len(set(zip(got, want))) == len(set(got)) == len(set(want))
+    wide = cells.copy()
+    wide[:, 0] *= 2**40  # a box too wide to pack into one int64: unique over rows
+    wide[:, 1] *= 2**30
+    again = grow.cell_ids(wide)
+    assert len(set(zip(again, want))) == len(set(again)) == len(set(want))

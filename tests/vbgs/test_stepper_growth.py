@@ -1,0 +1,101 @@
+"""A stepper whose reference grows (vbgs.grow fills slots) is updated in place, equals a
+freshly built one, and never recompiles its step."""
+
+import jax
+import numpy as np
+import pytest
+
+from vbgs import grow, model, stepper
+from vbgs.camera import unproject
+from vbgs.data.synthetic import object_scene
+
+
+@pytest.fixture(scope="module")
+def frames():
+    scene = object_scene(size=24, n_train=5, n_test=1, seed=1)
+    return [unproject(f.camera, f.rgb, f.depth) for f in scene.train]
+
+
+K = 400
+
+
+def _start(frames):
+    """The growth rule and the empty state of a stream of ``frames``."""
+    rule = grow.calibrate(frames[0][0], K, 0.3 * K, refine=0.05)
+    return rule, grow.start_empty(frames[0][0], K, rule.cell)
+
+
+@pytest.mark.parametrize(("assign", "estep"), [("prior", "sparse"), ("prior", "dense"),
+                                               ("posterior", "sparse")])
+def test_a_grown_stepper_equals_a_fresh_one(frames, assign, estep):
+    rule, state = _start(frames)
+    size = max(len(f[0]) for f in frames)  # one padded size: one compiled step
+    kept, n_grown = None, []
+    for i, (xyz, rgb) in enumerate(frames):
+        state, info = grow.grow(state, xyz, rgb, rule, key=jax.random.key(i))
+        n_grown.append(info.n_new)
+        if kept is None:
+            kept = stepper.Stepper(state.prior, assign=assign, estep=estep, grows=True,
+                                   max_points=size)
+        else:
+            kept.grow(state.prior, info.slots)
+        fresh = stepper.Stepper(state.prior, assign=assign, estep=estep, grows=True,
+                                max_points=size)
+        a, ainfo = kept(state, xyz, rgb)
+        b, binfo = fresh(state, xyz, rgb)
+        if assign == "prior":  # the terms themselves, row by row
+            for got, want in zip(jax.tree.leaves(kept.fixed.reference),
+                                 jax.tree.leaves(fresh.fixed.reference), strict=True):
+                np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
+        n = len(xyz)
+        np.testing.assert_allclose(np.asarray(ainfo.point_loglik)[:n],
+                                   np.asarray(binfo.point_loglik)[:n], rtol=1e-5, atol=1e-4)
+        np.testing.assert_allclose(a.stats.count, b.stats.count, rtol=1e-5, atol=1e-4)
+        np.testing.assert_allclose(a.posterior.space.mean, b.posterior.space.mean,
+                                   rtol=1e-5, atol=1e-5)
+        scale = np.abs(np.asarray(b.posterior.space.scale)).max()
+        np.testing.assert_allclose(a.posterior.space.scale, b.posterior.space.scale,
+                                   rtol=1e-4, atol=1e-4 * scale)  # float32 sums
+        state = a
+    assert sum(n > 0 for n in n_grown[1:]) >= 3  # the reference grew after the start
+    assert float(state.stats.count.sum()) == pytest.approx(sum(len(f[0]) for f in frames),
+                                                           rel=1e-4)
+
+
+def test_growth_does_not_recompile_the_step(frames):
+    rule, state = _start(frames)
+    state, _ = grow.grow(state, *frames[0], rule, key=jax.random.key(0))
+    step = stepper.Stepper(state.prior, estep="sparse", grows=True,
+                           max_points=max(len(f[0]) for f in frames))
+    state, _ = step(state, *frames[0])  # compiles the step (if no other test did)
+    steps, rows = stepper._step._cache_size(), stepper._grown_terms._cache_size()
+    sizes = set()
+    for i, (xyz, rgb) in enumerate(frames[1:], 1):
+        state, info = grow.grow(state, xyz, rgb, rule, key=jax.random.key(i))
+        step.grow(state.prior, info.slots)
+        sizes.add(info.n_new)
+        state, _ = step(state, xyz, rgb)
+    assert len(sizes) > 1  # the frames grow different numbers of components...
+    assert stepper._step._cache_size() == steps  # ...and the step is never traced again
+    assert stepper._grown_terms._cache_size() - rows <= 1  # the row update at most once
+
+
+def test_a_growing_stepper_refuses_the_grid(frames):
+    rule, state = _start(frames)
+    prior = grow.grow(state, *frames[0], rule, key=jax.random.key(0))[0].prior
+    with pytest.raises(ValueError, match="grid"):
+        stepper.Stepper(prior, estep="sparse", search="grid", grows=True)
+    fixed = stepper.Stepper(prior, estep="sparse", search="grid")
+    with pytest.raises(ValueError, match="grows=True"):
+        fixed.grow(prior, np.arange(3))
+    wrong = grow.empty_prior(prior.n_components + 1, np.asarray(prior.origin), 1.0)
+    with pytest.raises(ValueError, match="fills slots"):
+        stepper.Stepper(prior, grows=True).grow(wrong, np.arange(3))
+
+
+def test_row_blocks_cover_the_rows_in_fixed_blocks():
+    rows = np.arange(3, 3 + stepper.ROW_BLOCK + 7)
+    blocks = stepper.row_blocks(rows)
+    assert [len(b) for b in blocks] == [stepper.ROW_BLOCK] * 2
+    assert set(np.concatenate(blocks)) == set(rows)
+    assert stepper.row_blocks(np.zeros(0, int)) == []
