@@ -36,8 +36,14 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from vbgs.model import Mixture, PriorConfig, State, check_points_host, m_step, make_prior, start
+from vbgs.model import Mixture, PriorConfig, State, check_points_host, m_step, start
+from vbgs.model import _make_prior  # compiled make_prior
 from vbgs.model import update as model_update
+
+# Compiled: eager, their many small ops dispatch one by one (m_step ~0.1 s at K=20k) and
+# each op is one more executable for a new process to load.
+_m_step = jax.jit(m_step)
+_start = jax.jit(start, static_argnames=("config",))
 
 # Concentration of an empty slot: E[log pi] = digamma(1e-6) ~ -1e6, no responsibility.
 EMPTY_ALPHA = 1e-6
@@ -89,8 +95,8 @@ def empty_prior(n_components: int, origin, cell: float, config: PriorConfig = Pr
     offset[:, :] = EMPTY_DISTANCE_CELLS * cell
     offset[:, 0] += cell * np.arange(n_components)
     means = origin + jnp.asarray(offset, dtype)
-    prior = make_prior(means, jnp.zeros((n_components, 3), dtype), origin, cell, config)
-    return prior._replace(alpha=jnp.full((n_components,), EMPTY_ALPHA, dtype))
+    prior = _make_prior(means, np.zeros((n_components, 3), dtype), origin, cell, config)
+    return prior._replace(alpha=jnp.asarray(np.full((n_components,), EMPTY_ALPHA, dtype)))
 
 
 def start_empty(xyz, n_components: int, cell: float,
@@ -99,7 +105,8 @@ def start_empty(xyz, n_components: int, cell: float,
     batch's box ``xyz [n, d]`` (a frame for precision, nothing more)."""
     pts = np.asarray(xyz, np.float64)
     origin = 0.5 * (pts.min(0) + pts.max(0))
-    return start(empty_prior(n_components, origin, cell, config, jnp.asarray(xyz).dtype))
+    return _start(empty_prior(n_components, origin, cell, config, jnp.asarray(xyz).dtype),
+                  config)
 
 
 def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixture:
@@ -115,9 +122,6 @@ def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixt
     space = prior.space._replace(mean=put(prior.space.mean, x_new))
     colour = prior.colour._replace(mean=put(prior.colour.mean, c_new))
     return prior._replace(space=space, colour=colour, alpha=put(prior.alpha, alpha))
-
-
-_m_step = jax.jit(m_step)  # eager, its many small ops dispatch one by one (~0.1 s at K=20k)
 
 
 class Growth(NamedTuple):
