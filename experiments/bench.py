@@ -14,6 +14,7 @@ from tqdm.auto import tqdm
 
 from vbgs import model
 from vbgs.data.images import image_to_points, load_image
+from vbgs.io_atomic import write_atomic, write_text_atomic
 from vbgs.metrics import psnr
 from vbgs.render import render_image
 
@@ -95,7 +96,8 @@ def write_table(rows: list[dict], out_dir: str | Path, name: str, *, command: st
     out.mkdir(parents=True, exist_ok=True)
     frame = mark_dropped(pd.DataFrame(rows))
     csv, md = out / f"{name}.csv", out / f"{name}.md"
-    frame.assign(**(settings or {}), machine=machine()).to_csv(csv, index=False)
+    table_csv = frame.assign(**(settings or {}), machine=machine())
+    write_atomic(csv, lambda tmp: table_csv.to_csv(tmp, index=False))
     head = [f"Measured on: {machine()}"]
     if command:
         head.append(f"Command: `{command}`")
@@ -107,7 +109,7 @@ def write_table(rows: list[dict], out_dir: str | Path, name: str, *, command: st
         head.append("Rows with exact = False dropped splat-tile overlaps beyond the "
                     "rasterizer's tile capacity: their renders (and timings) are not exact.")
     table = frame.to_markdown(index=False, floatfmt=_floatfmt(frame))
-    md.write_text("\n\n".join(head) + f"\n\n{table}\n")
+    write_text_atomic(md, "\n\n".join(head) + f"\n\n{table}\n")
     return [csv, md]
 
 

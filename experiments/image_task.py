@@ -21,6 +21,7 @@ from experiments.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
 from vbgs import grow, model
 from vbgs.bound import StreamBound, batch_bound
 from vbgs.data.images import image_to_points, load_image, patch_stream
+from vbgs.io_atomic import write_atomic
 from vbgs.fit import fit, stream
 from vbgs.metrics import psnr, ssim
 from vbgs.render import render_image
@@ -217,6 +218,5 @@ def save_comparison(path: str | Path, target: np.ndarray, render: np.ndarray, ti
         ax.axis("off")
     fig.colorbar(shown, ax=axes[2], fraction=0.046, label="mean abs error (colour units)")
     fig.suptitle(title)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=120, bbox_inches="tight"))
     plt.close(fig)

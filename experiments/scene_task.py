@@ -30,9 +30,10 @@ from experiments.settings import (
 )
 from vbgs import model
 from vbgs.background import parse_background
-from vbgs.data.formats import load_scene
 from vbgs.colour_fit import RIDGE as COLOUR_RIDGE
+from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
+from vbgs.io_atomic import write_atomic
 from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
 
 
@@ -153,6 +154,5 @@ def save_views(path: str | Path, targets, renders, title: str, n: int = 4) -> No
             axes[i, j].set_title(f"{name}, view {j}", fontsize=9)
             axes[i, j].axis("off")
     fig.suptitle(title)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight"))
     plt.close(fig)

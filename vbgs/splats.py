@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.io_atomic import write_atomic
 from vbgs.precision import matmul
 
 # Degree-0 real spherical harmonic, 1 / (2 sqrt(pi)): rgb = 0.5 + SH_C0 * f_dc.
@@ -211,7 +212,8 @@ def save_ply(path, splats: Splats) -> None:
     vertex = np.empty(len(means), dtype=[(name, "f4") for name in _PLY_PROPERTIES])
     for i, name in enumerate(_PLY_PROPERTIES):
         vertex[name] = columns[:, i]
-    PlyData([PlyElement.describe(vertex, "vertex")]).write(str(path))
+    ply = PlyData([PlyElement.describe(vertex, "vertex")])
+    write_atomic(path, lambda tmp: ply.write(str(tmp)))
 
 
 def load_ply(path) -> Splats:

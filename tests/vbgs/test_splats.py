@@ -89,6 +89,24 @@ def test_ply_round_trip(tmp_path):
     assert all(a.dtype == jnp.float32 for a in loaded)
 
 
+def test_an_interrupted_ply_write_leaves_the_earlier_file(tmp_path, monkeypatch):
+    """save_ply writes beside the file and renames: Ctrl-C mid-write changes nothing."""
+    path = tmp_path / "splats.ply"
+    save_ply(path, random_splats())
+    before = path.read_bytes()
+
+    def half_then_interrupt(self, stream):
+        with open(stream, "wb") as f:
+            f.write(b"ply\nformat binary_little_endian 1.0\n")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(PlyData, "write", half_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        save_ply(path, random_splats())
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["splats.ply"]  # no temporary left
+
+
 def test_ply_uses_the_3dgs_layout(tmp_path):
     splats = random_splats(k=8)
     path = tmp_path / "splats.ply"
