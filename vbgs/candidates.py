@@ -32,11 +32,18 @@ def means_tree(means) -> cKDTree:
 
 def query(tree: cKDTree, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
     """:func:`nearest_components` against a prebuilt :func:`means_tree`."""
+    return query_with_distance(tree, x, n_candidates)[1]
+
+
+def query_with_distance(tree: cKDTree, x, n_candidates: int = DEFAULT_CANDIDATES
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`query` and each point's distance to its nearest mean: ``([n], [n, C])``."""
     c = int(min(n_candidates, tree.n))
     if c < 1:
         raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
-    _, idx = tree.query(np.asarray(x, np.float64), k=c, workers=-1)
-    return np.asarray(idx, np.int32).reshape(len(x), c)
+    dist, idx = tree.query(np.asarray(x, np.float64), k=c, workers=-1)
+    return (np.asarray(dist).reshape(len(x), c)[:, 0],
+            np.asarray(idx, np.int32).reshape(len(x), c))
 
 
 def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,

@@ -54,6 +54,10 @@ EMPTY_DISTANCE_CELLS = 1e4
 MAX_NEW_SHARE = 0.5
 # Cell levels (each half the side of the one before) that refinement may use.
 LEVELS = 4
+# Points farther than this many level-0 cells from every component are beyond the
+# model's reach (see reach_of): more than the cell diagonal sqrt(3), so ground the rule
+# has covered (a component in the point's own cell) is always within reach.
+REACH_CELLS = 2.0
 
 class GrowInfo(NamedTuple):
     n_new: int  # components allocated by this call
@@ -137,6 +141,16 @@ class Growth(NamedTuple):
     levels: int
     refine: float
     max_new: int
+
+
+def reach_of(rule: Growth) -> float:
+    """``REACH_CELLS x cell``: how far from every component a point may lie and still be
+    learned. Once the budget K is spent, new ground gets no component; its points, forced
+    onto the nearest components (responsibilities sum to one at any distance), would
+    stretch them across the gap into needles (measured on the room: after frame 25 of
+    60, up to half of each frame's points lay over 2 cells from every component), so
+    the stepper leaves them out (:class:`vbgs.stepper.Stepper`, ``reach``)."""
+    return REACH_CELLS * rule.cell
 
 
 def calibrate(xyz, n_components: int, first_cells: float, *, refine: float = 0.0,

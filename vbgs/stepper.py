@@ -156,13 +156,20 @@ class Stepper:
 
     ``grows``: the reference will grow (:meth:`grow`); candidates then come from the
     host KD-tree (see the module docstring).
+
+    ``reach``: points farther than this from every mean of the assigning model (world
+    units) are left out of the update (weight 0; counted in ``unreached``). No component
+    explains them, and responsibilities, which sum to one whatever the distance, would
+    otherwise hand them to the nearest components and stretch those across the gap into
+    needles (a stream whose budget of components has run out). Sparse E-step with the
+    KD-tree only (its query gives the distance for free).
     """
 
     def __init__(self, prior: Mixture, *, assign: Assign = "prior",
                  config: PriorConfig = PriorConfig(), estep: EStep = "dense",
                  n_candidates: int = candidates.DEFAULT_CANDIDATES,
                  max_points: int | None = None, search: Search = "auto",
-                 grows: bool = False):
+                 grows: bool = False, reach: float | None = None):
         if assign not in ("prior", "posterior"):
             raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
         if estep not in ("dense", "sparse"):
@@ -199,6 +206,12 @@ class Stepper:
                                jnp.zeros((), prior.alpha.dtype), lists)
         self.size = model.bucket_size(max_points) if max_points else 0
         self._origin = np.asarray(prior.origin)
+        if reach is not None and (self.estep != "sparse" or self.spec is not None
+                                  or not reach > 0):
+            raise ValueError(f"reach={reach!r} needs a positive distance, the sparse E-step "
+                             "and the KD-tree search (estep='sparse', search='kdtree')")
+        self.reach = reach
+        self.unreached = 0  # points left out of the updates so far (beyond reach)
 
     def grow(self, prior: Mixture, rows) -> None:
         """Take the grown reference ``prior``, which differs from the stepper's only in
@@ -249,7 +262,11 @@ class Stepper:
             n = xyz.shape[0]
             tree = self._tree or candidates.means_tree(state.posterior.space.mean)
             cand = np.zeros((size, self.n_candidates), np.int32)  # padding: weight 0
-            cand[:n] = candidates.query(tree, x[:n], self.n_candidates)
+            nearest, cand[:n] = candidates.query_with_distance(tree, x[:n], self.n_candidates)
+            if self.reach is not None:
+                out = nearest > self.reach
+                w[:n][out] = 0.0
+                self.unreached += int(out.sum())
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)
         posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)

@@ -59,9 +59,11 @@ class VbgsLearner:
         the grown reference (:meth:`vbgs.stepper.Stepper.grow`: no recompilation)."""
         t = self.task
         if self.step is None:
+            grows = t.init == "stream"
             self.step = Stepper(self.state.prior, assign=t.assign, config=t.prior,
-                                estep=t.estep, n_candidates=t.candidates,
-                                grows=t.init == "stream")
+                                estep=t.estep, n_candidates=t.candidates, grows=grows,
+                                reach=grow.reach_of(self.rule)
+                                if grows and t.estep == "sparse" else None)
         elif self.step_prior is not self.state.prior:
             self.step.grow(self.state.prior, grown)
         else:
@@ -150,10 +152,13 @@ class VbgsLearner:
                                                 n_candidates=t.candidates))
 
     def details(self, result: SceneResult) -> dict:
-        """The streaming bound (:meth:`vbgs.bound.StreamBound.summary`) and, when skipping
-        is on, the share of points skipped and the frames skipped whole."""
+        """The streaming bound (:meth:`vbgs.bound.StreamBound.summary`), the share of
+        points beyond the stream start's reach (:func:`vbgs.grow.reach_of`) and, when
+        skipping is on, the share of points skipped and the frames skipped whole."""
         skipped = {}
+        if self.step is not None and self.step.reach is not None:
+            skipped["points_unreached"] = self.step.unreached / max(self.points_seen, 1)
         if self.task.skip_margin is not None:
-            skipped = {"points_skipped": self.points_skipped / max(self.points_seen, 1),
-                       "frames_skipped": self.frames_skipped}
+            skipped.update(points_skipped=self.points_skipped / max(self.points_seen, 1),
+                           frames_skipped=self.frames_skipped)
         return {**self.bound.summary(), **skipped}
