@@ -162,7 +162,8 @@ class Stepper:
     explains them, and responsibilities, which sum to one whatever the distance, would
     otherwise hand them to the nearest components and stretch those across the gap into
     needles (a stream whose budget of components has run out). Sparse E-step with the
-    KD-tree only (its query gives the distance for free).
+    KD-tree only (its query gives the distance for free). ``learned``: the last batch's
+    points within reach, ``[n]`` bool (None without ``reach``).
     """
 
     def __init__(self, prior: Mixture, *, assign: Assign = "prior",
@@ -212,6 +213,7 @@ class Stepper:
                              "and the KD-tree search (estep='sparse', search='kdtree')")
         self.reach = reach
         self.unreached = 0  # points left out of the updates so far (beyond reach)
+        self.learned: np.ndarray | None = None  # [n] the last batch's points within reach
 
     def grow(self, prior: Mixture, rows) -> None:
         """Take the grown reference ``prior``, which differs from the stepper's only in
@@ -267,6 +269,7 @@ class Stepper:
                 out = nearest > self.reach
                 w[:n][out] = 0.0
                 self.unreached += int(out.sum())
+                self.learned = ~out
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)
         posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)

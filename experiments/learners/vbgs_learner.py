@@ -110,8 +110,13 @@ class VbgsLearner:
                 self._observe_colour(frame, background)
                 return
             xyz, rgb = xyz[keep], rgb[keep]
-        self._last = (self.state.posterior, xyz, rgb)
+        before = self.state.posterior
         self.state, _ = self.step(self.state, xyz, rgb)
+        learned = self.step.learned  # points beyond reach were left out: not in the bound
+        if learned is None:
+            self._last = (before, xyz, rgb)
+        else:  # nothing learned, nothing to bound (q_t = q_{t-1})
+            self._last = (before, xyz[learned], rgb[learned]) if learned.any() else None
         jax.block_until_ready(self.state.stats.count)
         self._observe_colour(frame, background)
 

@@ -136,6 +136,7 @@ def test_reach_keeps_a_spent_budget_off_a_depth_edge(reach):
         assert depth.max() > 0.25  # some component spans a quarter of the gap or more
     else:
         assert step.unreached == len(b_xyz)  # every point of B, and no point of A
+        np.testing.assert_array_equal(step.learned, np.arange(6000) < 3000)  # the last batch
         assert depth.max() < 0.05 and extent.max() < 0.3  # flat on A (prior floor ~0.01)
         assert np.abs(np.asarray(means)[:, 2]).max() < 0.01
         np.testing.assert_allclose(float(state.stats.count.sum()), 2 * 3000, rtol=1e-4)  # A, twice
