@@ -41,8 +41,6 @@ from experiments.settings import (
     STREAM,
 )
 from experiments.sweep.tasks import TASKS, TaskUnavailable
-from vbgs.baseline.replay import parse_replay
-
 
 class ConfigError(ValueError):
     """A config that cannot run; the message names the file and the key."""
@@ -50,6 +48,10 @@ class ConfigError(ValueError):
 
 def _replay(value: str) -> str | None:
     """The problem :func:`vbgs.baseline.replay.parse_replay` finds in a spec, or None."""
+    # imported here: vbgs.baseline imports JAX, and a local sweep worker imports this
+    # module before it sets its thread limits (which must come before JAX)
+    from vbgs.baseline.replay import parse_replay
+
     try:
         parse_replay(value)
     except (TypeError, ValueError) as err:

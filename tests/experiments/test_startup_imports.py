@@ -36,3 +36,15 @@ def test_every_command_still_has_its_parser():
     assert parser.parse_args(["sweep", "--config", "quick"]).command == "sweep"
     assert parser.parse_args(["report", "results/quick"]).command == "report"
     assert set(parser._subparsers._group_actions[0].choices) == set(COMMANDS)
+
+
+def test_a_sweep_worker_sets_its_thread_limits_before_jax():
+    """A local sweep worker is spawned into experiments.sweep.backends and limits XLA's
+    threads there; that only works if nothing it imports has imported JAX already."""
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        filter(None, [str(root), os.environ.get("PYTHONPATH")]))}
+    code = "import sys, experiments.sweep.backends; print('jax' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, cwd=root, timeout=300, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "False"
