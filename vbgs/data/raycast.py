@@ -282,35 +282,83 @@ def box(
 
 
 def cast(prims, origin: np.ndarray, dirs: np.ndarray):
-    """Nearest hit of all primitives: ``t [n]`` (inf if none), albedo ``[n, 3]`` (0 if none)."""
+    """Nearest hit of all primitives: ``t [n]`` (inf if none), albedo ``[n, 3]`` (0 if none).
+
+    Each primitive is intersected only with the rays that pass through the sphere
+    around its bounding box (:func:`_rays_near`): the same hits, far fewer rays tested
+    for small primitives.
+    """
     best_t = np.full(len(dirs), np.inf)
     rgb = np.zeros((len(dirs), 3))
+    dir_sq = np.einsum("ij,ij->i", dirs, dirs)  # [n] |d|², rays need not be unit length
     for prim in prims:
-        t, uv = prim.hit(origin, dirs)
-        closer = t < best_t
+        (rows,) = np.nonzero(_rays_near(prim.bounds(), origin, dirs, dir_sq))
+        if len(rows) == 0:
+            continue
+        t, uv = prim.hit(origin, dirs[rows])
+        closer = t < best_t[rows]
         if np.any(closer):
-            best_t[closer] = t[closer]
-            rgb[closer] = prim.surface.colour(uv[closer])
+            best_t[rows[closer]] = t[closer]
+            rgb[rows[closer]] = prim.surface.colour(uv[closer])
     return best_t, rgb
 
 
-def camera_rays(camera: Camera) -> np.ndarray:
-    """World directions ``[h * w, 3]`` through the pixel centres, with camera-frame z = 1."""
-    u, v = pixel_grid(camera)
+def _rays_near(bounds, origin, dirs, dir_sq) -> np.ndarray:
+    """``[n]`` bool: the ray ``origin + t dirs`` (t > 0) comes within the radius of the
+    sphere around the box ``bounds = (lo, hi)`` of its centre (a conservative test:
+    every ray that can hit the box passes it)."""
+    lo, hi = (np.asarray(b, float) for b in bounds)
+    centre, radius = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo) * (1 + 1e-6) + 1e-9
+    to_centre = centre - np.asarray(origin, float)
+    along = dirs @ to_centre  # [n] (c - o) . d
+    dist_sq = to_centre @ to_centre
+    inside = dist_sq <= radius * radius
+    # squared distance from the centre to the ray's closest point (ahead of the origin)
+    closest_sq = dist_sq - np.where(along > 0, along * along / dir_sq, 0.0)
+    return inside | ((along > 0) & (closest_sq <= radius * radius))
+
+
+def camera_rays(camera: Camera, samples: int = 1) -> np.ndarray:
+    """World directions ``[h * w * samples², 3]`` with camera-frame z = 1: through the
+    pixel centres (``samples = 1``), or through the centres of a ``samples x samples``
+    grid of equal sub-pixels in each pixel, pixel-major (row, col, sub-row, sub-col)."""
+    u, v = pixel_grid(camera)  # [h, w] pixel centres
+    offsets = (np.arange(samples) + 0.5) / samples - 0.5  # sub-pixel centres, [-0.5, 0.5]
+    u = u[:, :, None, None] + offsets[None, None, None, :]
+    v = v[:, :, None, None] + offsets[None, None, :, None]
+    u, v = np.broadcast_arrays(u, v)
     d_cam = np.stack(
         [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], -1
     )
     return d_cam.reshape(-1, 3) @ np.asarray(camera.pose, float)[:3, :3].T
 
 
-def render(prims, camera: Camera, background=(1.0, 1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
-    """Exact ``rgb [h, w, 3]`` and z-depth ``[h, w]`` (0 where no surface is hit), float32."""
-    t, rgb = cast(prims, camera.position, camera_rays(camera))
-    hit = np.isfinite(t)
-    rgb[~hit] = background
+def render(prims, camera: Camera, background=(1.0, 1.0, 1.0), samples: int = 1
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """``rgb [h, w, 3]`` and z-depth ``[h, w]`` (0 where no surface is hit), float32.
+
+    A pixel's colour is the mean over ``samples x samples`` rays through the centres of
+    equal sub-pixels (a box filter over the pixel's area, as a camera integrates light
+    and as NeRF-synthetic's renders are anti-aliased); ``samples = 1`` casts one ray
+    through the pixel centre. Depth is the pixel centre's: the middle ray of an odd
+    ``samples`` passes through it, otherwise one more ray is cast there. Both are exact
+    up to float32 rounding.
+    """
+    if not (isinstance(samples, (int, np.integer)) and samples >= 1):
+        raise ValueError(f"samples must be a positive integer (rays per pixel side), "
+                         f"got {samples!r}")
     shape = (camera.height, camera.width)
+    t, rgb = cast(prims, camera.position, camera_rays(camera, samples))
+    rgb[~np.isfinite(t)] = background
+    rgb = rgb.reshape(shape + (samples * samples, 3)).mean(2)
+    if samples % 2:
+        middle = (samples // 2) * (samples + 1)  # index of the central sub-pixel
+        t = t.reshape(shape + (samples * samples,))[..., middle]
+    else:
+        t, _ = cast(prims, camera.position, camera_rays(camera))
+    hit = np.isfinite(t)
     depth = np.where(hit, t, 0.0).reshape(shape)
-    return np.clip(rgb, 0, 1).reshape(shape + (3,)).astype(np.float32), depth.astype(np.float32)
+    return np.clip(rgb, 0, 1).astype(np.float32), depth.astype(np.float32)
 
 
 def distance_to_surfaces(prims, points: np.ndarray) -> np.ndarray:
