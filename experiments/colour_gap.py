@@ -37,11 +37,12 @@ def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> 
     c_post = learner.state.posterior.colour.mean  # [k, 3]
     final = colour_fit.no_frames(base.count)
     for frame in scene.train:
-        final = colour_fit.observe(final, base, frame.camera, frame.rgb, background)
+        final = colour_fit.observe(final, base, frame.camera, frame.rgb, background,
+                                   blur=learner.blur)
     start = time.perf_counter()
     ridge = task.colour_ridge
     exact, iters = colour_fit.exact_colours(base, scene.train, background, c_post, ridge=ridge,
-                                            iterations=iterations)
+                                            iterations=iterations, blur=learner.blur)
     exact_seconds = time.perf_counter() - start
     colourings = {
         "posterior": c_post,
@@ -52,7 +53,7 @@ def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> 
     out = {"cg_iterations": iters, "exact_seconds": exact_seconds}
     for name, colours in colourings.items():
         ev = evaluate(base._replace(colours=jnp.asarray(colours, jnp.float32)), scene.test,
-                      background)
+                      background, learner.blur)
         out[f"{name}_psnr"], out[f"{name}_ssim"] = ev.psnr, ev.ssim
     out["gap_db"] = out["exact_psnr"] - out["lumped_stream_psnr"]
     return out

@@ -44,7 +44,7 @@ from vbgs.camera import unproject
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
 from vbgs.metrics import depth_l1, psnr, ssim
-from vbgs.raster import exact_capacity, rasterize, surface_depth
+from vbgs.raster import BLUR_VARIANCE, exact_capacity, rasterize, surface_depth
 from vbgs.splats import Splats, save_ply
 
 EARLY_FRACTION = 0.1  # the first 10% of the stream defines the "early" views
@@ -57,6 +57,7 @@ class Learner(Protocol):
     """A continual scene learner: sees each frame once, shows its splats at any time."""
 
     replay_bytes: int  # bytes of frames it holds for replay (0: none)
+    blur: float  # px², the pixel filter its splats are rendered with (vbgs.raster.rasterize)
 
     def learn(self, frame: Frame, background: np.ndarray) -> None: ...
 
@@ -153,20 +154,24 @@ def early_views(scene: Scene, order: np.ndarray) -> list[int]:
     return sorted(set(int(i) for i in nearest))
 
 
-def render_view(splats: Splats, frame: Frame, background) -> tuple[np.ndarray, np.ndarray, int]:
+def render_view(splats: Splats, frame: Frame, background, blur: float = BLUR_VARIANCE
+                ) -> tuple[np.ndarray, np.ndarray, int]:
     """Render one view: rgb ``[h, w, 3]``, alpha-normalised depth ``[h, w]`` (0 where
     uncovered) and the number of splats the tiles dropped (0: the capacity is chosen
-    so that nothing is, :func:`vbgs.raster.exact_capacity`)."""
-    out = rasterize(splats, frame.camera, background=background,
-                    capacity=exact_capacity(splats, frame.camera))
+    so that nothing is, :func:`vbgs.raster.exact_capacity`); ``blur``: the learner's
+    pixel filter (px², :attr:`Learner.blur`)."""
+    out = rasterize(splats, frame.camera, background=background, blur=blur,
+                    capacity=exact_capacity(splats, frame.camera, blur=blur))
     return np.clip(np.asarray(out.rgb), 0, 1), surface_depth(out), int(out.dropped)
 
 
-def evaluate(splats: Splats, frames: list[Frame], background) -> Evaluation:
-    """Mean PSNR, SSIM and depth L1 over ``frames``, plus the renders."""
+def evaluate(splats: Splats, frames: list[Frame], background, blur: float = BLUR_VARIANCE
+             ) -> Evaluation:
+    """Mean PSNR, SSIM and depth L1 over ``frames``, plus the renders (rendered with the
+    pixel filter ``blur``, px²)."""
     scores, renders, dropped = [], [], 0
     for frame in frames:
-        rgb, depth, n = render_view(splats, frame, background)
+        rgb, depth, n = render_view(splats, frame, background, blur)
         dropped += n
         scores.append((psnr(rgb, frame.rgb), ssim(rgb, frame.rgb), depth_l1(depth, frame.depth)))
         renders.append(rgb)
@@ -176,13 +181,14 @@ def evaluate(splats: Splats, frames: list[Frame], background) -> Evaluation:
                       dropped, renders)
 
 
-def evaluate_validation(splats: Splats, scene: Scene, background) -> Evaluation:
+def evaluate_validation(splats: Splats, scene: Scene, background, blur: float = BLUR_VARIANCE
+                        ) -> Evaluation:
     """:func:`evaluate` over the scene's validation views (never its test views); a scene
     without validation views is refused."""
     if not scene.val:
         raise ValueError(f"scene {scene.name!r} has no validation views; give the task "
                          f"n_val >= 1 (datasets: a transforms_val.json or val_every)")
-    return evaluate(splats, scene.val, background)
+    return evaluate(splats, scene.val, background, blur)
 
 
 def stream_frames(task, scene: Scene, order: np.ndarray, *, progress: bool = False):
@@ -199,7 +205,7 @@ def stream_frames(task, scene: Scene, order: np.ndarray, *, progress: bool = Fal
 def _final(scene: Scene, learner: Learner, background, ply: str | None
            ) -> tuple[Evaluation, int]:
     """Score every test view; save the used splats as PLY if asked; (scores, used)."""
-    final = evaluate(learner.splats(), scene.test, background)
+    final = evaluate(learner.splats(), scene.test, background, learner.blur)
     kept = learner.splats(drop_unused=True)
     if ply:
         save_ply(ply, kept)
@@ -222,7 +228,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         frame_seconds.append(time.perf_counter() - t0)
         diagnose(learner, frame)
         if step in checkpoints:
-            curve.append([step, evaluate(learner.splats(), early, background).psnr])
+            curve.append([step, evaluate(learner.splats(), early, background,
+                                         learner.blur).psnr])
     final, used = _final(scene, learner, background, ply)
     steady = frame_seconds[COMPILE_FRAMES:] or frame_seconds
     return SceneResult(

@@ -101,6 +101,8 @@ def _add_fit_scene(sub):
     p.add_argument("--opacity", type=float, default=None, help="VBGS splat opacity")
     p.add_argument("--splat-scale", type=float, default=None,
                    help="VBGS splat covariance scale (sigma multiplier)")
+    p.add_argument("--splat-blur", type=float, default=None, metavar="PX2",
+                   help="VBGS pixel filter: variance (px²) added to each projected splat")
     p.add_argument("--replay", default=REPLAY_DEFAULT, help="gradient: none | fifo:K | reservoir:K | full")
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--steps", type=int, default=3000, help="gradient, static protocol")
@@ -125,8 +127,8 @@ def _add_fit_scene(sub):
 def _fit_scene(args) -> dict:
     from experiments.scene_task import SceneTask, run_scene, save_views
 
-    render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale))
-              if v is not None}
+    render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale),
+                                ("splat_blur", args.splat_blur)) if v is not None}
     task = SceneTask(scene=args.scene, format=args.format, method=args.method,
                      components=args.components, frames=args.frames, n_test=args.test_views,
                      size=args.size, order=args.order, assign=args.assign, estep=args.estep,
@@ -152,7 +154,8 @@ def _fit_scene(args) -> dict:
     return result.to_dict(images=False)
 
 
-DEFAULT_GRID = ["splat_scale=0.5,0.7,0.85,1.0,1.41"]  # opacity comes from evidence (the default)
+# opacity comes from evidence (the default); scale and pixel filter are chosen together
+DEFAULT_GRID = ["splat_scale=0.85,1.0,1.2,1.4,1.6", "splat_blur=0,0.02,0.05,0.1,0.15,0.3"]
 
 
 def _add_tune(sub):

@@ -34,7 +34,7 @@ from vbgs.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
 from vbgs.io_atomic import write_atomic
-from vbgs.splats import VBGS_COV_SCALE, VBGS_OPACITY
+from vbgs.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,7 @@ class SceneTask:
     opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
     splat_scale: float = VBGS_COV_SCALE
+    splat_blur: float = VBGS_BLUR  # px², the pixel filter VBGS splats are rendered with
     # VBGS splat colours: the posterior colour means | fitted to the training pixels
     # (vbgs.colour_fit; why off by default: experiments.settings.COLOUR_RULE)
     colour_rule: str = COLOUR_RULE.default
@@ -90,6 +91,9 @@ class SceneTask:
             choice.check(name, getattr(self, name))
         oracle_start(self.init)  # a known scheme
         parse_background(self.background)  # fails on a malformed R,G,B
+        if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):
+            raise ValueError(f"splat_blur must be a pixel filter variance in [0, 10) px², "
+                             f"got {self.splat_blur!r}")
         if not self.colour_ridge > 0:
             raise ValueError(f"colour_ridge must be > 0 (pixels' worth of weight on the "
                              f"posterior colour), got {self.colour_ridge!r}")

@@ -124,7 +124,7 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
             setting = {name: {**fixed, **rendered}[name] for name in grid}
             view = copy.copy(learner)  # shares the learned state; only render settings differ
             view.task = replace(task, **setting)
-            ev = evaluate_validation(view.splats(), scene, background)
+            ev = evaluate_validation(view.splats(), scene, background, view.blur)
             rows.append({**setting, "val_psnr": ev.psnr, "val_ssim": ev.ssim,
                          "val_depth_l1": ev.depth_l1})
     return sorted(rows, key=lambda r: -np.nan_to_num(r["val_psnr"], nan=-np.inf))

@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 
 from vbgs.camera import Camera
-from vbgs.raster import exact_capacity, rasterize
+from vbgs.raster import BLUR_VARIANCE, exact_capacity, rasterize
 from vbgs.splats import Splats
 
 # Ridge weight toward the posterior colour, in pixels: the posterior colour (the mean
@@ -67,14 +67,17 @@ def no_frames(k: int) -> ColourNormal:
     return ColourNormal(jnp.zeros((k, 3), jnp.float32), jnp.zeros(k, jnp.float32))
 
 
-def observe(normal: ColourNormal, splats: Splats, camera: Camera, rgb, background) -> ColourNormal:
+def observe(normal: ColourNormal, splats: Splats, camera: Camera, rgb, background, *,
+            blur: float = BLUR_VARIANCE) -> ColourNormal:
     """Add one frame: its pixels ``rgb [h, w, 3]`` seen by ``camera``, composited over
-    ``background`` ([3] or a grey scalar), against ``splats`` (their colours unused)."""
-    rhs, lumped = frame_terms(splats, camera, rgb, background)
+    ``background`` ([3] or a grey scalar), against ``splats`` (their colours unused)
+    rendered with the pixel filter ``blur`` (px², as the splats will be shown)."""
+    rhs, lumped = frame_terms(splats, camera, rgb, background, blur=blur)
     return ColourNormal(normal.rhs + rhs, normal.lumped + lumped)
 
 
-def frame_terms(splats: Splats, camera: Camera, rgb, background) -> tuple[jax.Array, jax.Array]:
+def frame_terms(splats: Splats, camera: Camera, rgb, background, *,
+                blur: float = BLUR_VARIANCE) -> tuple[jax.Array, jax.Array]:
     """One frame's ``W_fᵀ (C_f - T_f bg)`` ``[k, 3]`` and ``W_fᵀ α_f`` ``[k]``."""
     target = jnp.asarray(rgb, jnp.float32)
     if target.shape != (camera.height, camera.width, 3):
@@ -82,7 +85,7 @@ def frame_terms(splats: Splats, camera: Camera, rgb, background) -> tuple[jax.Ar
                          f"[{camera.height}, {camera.width}, 3]")
     bg = jnp.broadcast_to(jnp.asarray(background, jnp.float32), (3,))
     return _frame_terms(splats, *_camera_args(camera), target, bg,
-                        **_static(splats, camera))
+                        **_static(splats, camera, blur))
 
 
 def solve(normal: ColourNormal, posterior_colours, ridge: float = RIDGE) -> jax.Array:
@@ -95,14 +98,16 @@ def solve(normal: ColourNormal, posterior_colours, ridge: float = RIDGE) -> jax.
     return jnp.clip(colours, 0.0, 1.0)
 
 
-def normal_matvec(splats: Splats, camera: Camera, colours) -> jax.Array:
+def normal_matvec(splats: Splats, camera: Camera, colours, *,
+                  blur: float = BLUR_VARIANCE) -> jax.Array:
     """``W_fᵀ W_f x`` ``[k, 3]`` for one frame and ``x = colours [k, 3]``."""
     x = jnp.asarray(colours, jnp.float32)
-    return _matvec(splats, *_camera_args(camera), x, **_static(splats, camera))
+    return _matvec(splats, *_camera_args(camera), x, **_static(splats, camera, blur))
 
 
 def exact_colours(splats: Splats, frames, background, posterior_colours, *,
-                  ridge: float = RIDGE, iterations: int = 50, tol: float = 1e-4):
+                  ridge: float = RIDGE, iterations: int = 50, tol: float = 1e-4,
+                  blur: float = BLUR_VARIANCE):
     """Diagnostic: the full least-squares colours ``[k, 3]`` over ``frames`` (each with
     ``.rgb`` and ``.camera``), all rendered with ``splats``' geometry, by conjugate
     gradients on ``(A + ridge I) c = b + ridge c_post`` preconditioned with the lumped
@@ -113,12 +118,12 @@ def exact_colours(splats: Splats, frames, background, posterior_colours, *,
     c_post = jnp.asarray(posterior_colours, jnp.float32)
     normal = no_frames(splats.count)
     for frame in frames:
-        normal = observe(normal, splats, frame.camera, frame.rgb, background)
+        normal = observe(normal, splats, frame.camera, frame.rgb, background, blur=blur)
 
     def matvec(x):  # [k, 3] -> (A + ridge I) x
         out = ridge * x
         for frame in frames:
-            out = out + normal_matvec(splats, frame.camera, x)
+            out = out + normal_matvec(splats, frame.camera, x, blur=blur)
         return out
 
     precond = 1.0 / (normal.lumped + ridge)[:, None]  # [k, 1]
@@ -148,28 +153,30 @@ def _camera_args(camera: Camera):
                  (camera.fx, camera.fy, camera.cx, camera.cy, camera.pose))
 
 
-def _static(splats: Splats, camera: Camera) -> dict:
-    """Image size and a tile capacity that drops no splat (so W_f is the exact render)."""
-    return {"width": int(camera.width), "height": int(camera.height),
-            "capacity": exact_capacity(splats, camera)}
+def _static(splats: Splats, camera: Camera, blur: float) -> dict:
+    """Image size, pixel filter and a tile capacity that drops no splat (so W_f is the
+    exact render)."""
+    return {"width": int(camera.width), "height": int(camera.height), "blur": float(blur),
+            "capacity": exact_capacity(splats, camera, blur=blur)}
 
 
-def _render_linear(splats, fx, fy, cx, cy, pose, width, height, capacity):
+def _render_linear(splats, fx, fy, cx, cy, pose, width, height, capacity, blur):
     """``colours -> (W_f colours [h, w, 3], alpha [h, w])``: the render over a black
     background, linear in the colours."""
     camera = Camera(fx, fy, cx, cy, width, height, pose)
 
     def render(colours):
         out = rasterize(splats._replace(colours=colours), camera, background=0.0,
-                        capacity=capacity)
+                        capacity=capacity, blur=blur)
         return out.rgb, out.alpha
 
     return render
 
 
-@functools.partial(jax.jit, static_argnames=("width", "height", "capacity"))
-def _frame_terms(splats, fx, fy, cx, cy, pose, target, background, *, width, height, capacity):
-    render = _render_linear(splats, fx, fy, cx, cy, pose, width, height, capacity)
+@functools.partial(jax.jit, static_argnames=("width", "height", "capacity", "blur"))
+def _frame_terms(splats, fx, fy, cx, cy, pose, target, background, *, width, height, capacity,
+                 blur):
+    render = _render_linear(splats, fx, fy, cx, cy, pose, width, height, capacity, blur)
     _, pullback, alpha = jax.vjp(render, splats.colours, has_aux=True)  # alpha [h, w]
     residual = target - (1.0 - alpha)[..., None] * background  # [h, w, 3] C_f - T_f bg
     cotangents = jnp.stack([residual, jnp.broadcast_to(alpha[..., None], target.shape)])
@@ -179,9 +186,9 @@ def _frame_terms(splats, fx, fy, cx, cy, pose, target, background, *, width, hei
     return both[0], both[1, :, 0]
 
 
-@functools.partial(jax.jit, static_argnames=("width", "height", "capacity"))
-def _matvec(splats, fx, fy, cx, cy, pose, x, *, width, height, capacity):
-    render = _render_linear(splats, fx, fy, cx, cy, pose, width, height, capacity)
+@functools.partial(jax.jit, static_argnames=("width", "height", "capacity", "blur"))
+def _matvec(splats, fx, fy, cx, cy, pose, x, *, width, height, capacity, blur):
+    render = _render_linear(splats, fx, fy, cx, cy, pose, width, height, capacity, blur)
     wx, pullback, _ = jax.vjp(render, x, has_aux=True)  # W_f x [h, w, 3] (linear in x)
     (out,) = pullback(wx)
     return out

@@ -47,7 +47,7 @@ from vbgs.baseline import (
 from vbgs.baseline.params import place
 from vbgs.baseline.densify import DEAD_OPACITY
 from vbgs.data.scene import Frame, Scene
-from vbgs.raster import ALPHA_MIN
+from vbgs.raster import ALPHA_MIN, BLUR_VARIANCE
 from vbgs.splats import Splats, prune
 
 TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
@@ -76,6 +76,7 @@ class GradientLearner:
     """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
 
     PROTOCOLS = ("continual", "static")
+    blur = BLUR_VARIANCE  # renders as it trains: 3DGS's low-pass dilation (vbgs.raster)
 
     def __init__(self, task, scene: Scene, config: TrainConfig = DEFAULT_CONFIG):
         self.task = task

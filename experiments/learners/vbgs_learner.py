@@ -48,6 +48,12 @@ class VbgsLearner:
         self.points_seen = self.points_skipped = self.frames_skipped = 0
 
     @property
+    def blur(self) -> float:
+        """The pixel filter (px²) its splats are rendered with: the task's ``splat_blur``
+        (:data:`vbgs.splats.VBGS_BLUR`)."""
+        return self.task.splat_blur
+
+    @property
     def prior(self) -> model.Mixture:
         """The current reference model (it grows under ``init="stream"``)."""
         if self.state is None:
@@ -126,7 +132,8 @@ class VbgsLearner:
         if self.task.colour_rule != "fit":
             return
         self.colour = colour_fit.observe(self.colour, self.posterior_splats(), frame.camera,
-                                         frame.rgb, 0.0 if background is None else background)
+                                         frame.rgb, 0.0 if background is None else background,
+                                         blur=self.blur)
         jax.block_until_ready(self.colour.rhs)
 
     def splats(self, drop_unused: bool = False) -> Splats:

@@ -81,3 +81,29 @@ def test_the_streaming_bound_counts_only_the_points_learned():
         learner.diagnose(frame)
     assert learner.step.reach is not None and learner.step.unreached > 0
     assert learner.bound.n_points == learner.points_seen - learner.step.unreached
+
+
+def test_each_learner_is_scored_with_its_own_pixel_filter(scene):
+    """VBGS splats are drawn with the task's splat_blur, the gradient baseline's with the
+    filter it trained under: the record's renders are those renders."""
+    from experiments.protocol import render_view, stream_protocol
+    from vbgs.raster import BLUR_VARIANCE
+
+    assert GradientLearner.blur == BLUR_VARIANCE
+    psnrs = {}
+    for blur in (0.02, 0.3):
+        task = tiny(splat_blur=blur)
+        learner = VbgsLearner(task, scene)
+        assert learner.blur == blur
+        result = stream_protocol(task, scene, learner)
+        background = np.asarray(result.background_rgb)
+        rgb, _, _ = render_view(learner.splats(), scene.test[0], background, blur)
+        np.testing.assert_allclose(result.images["render"][0], rgb, atol=1e-6)
+        psnrs[blur] = result.psnr
+    assert abs(psnrs[0.02] - psnrs[0.3]) > 0.05
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), 10.0])
+def test_a_bad_pixel_filter_is_refused(bad):
+    with pytest.raises(ValueError, match="splat_blur must be a pixel filter variance"):
+        tiny(splat_blur=bad)

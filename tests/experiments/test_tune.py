@@ -43,19 +43,22 @@ def test_each_rerender_equals_a_fresh_stream_with_that_setting():
     """Stream once and re-render (the tuning's fast path) == a learner streamed anew with
     the setting in its task (the slow reference)."""
     scene = load_task_scene(TINY)
-    grid = {"splat_scale": [0.6, 1.2], "opacity": [0.4]}
+    grid = {"splat_scale": [0.6, 1.2], "splat_blur": [0.05, 0.3], "opacity": [0.4]}
     rows = tune(TINY, scene, grid)
     assert [r["val_psnr"] for r in rows] == sorted((r["val_psnr"] for r in rows), reverse=True)
-    row = next(r for r in rows if r["splat_scale"] == 1.2)  # not the task's own setting
-    task = replace(TINY, splat_scale=1.2, opacity=0.4)
+    # not the task's own setting
+    row = next(r for r in rows if r["splat_scale"] == 1.2 and r["splat_blur"] == 0.05)
+    task = replace(TINY, splat_scale=1.2, splat_blur=0.05, opacity=0.4)
     learner = VbgsLearner(task, scene)
     order = stream_order(len(scene.train), task.order, seed=task.seed)
     for _, frame, background in stream_frames(task, scene, order):
         learner.learn(frame, background)
-    fresh = evaluate_validation(learner.splats(), scene, background)
+    fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
     assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
     assert row["val_ssim"] == pytest.approx(fresh.ssim, abs=1e-5)
     assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # settings change the picture
+    by_blur = {r["splat_blur"]: r["val_psnr"] for r in rows if r["splat_scale"] == 1.2}
+    assert abs(by_blur[0.05] - by_blur[0.3]) > 0.01  # the pixel filter reaches the render
 
 
 def test_a_parameter_that_changes_no_score_is_named():
@@ -73,9 +76,9 @@ def test_tuning_never_renders_a_test_view(monkeypatch):
     seen = []
     real = tune_module.evaluate_validation
 
-    def spy(splats, scene_, background):
+    def spy(splats, scene_, background, blur):
         seen.extend(id(f) for f in scene_.val)
-        return real(splats, scene_, background)
+        return real(splats, scene_, background, blur)
 
     monkeypatch.setattr(tune_module, "evaluate_validation", spy)
     tune(TINY, scene, {"splat_scale": [0.7]})
@@ -128,6 +131,6 @@ def test_colour_rule_is_gathered_while_streaming_and_each_rule_equals_a_fresh_st
         order = stream_order(len(scene.train), task.order, seed=task.seed)
         for _, frame, background in stream_frames(task, scene, order):
             learner.learn(frame, background)
-        fresh = evaluate_validation(learner.splats(), scene, background)
+        fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
         assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
     assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # the rule changes the picture
