@@ -23,6 +23,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from vbgs import CPU_SCHEDULER_FLAG
 from vbgs.model import Mixture, State
 
 AXIS = "k"
@@ -34,8 +35,9 @@ AXIS = "k"
 # completes and XLA aborts after 40 s ("all-reduce rendezvous timed out"). Seen with 2
 # host devices on this 2-core machine under load, and every time with one core
 # (``taskset -c 0``) from 20k components. Scheduling each device's operations one after
-# another (the concurrency-optimised scheduler off) removes the wait on the pool.
-HOST_DEVICE_XLA_FLAGS = ("--xla_cpu_enable_concurrency_optimized_scheduler=false",)
+# another (the concurrency-optimised scheduler off, as importing vbgs sets for every
+# process: vbgs.CPU_SCHEDULER_FLAG) removes the wait on the pool.
+HOST_DEVICE_XLA_FLAGS = (CPU_SCHEDULER_FLAG,)
 
 
 def mesh(n_devices: int | None = None, devices=None) -> Mesh:
