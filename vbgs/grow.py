@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from vbgs.model import Mixture, PriorConfig, State, check_points_host, m_step, start
+from vbgs.model import LOCAL_MAX_ITERS, Mixture, PriorConfig, State, check_points_host, m_step, start
 from vbgs.model import _make_prior  # compiled make_prior
 from vbgs.model import update as model_update
 
@@ -248,12 +248,19 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
 
 def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,
            assign: str = "prior", config: PriorConfig = PriorConfig(),
-           refine: float = 0.0, callback=None) -> State:
+           refine: float = 0.0, local_iters: int = LOCAL_MAX_ITERS,
+           callback=None) -> State:
     """Continual learning from empty slots: each ``(xyz, rgb)`` batch is seen once;
     before it is learned (:func:`vbgs.model.update`), :func:`grow` fills empty slots
     on its poorly explained points. The cell side is fixed on the first batch so that
     it gets about ``first_cells`` components. ``callback(i, state, info, grown)``
-    observes each batch (``grown``: the state after growth, before the batch)."""
+    observes each batch (``grown``: the state after growth, before the batch).
+
+    Under posterior assignment each batch's update is solved by local coordinate
+    ascent, at most ``local_iters`` E-steps (:func:`vbgs.model.local_cavi`): the
+    components grown for the batch start at their prior, and a single E-step would
+    score them so against neighbours fitted to earlier batches (1: that single step).
+    Prior assignment ignores ``local_iters`` (its E-step does not depend on the model)."""
     state, rule = None, None
     for i, (xyz, rgb) in enumerate(batches):
         if state is None:
@@ -261,7 +268,8 @@ def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,
             state = start_empty(xyz, n_components, rule.cell, config)
         key, sub = jax.random.split(key)
         grown, _ = grow(state, xyz, rgb, rule, key=sub, config=config)
-        state, info = model_update(grown, xyz, rgb, assign=assign, config=config)
+        state, info = model_update(grown, xyz, rgb, assign=assign, config=config,
+                                   local_iters=local_iters)
         if callback is not None:
             callback(i, state, info, grown)
     if state is None:

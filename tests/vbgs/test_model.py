@@ -96,3 +96,33 @@ def test_cell_length_scales_with_extent_and_count():
     assert model.cell_length(np.zeros(2), np.array([64.0, 64.0]), 4096) == pytest.approx(1.0)
     assert model.cell_length(np.zeros(3), np.array([2.0, 2.0, 0.0]), 400) == pytest.approx(0.1)
     assert model.cell_length(np.zeros(2), np.zeros(2), 10) == 1.0
+
+
+def test_local_cavi_never_lowers_the_batch_bound_and_one_step_is_the_old_update(astronaut64):
+    """Posterior assignment's local coordinate ascent on one batch: the bound
+    ``L_t = sum_n lse_n(q_j) - KL(q_j || q_{t-1})`` never falls from one E-step to the
+    next; ``local_iters=1`` is the single E-step under the posterior before the batch."""
+    img, uv, rgb = astronaut64
+    prior = model.init(uv, rgb, 200, key=jax.random.key(2), scheme="data")
+    batches = list(patch_stream(img, 16, "sequential"))
+    state, _ = model.update(model.start(prior), *batches[0], assign="posterior")
+    xyz, rgb1 = batches[1]
+    x, c, w = model.padded_batch(xyz, rgb1, prior.origin, len(xyz), np.float32)
+    noise = model.PriorConfig().colour_noise
+    bounds = []
+    for steps in range(1, 7):
+        batch, lse, q, j = model.local_cavi(state, x, c, w, None, noise, len(xyz), steps,
+                                            -np.inf)
+        assert int(j) == steps
+        bounds.append(float(lse.sum() - model.kl(q, state.posterior, noise)))
+    assert np.all(np.diff(bounds) >= -1e-4 * np.abs(bounds[:-1])), bounds
+    assert bounds[-1] > bounds[0]
+    one, _ = model.update(state, xyz, rgb1, assign="posterior", local_iters=1)
+    batch1, _ = model.e_step(state.posterior, x, c, w, noise, len(xyz))
+    np.testing.assert_allclose(np.asarray(one.stats.count),
+                               np.asarray(state.stats.count + batch1.count), rtol=1e-4,
+                               atol=1e-3)  # float32, other chunking
+    many, _ = model.update(state, xyz, rgb1, assign="posterior", local_iters=6)
+    assert not np.allclose(np.asarray(many.stats.count), np.asarray(one.stats.count))
+    with pytest.raises(ValueError, match="local_iters"):
+        model.update(state, xyz, rgb1, assign="posterior", local_iters=0)
