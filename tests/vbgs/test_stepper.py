@@ -79,9 +79,13 @@ def test_stepper_equals_model_update(scene_points, assign, estep, search):
         fast, finfo = step(fast, xyz, rgb)
         slow, sinfo = model.update(slow, xyz, rgb, assign=assign, estep=estep)
         n = len(xyz)
-        # posterior assignment carries float32 rounding from batch to batch (below)
+        # posterior assignment carries float32 rounding from batch to batch (below); a
+        # point's log-likelihood is a sum of terms of ~1e2-1e3 nats (quadratic forms,
+        # log-determinants) that cancel to a few nats, so float32 leaves ~1e-4 nats of
+        # it, more where padding changes the summation order (seen: 1.2e-4)
         np.testing.assert_allclose(np.asarray(finfo.point_loglik)[:n], sinfo.point_loglik,
-                                   rtol=1e-5 if assign == "prior" else 1e-4, atol=1e-4)
+                                   rtol=1e-5 if assign == "prior" else 1e-4,
+                                   atol=1e-4 if assign == "prior" else 5e-4)
         np.testing.assert_allclose(finfo.elbo, sinfo.elbo, rtol=1e-5)
     # posterior assignment carries float32 rounding (padding changes the summation
     # order) from batch to batch, so counts agree to 1e-3 of a point there

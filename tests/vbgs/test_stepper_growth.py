@@ -52,8 +52,11 @@ def test_a_grown_stepper_equals_a_fresh_one(frames, assign, estep, monkeypatch):
                                  jax.tree.leaves(fresh.fixed.reference), strict=True):
                 np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
         n = len(xyz)
+        # sums of terms of ~1e2-1e3 nats that cancel to a few: float32 leaves ~1e-4 nats
+        # (seen: 1.2e-4 on the dense E-step); a missed E[log pi] shift or a stale row
+        # moves them by far more
         np.testing.assert_allclose(np.asarray(ainfo.point_loglik)[:n],
-                                   np.asarray(binfo.point_loglik)[:n], rtol=1e-5, atol=1e-4)
+                                   np.asarray(binfo.point_loglik)[:n], rtol=1e-5, atol=5e-4)
         np.testing.assert_allclose(a.stats.count, b.stats.count, rtol=1e-5, atol=1e-4)
         np.testing.assert_allclose(a.posterior.space.mean, b.posterior.space.mean,
                                    rtol=1e-5, atol=1e-5)
