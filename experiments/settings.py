@@ -53,11 +53,12 @@ PROTOCOL = Choice(("continual", "static"), "continual",
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")
-# The fit scores 0.1 dB more on validation views (results/tuning/colour) at about twice
-# the seconds per frame (fit-scene, object, 128 px, 20k: 0.39 against 0.20): off by default.
+# The fit scores 0.12 dB more on validation views (results/tuning/colour: mean of object
+# and room, 22.37 against 22.25 dB) at about twice the seconds per frame (fit-scene,
+# object, 128 px, 20k: 0.39 against 0.20, measured on the aliased frames): off by default.
 COLOUR_RULE = Choice(("posterior", "fit"), "posterior",
                      "VBGS splat colours: the posterior colour means, or fitted to the "
-                     "training pixels (fit: +0.1 dB on validation views, about twice the "
+                     "training pixels (fit: +0.12 dB on validation views, about twice the "
                      "time per frame)")
 DEPTH_KIND = Choice(DEPTH_KINDS, "inverse", "what the depth model outputs")
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
