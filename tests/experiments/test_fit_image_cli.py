@@ -40,6 +40,25 @@ def test_fit_image_patch_stream_summary_and_scores(capsys):
     assert result["psnr"] > 29.5 and result["ssim"] > 0.9
 
 
+def test_fit_image_loads_and_resizes_the_image_once(monkeypatch, capsys):
+    import experiments.image_task as image_task
+    import vbgs.data.images as images
+
+    calls = []
+
+    def counted(*args):
+        calls.append(args)
+        return load(*args)
+
+    load = images.load_image
+    monkeypatch.setattr(images, "load_image", counted)
+    monkeypatch.setattr(image_task, "load_image", counted)
+    assert main(["fit-image", "--image", "coffee", "--size", "16", "--components", "50",
+                 "--iters", "2", "--json"]) == 0
+    assert calls == [("coffee", 16)]
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["height"] == 16
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
