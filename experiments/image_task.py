@@ -111,11 +111,12 @@ def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.A
     return state, total[0]
 
 
-def task_image(task: ImageTask, image: np.ndarray | None = None) -> np.ndarray:
+def task_image(task: ImageTask, image: np.ndarray | None = None, *,
+               cache: Path | None = None) -> np.ndarray:
     """The task's target: ``image`` when the caller has loaded it already (the CLI does,
     to check sizes before the fit: loading and resizing twice costs start-up time), else
-    ``load_image(task.image, task.size)``."""
-    return load_image(task.image, task.size) if image is None else image
+    ``load_image(task.image, task.size, cache=cache)``."""
+    return load_image(task.image, task.size, cache=cache) if image is None else image
 
 
 def run_image(task: ImageTask, *, progress: bool = False,

@@ -64,6 +64,7 @@ def _add_fit_image(sub):
 
 def _fit_image(args) -> dict:
     from experiments.image_task import ImageTask, run_image, save_comparison, task_image
+    from vbgs.compilation import cache_root
 
     reassign = {"on": True, "off": False, "auto": args.stream == "none"}[args.reassign]
     task = ImageTask(image=args.image, size=args.size or None, components=args.components,
@@ -71,7 +72,8 @@ def _fit_image(args) -> dict:
                      order=args.order, assign=args.assign, patch=args.patch, reassign=reassign,
                      method=args.method, steps=args.steps)
     check_output_file(args.save, "--save", ".png")  # output paths and sizes before the fit
-    image = task_image(task)  # loaded once: sizes checked here, then fitted
+    root = cache_root()  # bundled photos kept resized: no skimage.transform, no SciPy
+    image = task_image(task, cache=root and root / "images")  # once: checked, then fitted
     h, w, _ = image.shape
     check_fewer_components(args.components, h * w, f"{w}x{h} image",
                            "use fewer --components or a larger --size")
