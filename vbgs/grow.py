@@ -115,25 +115,29 @@ def lattice_step(pts: np.ndarray) -> float | None:
 def empty_prior(n_components: int, origin, cell: float, config: PriorConfig = PriorConfig(),
                 dtype=jnp.float32) -> Mixture:
     """A prior of ``n_components`` empty slots about ``origin [d]`` at cell length
-    ``cell`` (the prior strengths a filled slot takes)."""
-    origin = jnp.asarray(origin, dtype)
+    ``cell`` (the prior strengths a filled slot takes). The means are summed on the
+    host (the same float32 sum as on the device) and arrays are put, not converted:
+    every eager ``jnp`` conversion or op is one more executable a fresh process loads."""
+    dtype = np.dtype(dtype)
+    origin = np.asarray(origin, dtype)
     d = origin.shape[0]
     offset = np.zeros((n_components, d))
     offset[:, :] = EMPTY_DISTANCE_CELLS * cell
     offset[:, 0] += cell * np.arange(n_components)
-    means = origin + jnp.asarray(offset, dtype)
+    means = origin + offset.astype(dtype)
     prior = _make_prior(means, np.zeros((n_components, 3), dtype), origin, cell, config)
-    return prior._replace(alpha=jnp.asarray(np.full((n_components,), EMPTY_ALPHA, dtype)))
+    return prior._replace(alpha=jax.device_put(np.full((n_components,), EMPTY_ALPHA, dtype)))
 
 
 def start_empty(xyz, n_components: int, cell: float,
                 config: PriorConfig = PriorConfig()) -> State:
     """The state before any data: every slot empty, origin at the centre of the first
     batch's box ``xyz [n, d]`` (a frame for precision, nothing more)."""
-    pts = np.asarray(xyz, np.float64)
+    pts = np.asarray(xyz)
+    dtype = jax.dtypes.canonicalize_dtype(pts.dtype)  # as jnp.asarray(xyz) would hold it
+    pts = pts.astype(np.float64)
     origin = 0.5 * (pts.min(0) + pts.max(0))
-    return _start(empty_prior(n_components, origin, cell, config, jnp.asarray(xyz).dtype),
-                  config)
+    return _start(empty_prior(n_components, origin, cell, config, dtype), config)
 
 
 def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixture:
@@ -144,7 +148,7 @@ def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixt
     def put(a, rows):
         out = np.array(a)
         out[slots] = rows
-        return jnp.asarray(out)
+        return jax.device_put(out)  # jnp.asarray would compile a copy per shape
 
     space = prior.space._replace(mean=put(prior.space.mean, x_new))
     colour = prior.colour._replace(mean=put(prior.colour.mean, c_new))
