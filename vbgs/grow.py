@@ -133,11 +133,16 @@ def start_empty(xyz, n_components: int, cell: float,
                 config: PriorConfig = PriorConfig()) -> State:
     """The state before any data: every slot empty, origin at the centre of the first
     batch's box ``xyz [n, d]`` (a frame for precision, nothing more)."""
+    return _start(_empty_about(xyz, n_components, cell, config), config)
+
+
+def _empty_about(xyz, n_components: int, cell: float, config: PriorConfig) -> Mixture:
+    """:func:`empty_prior` about the centre of ``xyz``'s box, in ``xyz``'s dtype."""
     pts = np.asarray(xyz)
     dtype = jax.dtypes.canonicalize_dtype(pts.dtype)  # as jnp.asarray(xyz) would hold it
     pts = pts.astype(np.float64)
     origin = 0.5 * (pts.min(0) + pts.max(0))
-    return _start(empty_prior(n_components, origin, cell, config, dtype), config)
+    return empty_prior(n_components, origin, cell, config, dtype)
 
 
 def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixture:
@@ -255,22 +260,30 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``."""
+    prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
+                               config=config)
+    if info.n_new == 0:
+        return state, info
+    return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
+
+
+def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
+                 key: jax.Array, config: PriorConfig) -> tuple[Mixture, GrowInfo]:
+    """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
-    prior = state.prior
     active = is_active(prior)
     empty = np.flatnonzero(~active)
     x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)  # [n, d]
-    taken = np.asarray(state.posterior.space.mean, np.float64)[active]  # [m, d]
+    taken = np.asarray(posterior.space.mean, np.float64)[active]  # [m, d]
     chosen, n_ground = select(x, taken, len(empty), rule, key=key)
     n_new = len(chosen)
     if n_new == 0:
-        return state, GrowInfo(0, 0, int(active.sum()), empty[:0])
+        return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
     slots = empty[:n_new]
     dtype = prior.alpha.dtype
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha))
-    return (state._replace(prior=new_prior, posterior=_m_step(new_prior, state.stats)),
-            GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots))
+    return new_prior, GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots)
 
 
 def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,
@@ -309,6 +322,8 @@ def batch_prior(xyz, rgb, n_components: int, *, key: jax.Array,
     """The stream start when one batch ``xyz [n, d]``, ``rgb [n, 3]`` is all there is
     (a batch fit): the grown prior with ``min(K, n)`` components spread over it."""
     rule = calibrate(xyz, n_components, n_components, rate=1.0, refine=1.0)
-    state, _ = grow(start_empty(xyz, n_components, rule.cell, config), xyz, rgb, rule,
-                    key=key, config=config)
-    return state.prior
+    empty = _empty_about(xyz, n_components, rule.cell, config)
+    # grow from the empty state (posterior = prior), without the state: its start and
+    # M-step would be two more executables for a fresh process to load, then dropped
+    prior, _ = _grown_prior(empty, empty, xyz, rgb, rule, key=key, config=config)
+    return prior

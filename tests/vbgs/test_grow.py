@@ -185,3 +185,18 @@ def test_local_iterations_leave_prior_assignment_alone():
                              assign="prior", local_iters=n) for n in (1, 30))
     for a, b in zip(jax.tree.leaves(one.stats), jax.tree.leaves(many.stats), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_batch_prior_is_growth_from_the_empty_state_to_the_bit():
+    """batch_prior skips the state (its start and M-step): the same prior as growing the
+    empty state by the whole batch."""
+    img = load_image("coffee", 16)
+    from vbgs.data.images import image_to_points
+
+    uv, rgb = image_to_points(img)
+    key = jax.random.key(3)
+    rule = grow.calibrate(uv, 100, 100, rate=1.0, refine=1.0)
+    state, _ = grow.grow(grow.start_empty(uv, 100, rule.cell), uv, rgb, rule, key=key)
+    fast = grow.batch_prior(uv, rgb, 100, key=key)
+    for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(state.prior), strict=True):
+        assert a.dtype == b.dtype and np.asarray(a).tobytes() == np.asarray(b).tobytes()
