@@ -111,12 +111,22 @@ def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.A
     return state, total[0]
 
 
-def run_image(task: ImageTask, *, progress: bool = False) -> dict:
+def task_image(task: ImageTask, image: np.ndarray | None = None, *,
+               cache: Path | None = None) -> np.ndarray:
+    """The task's target: ``image`` when the caller has loaded it already (the CLI does,
+    to check sizes before the fit: loading and resizing twice costs start-up time), else
+    ``load_image(task.image, task.size, cache=cache)``."""
+    return load_image(task.image, task.size, cache=cache) if image is None else image
+
+
+def run_image(task: ImageTask, *, progress: bool = False,
+              image: np.ndarray | None = None) -> dict:
     """Fit, render and score; returns the metrics, the settings, the ELBO trace and
-    (under ``"images"``) the target and render for plotting."""
+    (under ``"images"``) the target and render for plotting. ``image``: the target if
+    already loaded (``load_image(task.image, task.size)``), see :func:`task_image`."""
     if task.method == "gradient":
-        return run_gradient_image(task, progress=progress, steps=task.steps)
-    img = load_image(task.image, task.size)
+        return run_gradient_image(task, progress=progress, steps=task.steps, image=image)
+    img = task_image(task, image)
     h, w, _ = img.shape
     uv, rgb = image_to_points(img)
     k_init, k_fit = task_keys(task.seed)
@@ -156,11 +166,12 @@ def run_image(task: ImageTask, *, progress: bool = False) -> dict:
 
 
 def run_gradient_image(task: ImageTask, *, steps: int | None = None, progress: bool = False,
-                       config=None) -> dict:
+                       config=None, image: np.ndarray | None = None) -> dict:
     """Fit 2-D Gaussians to the task's image with Adam for ``steps`` steps (``task.iters``
     is ignored); same keys as :func:`experiments.image_task.run_image`, with the loss
     trace under ``"loss"`` and ``"elbo": []``. ``config``: a
-    :class:`vbgs.baseline.TrainConfig` (its defaults when None)."""
+    :class:`vbgs.baseline.TrainConfig` (its defaults when None); ``image`` as for
+    :func:`run_image`."""
     from tqdm.auto import tqdm  # the baseline (optax) is imported only when it runs
 
     from vbgs.baseline import TrainConfig, count_live, params_from_prior
@@ -170,7 +181,7 @@ def run_gradient_image(task: ImageTask, *, steps: int | None = None, progress: b
     steps = IMAGE_STEPS if steps is None else steps
     if not isinstance(steps, int) or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
-    img = load_image(task.image, task.size)
+    img = task_image(task, image)
     h, w, _ = img.shape
     uv, rgb = image_to_points(img)
     k_init, k_fit = task_keys(task.seed)  # as run_image splits

@@ -63,8 +63,8 @@ def _add_fit_image(sub):
 
 
 def _fit_image(args) -> dict:
-    from experiments.image_task import ImageTask, run_image, save_comparison
-    from vbgs.data.images import load_image
+    from experiments.image_task import ImageTask, run_image, save_comparison, task_image
+    from vbgs.compilation import cache_root
 
     reassign = {"on": True, "off": False, "auto": args.stream == "none"}[args.reassign]
     task = ImageTask(image=args.image, size=args.size or None, components=args.components,
@@ -72,10 +72,12 @@ def _fit_image(args) -> dict:
                      order=args.order, assign=args.assign, patch=args.patch, reassign=reassign,
                      method=args.method, steps=args.steps)
     check_output_file(args.save, "--save", ".png")  # output paths and sizes before the fit
-    h, w, _ = load_image(args.image, args.size or None).shape
+    root = cache_root()  # bundled photos kept resized: no skimage.transform, no SciPy
+    image = task_image(task, cache=root and root / "images")  # once: checked, then fitted
+    h, w, _ = image.shape
     check_fewer_components(args.components, h * w, f"{w}x{h} image",
                            "use fewer --components or a larger --size")
-    result = run_image(task, progress=sys.stderr.isatty())
+    result = run_image(task, progress=sys.stderr.isatty(), image=image)
     images = result.pop("images")
     if args.save:
         save_comparison(args.save, images["target"], images["render"],

@@ -5,6 +5,7 @@ although nothing changed since the last run. :func:`enable_persistent_cache` kee
 compiled executables on disk (``$XDG_CACHE_HOME/vbgs/jax``, by default
 ``~/.cache/vbgs/jax``) so a second identical run loads them instead; set
 ``VBGS_NO_COMPILE_CACHE=1`` to opt out, or ``VBGS_COMPILE_CACHE=DIR`` to move it.
+:func:`cache_root` is the folder of the CLI's other caches (resized photos, ``images``).
 :class:`CompileTimer` sums the compile events JAX reports (tracing, lowering, backend
 compile or cache load) so results can report compile time apart from run time.
 """
@@ -28,14 +29,22 @@ _total = [0.0]
 _listening = [False]
 
 
+def cache_root() -> Path | None:
+    """The CLI's cache folder, ``$XDG_CACHE_HOME/vbgs`` (``~/.cache/vbgs``), or None
+    when ``VBGS_NO_COMPILE_CACHE`` opts out of caching."""
+    if os.environ.get("VBGS_NO_COMPILE_CACHE", "").strip() not in ("", "0"):
+        return None
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "vbgs"
+
+
 def cache_dir() -> Path | None:
     """Where the persistent cache lives, or None when opted out."""
-    if os.environ.get("VBGS_NO_COMPILE_CACHE", "").strip() not in ("", "0"):
+    root = cache_root()
+    if root is None:
         return None
     if os.environ.get("VBGS_COMPILE_CACHE"):
         return Path(os.environ["VBGS_COMPILE_CACHE"]).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "vbgs" / "jax"
+    return root / "jax"
 
 
 def enable_persistent_cache() -> Path | None:

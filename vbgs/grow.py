@@ -29,12 +29,12 @@ assignment the posterior is no longer independent of the order (as with
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.spatial import cKDTree
 
 from vbgs.model import LOCAL_MAX_ITERS, Mixture, PriorConfig, State, check_points_host, m_step, start
 from vbgs.model import _make_prior  # compiled make_prior
@@ -84,33 +84,65 @@ def covered_area(xyz) -> float:
     pts = np.asarray(xyz, np.float64)
     if len(pts) < 2:
         return 1.0
-    dist, _ = cKDTree(pts).query(pts, k=2, workers=-1)
-    spacing = float(np.median(dist[:, 1]))
+    spacing = lattice_step(pts)
+    if spacing is None:
+        from scipy.spatial import cKDTree  # 0.2-0.4 s to import: only off the lattice
+
+        dist, _ = cKDTree(pts).query(pts, k=2, workers=-1)
+        spacing = float(np.median(dist[:, 1]))
     return len(pts) * spacing**2 if spacing > 0 else 1.0
+
+
+def lattice_step(pts: np.ndarray) -> float | None:
+    """Every point's nearest-neighbour distance when ``pts [n, d]`` (float64) are a full
+    axis-aligned lattice, each node once (an image's pixel centres), else None.
+
+    On such a lattice the nearest neighbour is one step along the axis of the smallest
+    step (the neighbour differs in that coordinate only, by exactly the step that
+    ``np.diff`` finds), so the distance is ``sqrt(step^2) = step`` bit for bit: what a
+    KD-tree query returns, without the tree."""
+    axes = [np.unique(pts[:, j]) for j in range(pts.shape[1])]
+    if math.prod(len(a) for a in axes) != len(pts):
+        return None
+    steps = [np.diff(a) for a in axes if len(a) > 1]
+    if not steps or any((s != s[0]).any() for s in steps):
+        return None  # a single point's repeats, or uneven steps
+    if len(np.unique(pts, axis=0)) != len(pts):
+        return None  # repeated points: n nodes, yet not all of them
+    return float(min(s[0] for s in steps))
 
 
 def empty_prior(n_components: int, origin, cell: float, config: PriorConfig = PriorConfig(),
                 dtype=jnp.float32) -> Mixture:
     """A prior of ``n_components`` empty slots about ``origin [d]`` at cell length
-    ``cell`` (the prior strengths a filled slot takes)."""
-    origin = jnp.asarray(origin, dtype)
+    ``cell`` (the prior strengths a filled slot takes). The means are summed on the
+    host (the same float32 sum as on the device) and arrays are put, not converted:
+    every eager ``jnp`` conversion or op is one more executable a fresh process loads."""
+    dtype = np.dtype(dtype)
+    origin = np.asarray(origin, dtype)
     d = origin.shape[0]
     offset = np.zeros((n_components, d))
     offset[:, :] = EMPTY_DISTANCE_CELLS * cell
     offset[:, 0] += cell * np.arange(n_components)
-    means = origin + jnp.asarray(offset, dtype)
+    means = origin + offset.astype(dtype)
     prior = _make_prior(means, np.zeros((n_components, 3), dtype), origin, cell, config)
-    return prior._replace(alpha=jnp.asarray(np.full((n_components,), EMPTY_ALPHA, dtype)))
+    return prior._replace(alpha=jax.device_put(np.full((n_components,), EMPTY_ALPHA, dtype)))
 
 
 def start_empty(xyz, n_components: int, cell: float,
                 config: PriorConfig = PriorConfig()) -> State:
     """The state before any data: every slot empty, origin at the centre of the first
     batch's box ``xyz [n, d]`` (a frame for precision, nothing more)."""
-    pts = np.asarray(xyz, np.float64)
+    return _start(_empty_about(xyz, n_components, cell, config), config)
+
+
+def _empty_about(xyz, n_components: int, cell: float, config: PriorConfig) -> Mixture:
+    """:func:`empty_prior` about the centre of ``xyz``'s box, in ``xyz``'s dtype."""
+    pts = np.asarray(xyz)
+    dtype = jax.dtypes.canonicalize_dtype(pts.dtype)  # as jnp.asarray(xyz) would hold it
+    pts = pts.astype(np.float64)
     origin = 0.5 * (pts.min(0) + pts.max(0))
-    return _start(empty_prior(n_components, origin, cell, config, jnp.asarray(xyz).dtype),
-                  config)
+    return empty_prior(n_components, origin, cell, config, dtype)
 
 
 def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixture:
@@ -121,7 +153,7 @@ def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixt
     def put(a, rows):
         out = np.array(a)
         out[slots] = rows
-        return jnp.asarray(out)
+        return jax.device_put(out)  # jnp.asarray would compile a copy per shape
 
     space = prior.space._replace(mean=put(prior.space.mean, x_new))
     colour = prior.colour._replace(mean=put(prior.colour.mean, c_new))
@@ -228,22 +260,30 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``."""
+    prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
+                               config=config)
+    if info.n_new == 0:
+        return state, info
+    return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
+
+
+def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
+                 key: jax.Array, config: PriorConfig) -> tuple[Mixture, GrowInfo]:
+    """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
-    prior = state.prior
     active = is_active(prior)
     empty = np.flatnonzero(~active)
     x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)  # [n, d]
-    taken = np.asarray(state.posterior.space.mean, np.float64)[active]  # [m, d]
+    taken = np.asarray(posterior.space.mean, np.float64)[active]  # [m, d]
     chosen, n_ground = select(x, taken, len(empty), rule, key=key)
     n_new = len(chosen)
     if n_new == 0:
-        return state, GrowInfo(0, 0, int(active.sum()), empty[:0])
+        return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
     slots = empty[:n_new]
     dtype = prior.alpha.dtype
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha))
-    return (state._replace(prior=new_prior, posterior=_m_step(new_prior, state.stats)),
-            GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots))
+    return new_prior, GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots)
 
 
 def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,
@@ -282,6 +322,8 @@ def batch_prior(xyz, rgb, n_components: int, *, key: jax.Array,
     """The stream start when one batch ``xyz [n, d]``, ``rgb [n, 3]`` is all there is
     (a batch fit): the grown prior with ``min(K, n)`` components spread over it."""
     rule = calibrate(xyz, n_components, n_components, rate=1.0, refine=1.0)
-    state, _ = grow(start_empty(xyz, n_components, rule.cell, config), xyz, rgb, rule,
-                    key=key, config=config)
-    return state.prior
+    empty = _empty_about(xyz, n_components, rule.cell, config)
+    # grow from the empty state (posterior = prior), without the state: its start and
+    # M-step would be two more executables for a fresh process to load, then dropped
+    prior, _ = _grown_prior(empty, empty, xyz, rgb, rule, key=key, config=config)
+    return prior

@@ -75,7 +75,7 @@ def test_more_components_than_pixels_is_refused(argv, message, capsys, no_fit):
 
 
 def test_a_score_with_no_component_used_is_flagged(monkeypatch, capsys):
-    monkeypatch.setattr(image_task, "run_image", lambda task, progress: {
+    monkeypatch.setattr(image_task, "run_image", lambda task, progress, image: {
         "psnr": 130.0, "ssim": 1.0, "components_used": 0, "images": {}})
     assert main([*IMAGE, "--json"]) == 0
     captured = capsys.readouterr()

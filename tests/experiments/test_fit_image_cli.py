@@ -40,6 +40,32 @@ def test_fit_image_patch_stream_summary_and_scores(capsys):
     assert result["psnr"] > 29.5 and result["ssim"] > 0.9
 
 
+def test_fit_image_loads_and_resizes_the_image_once(monkeypatch, capsys, tmp_path):
+    import experiments.image_task as image_task
+    import vbgs.data.images as images
+    from vbgs.compilation import cache_dir
+
+    if cache_dir() is not None:  # JAX's cache where it was; the photos under tmp_path
+        monkeypatch.setenv("VBGS_COMPILE_CACHE", str(cache_dir()))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(args)
+        return load(*args, **kwargs)
+
+    load = images.load_image
+    monkeypatch.setattr(images, "load_image", counted)
+    monkeypatch.setattr(image_task, "load_image", counted)
+    assert main(["fit-image", "--image", "coffee", "--size", "16", "--components", "50",
+                 "--iters", "2", "--json"]) == 0
+    assert calls == [("coffee", 16)]
+    if cache_dir() is not None:  # kept resized for the next run
+        assert [p.name[:12] for p in (tmp_path / "vbgs" / "images").iterdir()] == ["coffee-16x16"]
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["height"] == 16
+
+
 @pytest.mark.parametrize(
     "args, message",
     [

@@ -9,7 +9,10 @@ from pathlib import Path
 
 NOT_FOR_A_FIT = ("optax", "pandas", "tabulate", "matplotlib", "tqdm", "dask", "onnxruntime",
                  "skimage.io", "vbgs.baseline", "experiments.sweep.cli",
-                 "experiments.sweep.backends")
+                 "experiments.sweep.backends",
+                 # a bundled photo comes resized from the cache; pixel grids need no
+                 # KD-tree (vbgs.grow.lattice_step)
+                 "skimage.transform", "scipy.ndimage", "scipy.spatial")
 
 CODE = f"""
 import json, sys

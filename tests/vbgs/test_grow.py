@@ -27,6 +27,42 @@ def test_covered_area_of_a_grid_is_one_pixel_per_point():
     assert grow.covered_area(2.5 * lattice(6)) == pytest.approx(36 * 6.25)
 
 
+def _kd_tree_area(pts) -> float:
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(pts, np.float64)
+    spacing = float(np.median(cKDTree(pts).query(pts, k=2)[0][:, 1]))
+    return len(pts) * spacing**2
+
+
+@pytest.mark.parametrize("h, w, scale, offset, on_lattice", [
+    (64, 64, 1.0, 0.0, True), (3, 17, 1.0, 0.0, True), (1, 9, 1.0, 0.0, True),
+    (5, 4, 0.25, 0.0, True), (7, 6, 2.5, -3.0, True),
+    (5, 4, 0.1, 0.0, False), (6, 5, 1 / 3, 1e3, False)])  # rounded: uneven steps
+def test_covered_area_of_a_lattice_is_the_kd_tree_s_to_the_bit(h, w, scale, offset,
+                                                               on_lattice):
+    from vbgs.pixels import pixel_centres
+
+    pts = pixel_centres(h, w).astype(np.float64) * scale + offset
+    assert (grow.lattice_step(pts) is not None) == on_lattice
+    assert grow.covered_area(pts) == _kd_tree_area(pts)
+
+
+def test_points_off_a_full_lattice_use_the_kd_tree():
+    grid = lattice(6)
+    for pts in (grid[1:], np.concatenate([grid[:-1], grid[:1]]),  # a hole; a hole + repeat
+                grid * [1.0, 1.5], np.concatenate([grid, [[0.25, 0.5]]]),
+                np.random.default_rng(0).random((50, 3))):
+        if grow.lattice_step(np.asarray(pts, np.float64)) is None:
+            assert grow.covered_area(pts) == _kd_tree_area(pts)
+    assert grow.lattice_step(np.concatenate([grid[:-1], grid[:1]]).astype(float)) is None
+    assert grow.lattice_step(grid[1:].astype(float)) is None
+    assert grow.lattice_step((grid * [1.0, 1.5]).astype(float)) == 1.0  # steps 1 and 1.5
+    cube = np.stack(np.meshgrid(np.arange(4) * 0.75, np.arange(3) * 1.5, np.arange(5) * 0.5,
+                                indexing="ij"), -1).reshape(-1, 3)
+    assert grow.lattice_step(cube) == 0.5 and grow.covered_area(cube) == _kd_tree_area(cube)
+
+
 def test_one_component_per_empty_cell_on_the_batch_points():
     xy = lattice(8)  # 64 points; cells of side 2 about the centre 3.5: 4 x 4 hold points
     rule = grow.Growth(cell=2.0, levels=1, refine=0.0, max_new=100)
@@ -149,3 +185,18 @@ def test_local_iterations_leave_prior_assignment_alone():
                              assign="prior", local_iters=n) for n in (1, 30))
     for a, b in zip(jax.tree.leaves(one.stats), jax.tree.leaves(many.stats), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_batch_prior_is_growth_from_the_empty_state_to_the_bit():
+    """batch_prior skips the state (its start and M-step): the same prior as growing the
+    empty state by the whole batch."""
+    img = load_image("coffee", 16)
+    from vbgs.data.images import image_to_points
+
+    uv, rgb = image_to_points(img)
+    key = jax.random.key(3)
+    rule = grow.calibrate(uv, 100, 100, rate=1.0, refine=1.0)
+    state, _ = grow.grow(grow.start_empty(uv, 100, rule.cell), uv, rgb, rule, key=key)
+    fast = grow.batch_prior(uv, rgb, 100, key=key)
+    for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(state.prior), strict=True):
+        assert a.dtype == b.dtype and np.asarray(a).tobytes() == np.asarray(b).tobytes()

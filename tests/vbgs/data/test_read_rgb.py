@@ -46,3 +46,32 @@ def test_missing_and_bad_files_are_refused_by_name(tmp_path):
     (tmp_path / "bad.png").write_bytes(b"not a png")
     with pytest.raises(ValueError, match="bad.png"):
         read_rgb(tmp_path / "bad.png")
+
+
+def test_a_cached_bundled_photo_is_the_resized_one_to_the_bit(tmp_path, monkeypatch):
+    import vbgs.data.images as images
+
+    made = load_image("coffee", (12, 20))
+    first = load_image("coffee", (12, 20), cache=tmp_path)  # made and stored
+    assert [p.name.split("-")[:2] for p in tmp_path.iterdir()] == [["coffee", "12x20"]]
+
+    def no_resize(*args):
+        raise AssertionError("resized again: the cache was not read")
+
+    monkeypatch.setattr(images, "_resize", no_resize)
+    again = load_image("coffee", (12, 20), cache=tmp_path)
+    for img in (first, again):
+        assert img.dtype == np.float32 and img.tobytes() == made.tobytes()
+
+
+def test_a_broken_cache_entry_is_made_again_and_files_are_never_cached(tmp_path):
+    load_image("coffee", 8, cache=tmp_path)
+    (entry,) = tmp_path.iterdir()
+    for broken in (entry.read_bytes()[:100], b""):  # truncated, empty
+        entry.write_bytes(broken)
+        assert load_image("coffee", 8, cache=tmp_path).tobytes() == \
+            load_image("coffee", 8).tobytes()
+    assert np.load(entry).shape == (8, 8, 3)  # stored again, whole
+    path = _save(tmp_path / "photo.png", np.zeros((4, 6, 3), np.uint8))
+    load_image(path, 2, cache=tmp_path / "files")
+    assert not (tmp_path / "files").exists()
