@@ -163,7 +163,9 @@ DEFAULT_GRID = ["splat_scale=0.85,1.0,1.2,1.4,1.6", "splat_blur=0,0.02,0.05,0.1,
 def _add_tune(sub):
     p = sub.add_parser("tune", help="learn one stream, then score a grid of render settings "
                                     "on validation views; writes OUT/SCENE.csv and .md")
-    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    p.add_argument("--scene", nargs="+", default=["object"],
+                   help="object | room | a dataset folder; several: each gets its table and "
+                        "OUT/mean.csv ranks the settings by their mean over the scenes")
     add_choice(p, "--format", FORMAT)
     add_choice(p, "--method", METHOD)
     p.add_argument("--components", type=int, default=20000)
@@ -177,7 +179,9 @@ def _add_tune(sub):
     p.add_argument("--background", default="auto", help="auto or R,G,B in [0, 1]")
     p.add_argument("--grid", nargs="+", default=DEFAULT_GRID, metavar="NAME=V1,V2",
                    help="render settings (task fields) and their values, e.g. "
-                        "splat_scale=0.5,0.7,1.0 opacity=0.5,0.9 (default: %(default)s)")
+                        "splat_scale=0.5,0.7,1.0 opacity=0.5,0.9; model hyperparameters as "
+                        "prior.NAME (e.g. prior.cov_scale=0.2,0.5: one stream per value) "
+                        "(default: %(default)s)")
     p.add_argument("--out", default="results/tuning", help="folder for SCENE.csv and SCENE.md")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
@@ -189,42 +193,62 @@ def _tune(args) -> dict:
     from experiments.tune import (
         command_line,
         inert_parameters,
+        mean_over_scenes,
         parse_grid,
         tune,
         write_tuning,
     )
 
-    task = SceneTask(scene=args.scene, format=args.format, method=args.method,
-                     components=args.components, frames=args.frames, n_test=1,
-                     n_val=args.val_views, size=args.size, order=args.order,
-                     assign=args.assign, init=args.init, seed=args.seed,
-                     background=args.background)
     if args.val_views < 1:
         raise ValueError(f"--val-views must be at least 1 (settings are chosen on them), "
                          f"got {args.val_views}")
-    grid = parse_grid(args.grid, task)  # bad grids fail before any work
+    names = [Path(s).name or "scene" for s in args.scene]
+    if len(set(names)) != len(names):
+        raise ValueError(f"--scene: two scenes share the name {names!r}; each writes "
+                         f"OUT/NAME.csv, so give folders with different names")
+    tasks = [SceneTask(scene=scene, format=args.format, method=args.method,
+                       components=args.components, frames=args.frames, n_test=1,
+                       n_val=args.val_views, size=args.size, order=args.order,
+                       assign=args.assign, init=args.init, seed=args.seed,
+                       background=args.background) for scene in args.scene]
+    grid = parse_grid(args.grid, tasks[0])  # bad grids fail before any work
     check_fewer_components(args.components, args.frames * args.size**2,
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
-    scene = load_task_scene(task)
-    argv = ["tune", "--scene", args.scene, *(["--format", args.format] if args.format else []),
+    argv = ["tune", "--scene", *args.scene, *(["--format", args.format] if args.format else []),
             "--method", args.method, "--components", str(args.components),
             "--frames", str(args.frames), "--val-views", str(args.val_views),
             "--size", str(args.size), "--order", args.order, "--assign", args.assign,
             "--init", args.init, "--seed", str(args.seed), "--background", args.background,
             "--grid", *args.grid, "--out", args.out]
-    rows = tune(task, scene, grid, progress=sys.stderr.isatty())
-    about = (f"{len(scene.train)} training frames streamed once ({args.order}, "
-             f"{args.assign} assignment); scores are means over {len(scene.val)} validation "
-             f"views (no test view is rendered). Best first.")
+    per_scene, files, stream = {}, [], f"({args.order}, {args.assign} assignment)"
+    for task, name in zip(tasks, names, strict=True):
+        scene = load_task_scene(task)
+        rows = tune(task, scene, grid, progress=sys.stderr.isatty())
+        about = (f"{len(scene.train)} training frames streamed once {stream}; scores are "
+                 f"means over {len(scene.val)} validation views (no test view is rendered). "
+                 f"Best first.")
+        per_scene[name] = rows
+        files += write_tuning(rows, args.out, name, command_line(argv), _inert_note(
+            about, inert_parameters(rows, grid)))
+    if len(per_scene) > 1:  # one setting for every scene: the best mean
+        rows = mean_over_scenes(per_scene, grid)
+        about = (f"Validation PSNR, SSIM and depth L1 of each setting averaged over the scenes "
+                 f"{', '.join(per_scene)} (their own tables beside this one), each streamed "
+                 f"once {stream}. Best mean PSNR first: the setting to use for all of them.")
+        files += write_tuning(rows, args.out, "mean", command_line(argv), _inert_note(
+            about, inert_parameters(rows, grid)))
     inert = inert_parameters(rows, grid)
-    if inert:
-        about += (f" No effect on any score: {', '.join(inert)} (the learner does not use "
-                  f"it under these settings).")
-    name = Path(args.scene).name or "scene"
-    paths = write_tuning(rows, args.out, name, command_line(argv), about)
     best = {k: v for k, v in rows[0].items() if k not in inert}  # inert values mean nothing
-    return {"best": best, "rows": rows, "no_effect": inert, "files": [str(p) for p in paths]}
+    return {"best": best, "rows": rows, "no_effect": inert, "files": [str(p) for p in files]}
+
+
+def _inert_note(about: str, inert: list[str]) -> str:
+    """``about`` plus a line naming grid parameters that changed no score."""
+    if not inert:
+        return about
+    return (about + f" No effect on any score: {', '.join(inert)} (the learner does not use "
+            f"it under these settings).")
 
 
 def _add_depth_study(sub):

@@ -17,6 +17,11 @@ no change here.
 
 Writes ``<out>/<scene>.csv`` and ``<out>/<scene>.md``, both headed by the command that
 made them; rows are sorted by validation PSNR, best first.
+
+The model's hyperparameters (:class:`vbgs.model.PriorConfig`, the task's ``prior``) can
+be tuned on the same views: a grid entry ``prior.NAME=V1,V2`` (e.g.
+``prior.cov_scale=0.2,0.3,0.5``) changes the fit, so the stream is learned once per
+value, and every render setting of the grid is scored on each of those streams.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from experiments.bench import machine
 from experiments.learners import LEARNERS
 from experiments.protocol import evaluate_validation, stream_frames
 from vbgs.data.streams import stream_order
+from vbgs.model import PriorConfig
 
 # Task fields that change what is learned (or what is scored): a re-render cannot tune them.
 # opacity_rule too: a learner gathers opacity evidence while learning only under its rule.
@@ -53,12 +59,31 @@ FIT_FIELDS = frozenset({
 GATHERED = {"colour_rule": "fit"}
 # Render settings that only the final solve reads, never what is gathered: no re-learning.
 SOLVE_ONLY = frozenset({"colour_ridge"})
+# Grid names with this prefix name a field of the task's PriorConfig (``prior.cov_scale``):
+# model hyperparameters, learned anew for each value.
+PRIOR_PREFIX = "prior."
+
+
+def is_prior_setting(name: str) -> bool:
+    """True for a grid name that names a model hyperparameter (``prior.NAME``)."""
+    return name.startswith(PRIOR_PREFIX)
+
+
+def with_setting(task, setting: dict):
+    """``task`` with the grid ``setting`` applied: task fields by name, ``prior.NAME``
+    entries to the task's :class:`vbgs.model.PriorConfig`."""
+    prior = {n[len(PRIOR_PREFIX):]: v for n, v in setting.items() if is_prior_setting(n)}
+    plain = {n: v for n, v in setting.items() if not is_prior_setting(n)}
+    if prior:
+        plain["prior"] = replace(task.prior, **prior)
+    return replace(task, **plain)
 
 
 def parse_grid(specs: list[str], task) -> dict[str, list]:
     """``["name=v1,v2", ...]`` -> ``{name: [v1, v2]}``, each value converted to the type
     of the task's current value of ``name`` (float when that is None)."""
     known = {f.name for f in fields(task)}
+    known_prior = {PRIOR_PREFIX + f.name for f in fields(PriorConfig)}
     grid: dict[str, list] = {}
     for spec in specs:
         name, sep, values = spec.partition("=")
@@ -66,7 +91,10 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
         if not sep or not name or not values.strip():
             raise ValueError(f"--grid entry {spec!r}: write NAME=V1,V2,... "
                              f"(e.g. splat_scale=0.5,0.7,1.0)")
-        if name not in known:
+        if is_prior_setting(name) and name not in known_prior:
+            raise ValueError(f"--grid: {name!r} is not a model hyperparameter; write one of "
+                             f"{', '.join(sorted(known_prior))}")
+        if name not in known and not is_prior_setting(name):
             raise ValueError(f"--grid: {name!r} is not a task setting; render settings: "
                              f"{', '.join(sorted(known - FIT_FIELDS))}")
         if name in FIT_FIELDS:
@@ -74,6 +102,15 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
                              f"cannot tune it; compare it with `python -m experiments.run sweep`")
         if name in grid:
             raise ValueError(f"--grid: {name!r} is given twice; list all its values in one entry")
+        if is_prior_setting(name):
+            try:
+                grid[name] = [float(v.strip()) for v in values.split(",")]
+            except ValueError:
+                raise ValueError(f"--grid {name}: cannot read {values!r} as float "
+                                 f"values") from None
+            for value in grid[name]:  # PriorConfig refuses what it cannot take
+                with_setting(task, {name: value})
+            continue
         current = getattr(task, name)
         kind = float if current is None or isinstance(current, float) else type(current)
         try:
@@ -115,15 +152,16 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
     gather = {name: value for name, value in GATHERED.items()
               if name in grid or getattr(task, name, None) == value}
     relearn = {name: values for name, values in grid.items()
-               if gather and name not in gather and name not in SOLVE_ONLY}
+               if is_prior_setting(name)
+               or (gather and name not in gather and name not in SOLVE_ONLY)}
     rows = []
-    for fixed in settings(relearn):  # [{}] when nothing is gathered: one stream in all
-        learner, background = learn_once(replace(task, **fixed, **gather), scene,
+    for fixed in settings(relearn):  # [{}] when nothing is relearned: one stream in all
+        learner, background = learn_once(with_setting(task, {**fixed, **gather}), scene,
                                           progress=progress)
         for rendered in settings({n: v for n, v in grid.items() if n not in fixed}):
             setting = {name: {**fixed, **rendered}[name] for name in grid}
             view = copy.copy(learner)  # shares the learned state; only render settings differ
-            view.task = replace(task, **setting)
+            view.task = with_setting(task, setting)
             ev = evaluate_validation(view.splats(), scene, background, view.blur)
             rows.append({**setting, "val_psnr": ev.psnr, "val_ssim": ev.ssim,
                          "val_depth_l1": ev.depth_l1})
@@ -145,6 +183,25 @@ def inert_parameters(rows: list[dict], grid: dict[str, list]) -> list[str]:
         if all(len(scores) == 1 for scores in groups.values()):
             inert.append(name)
     return inert
+
+
+SCORES = ("val_psnr", "val_ssim", "val_depth_l1")
+
+
+def mean_over_scenes(per_scene: dict[str, list[dict]], grid: dict[str, list]) -> list[dict]:
+    """One row per grid setting: its scores averaged over the scenes (``{name: rows}`` as
+    :func:`tune` returns them), with each scene's PSNR beside them; best mean PSNR first."""
+    tables = []
+    for name, rows in per_scene.items():
+        frame = pd.DataFrame(rows).set_index(list(grid))
+        tables.append(frame[list(SCORES)].rename(columns={"val_psnr": f"{name}_psnr"})
+                      .assign(val_psnr=frame["val_psnr"]))
+    joined = pd.concat(tables, keys=list(per_scene), names=["scene"])
+    mean = joined.groupby(level=list(grid), sort=False)[list(SCORES)].mean()
+    each = pd.concat([t[[f"{n}_psnr"]] for n, t in zip(per_scene, tables, strict=True)], axis=1)
+    out = mean.join(each).reset_index()
+    out = out.sort_values("val_psnr", ascending=False, key=lambda c: c.fillna(-np.inf))
+    return out.to_dict("records")
 
 
 def write_tuning(rows: list[dict], out_dir: str | Path, name: str, command: str,

@@ -27,7 +27,18 @@ def test_parse_grid_types_values_by_the_task_field():
                               {"splat_scale": 1.0, "opacity": 0.9}]
 
 
+def test_model_hyperparameters_are_tuned_as_prior_fields():
+    grid = parse_grid(["prior.cov_scale=0.2,0.5", "splat_scale=1"], TINY)
+    assert grid == {"prior.cov_scale": [0.2, 0.5], "splat_scale": [1.0]}
+    task = tune_module.with_setting(TINY, {"prior.cov_scale": 0.2, "splat_scale": 1.5})
+    assert task.prior.cov_scale == 0.2 and task.splat_scale == 1.5
+    assert task.prior.cov_strength == TINY.prior.cov_strength  # the other fields kept
+
+
 @pytest.mark.parametrize("spec, message", [
+    (["prior.bogus=1"], "'prior.bogus' is not a model hyperparameter"),
+    (["prior.cov_scale=-1"], "cov_scale must be a positive finite number"),
+    (["prior.cov_scale=big"], "cannot read 'big' as float"),
     (["opacity"], "write NAME=V1,V2"),
     (["colour=1,2"], "'colour' is not a task setting"),
     (["components=100,200"], "'components' changes the fit, not the render"),
@@ -59,6 +70,22 @@ def test_each_rerender_equals_a_fresh_stream_with_that_setting():
     assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # settings change the picture
     by_blur = {r["splat_blur"]: r["val_psnr"] for r in rows if r["splat_scale"] == 1.2}
     assert abs(by_blur[0.05] - by_blur[0.3]) > 0.01  # the pixel filter reaches the render
+
+
+def test_a_prior_value_equals_a_fresh_stream_under_that_prior():
+    """A ``prior.NAME`` grid value relearns the stream: its row equals a learner streamed
+    anew with that PriorConfig, and the values give different pictures."""
+    scene = load_task_scene(TINY)
+    rows = tune(TINY, scene, {"prior.cov_scale": [0.2, 0.5], "splat_scale": [1.2]})
+    by_value = {r["prior.cov_scale"]: r["val_psnr"] for r in rows}
+    assert abs(by_value[0.2] - by_value[0.5]) > 0.01
+    task = replace(TINY, prior=replace(TINY.prior, cov_scale=0.2), splat_scale=1.2)
+    learner = VbgsLearner(task, scene)
+    order = stream_order(len(scene.train), task.order, seed=task.seed)
+    for _, frame, background in stream_frames(task, scene, order):
+        learner.learn(frame, background)
+    fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
+    assert by_value[0.2] == pytest.approx(fresh.psnr, abs=1e-4)
 
 
 def test_a_parameter_that_changes_no_score_is_named():
@@ -134,3 +161,23 @@ def test_colour_rule_is_gathered_while_streaming_and_each_rule_equals_a_fresh_st
         fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
         assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
     assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # the rule changes the picture
+
+
+def test_several_scenes_get_their_tables_and_a_mean_that_picks_one_setting(tmp_path, capsys):
+    out = tmp_path / "tuning"
+    argv = ["tune", "--scene", "object", "room", "--components", "150", "--frames", "3",
+            "--size", "16", "--val-views", "2", "--grid", "splat_scale=0.7,1.0",
+            "prior.cov_scale=0.3,0.5", "--out", str(out)]
+    assert main(argv) == 0
+    assert "best: splat_scale=" in capsys.readouterr().out
+    scenes = {n: pd.read_csv(out / f"{n}.csv", comment="#") for n in ("object", "room")}
+    mean = pd.read_csv(out / "mean.csv", comment="#")
+    assert len(mean) == 4 and mean["val_psnr"].is_monotonic_decreasing
+    for _, row in mean.iterrows():
+        own = [t[(t["splat_scale"] == row["splat_scale"])
+                 & (t["prior.cov_scale"] == row["prior.cov_scale"])].iloc[0] for t in scenes.values()]
+        assert row["object_psnr"] == pytest.approx(own[0]["val_psnr"])
+        assert row["room_psnr"] == pytest.approx(own[1]["val_psnr"])
+        assert row["val_psnr"] == pytest.approx((own[0]["val_psnr"] + own[1]["val_psnr"]) / 2)
+        assert row["val_ssim"] == pytest.approx((own[0]["val_ssim"] + own[1]["val_ssim"]) / 2)
+    assert "--scene object room" in (out / "mean.md").read_text()
