@@ -75,7 +75,7 @@ class SceneTask:
     protocol: str = PROTOCOL.default
     # VBGS: skip points explained within this many nats (None: learn every point; vbgs.skip)
     skip_margin: float | None = None
-    prior: model.PriorConfig = field(default_factory=model.PriorConfig)
+    prior: model.PriorConfig = model.SURFACE_PRIOR  # frozen: safe to share
 
     def __post_init__(self):
         for name in ("components", "frames", "size", "steps_per_frame", "steps"):

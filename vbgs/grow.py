@@ -54,6 +54,9 @@ EMPTY_DISTANCE_CELLS = 1e4
 MAX_NEW_SHARE = 0.5
 # Cell levels (each half the side of the one before) that refinement may use.
 LEVELS = 4
+# Batch points whose covariance gives a grown component's surface normal (the component's
+# point and its nearest neighbours in the batch: a 3x3 patch of pixels and a few more).
+NORMAL_NEIGHBOURS = 12
 # Points farther than this many level-0 cells from every component are beyond the
 # model's reach (see reach_of): more than the cell diagonal sqrt(3), so ground the rule
 # has covered (a component in the point's own cell) is always within reach.
@@ -145,16 +148,43 @@ def _empty_about(xyz, n_components: int, cell: float, config: PriorConfig) -> Mi
     return empty_prior(n_components, origin, cell, config, dtype)
 
 
-def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float) -> Mixture:
+def local_normals(x: np.ndarray, chosen: np.ndarray,
+                  neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
+    """Unit surface normals ``[m, 3]`` at the points ``x[chosen]`` of a batch ``x [n, 3]``:
+    the eigenvector of the smallest eigenvalue of the covariance of each point's
+    ``neighbours`` nearest batch points (local PCA; the sign is arbitrary, as a normal's
+    is in a covariance)."""
+    from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
+
+    k = min(neighbours, len(x))
+    _, idx = cKDTree(x).query(x[chosen], k=k, workers=-1)
+    patch = x[np.asarray(idx).reshape(len(chosen), k)]  # [m, k, 3]
+    centred = patch - patch.mean(1, keepdims=True)
+    cov = np.einsum("mki,mkj->mij", centred, centred) / k
+    return np.linalg.eigh(cov)[1][:, :, 0]  # eigenvalues ascending: the smallest's vector
+
+
+def surface_scales(scale: np.ndarray, normals: np.ndarray, thickness: float) -> np.ndarray:
+    """NIW scale matrices ``[m, 3, 3]`` flattened along ``normals [m, 3]``: an isotropic
+    ``scale [3, 3]`` (``s I``) becomes ``s (I - n n^T + thickness^2 n n^T)``."""
+    outer = np.einsum("mi,mj->mij", normals, normals)
+    return scale[None] - (1.0 - thickness**2) * scale[0, 0] * outer
+
+
+def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float,
+          scales=None) -> Mixture:
     """Put components on centred positions ``x_new [m, d]`` with colours ``c_new [m, 3]``
-    into the empty ``slots [m]`` (on the host: m changes from batch to batch, and a
-    device scatter would compile once per m)."""
+    (and NIW scale matrices ``scales [m, d, d]`` when given) into the empty ``slots
+    [m]`` (on the host: m changes from batch to batch, and a device scatter would
+    compile once per m)."""
 
     def put(a, rows):
         out = np.array(a)
         out[slots] = rows
         return jax.device_put(out)  # jnp.asarray would compile a copy per shape
 
+    if scales is not None:
+        prior = prior._replace(space=prior.space._replace(scale=put(prior.space.scale, scales)))
     space = prior.space._replace(mean=put(prior.space.mean, x_new))
     colour = prior.colour._replace(mean=put(prior.colour.mean, c_new))
     return prior._replace(space=space, colour=colour, alpha=put(prior.alpha, alpha))
@@ -281,8 +311,13 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
         return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
     slots = empty[:n_new]
     dtype = prior.alpha.dtype
+    scales = None
+    if prior.dim == 3 and config.surface_thickness != 1.0 and len(x) >= 3:
+        empty_scale = np.asarray(prior.space.scale[slots[0]], np.float64)  # s I
+        scales = surface_scales(empty_scale, local_normals(x, chosen),
+                                config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
-                      np.asarray(rgb)[chosen].astype(dtype), float(config.alpha))
+                      np.asarray(rgb)[chosen].astype(dtype), float(config.alpha), scales)
     return new_prior, GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots)
 
 

@@ -48,6 +48,12 @@ class PriorConfig:
     mean_strength: ``kappa_0``; pseudo-points behind the prior spatial mean.
     colour_strength: ``lambda_0``; pseudo-points behind the prior colour mean.
     alpha: Dirichlet concentration per component.
+    surface_thickness: for components a stream grows on 3-D points (:mod:`vbgs.grow`),
+        the prior's standard deviation along the local surface normal relative to the
+        one within the surface: ``E[Sigma] = (cov_scale ell)^2 (I - n n^T +
+        surface_thickness^2 n n^T)``, ``n`` the normal of the batch's points around the
+        component (:func:`vbgs.grow.local_normals`). 1 is the isotropic prior (images,
+        oracle starts, and every 2-D model, use it whatever the value).
     """
 
     colour_noise: float = 0.05
@@ -56,10 +62,11 @@ class PriorConfig:
     mean_strength: float = 1.0
     colour_strength: float = 1.0
     alpha: float = 1.0
+    surface_thickness: float = 1.0
 
     def __post_init__(self):
         for name in ("colour_noise", "cov_scale", "cov_strength", "mean_strength",
-                     "colour_strength", "alpha"):
+                     "colour_strength", "alpha", "surface_thickness"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"PriorConfig.{name} must be a positive finite number, got {value!r}")
@@ -67,6 +74,27 @@ class PriorConfig:
 
 # A config is part of a State's structure, not an array: jit sees it as static.
 jax.tree_util.register_static(PriorConfig)
+
+# The prior for points on surfaces (RGB-D scenes). An isotropic prior is a ball; on
+# surface data its thickness along the normal, (cov_scale ell)^2 / (n + 1) after n points,
+# is all the thickness a component has, so components stay blobs until they hold many
+# points: with the isotropic prior a median component of the object (128 px, 20k) had its
+# smallest sigma at 0.65 of its largest, and fresh ones grown on 1-4 points at 0.81; drawn
+# over the silhouettes of views that had seen the surface before, those cost an early view
+# 0.5 dB. A component a stream grows on a 3-D batch gets a prior flattened along the
+# batch's local surface normal (vbgs.grow.local_normals), thickness 0.1 of its width.
+# Images fill their plane: no normal, the isotropic prior. Chosen with the splat scale and
+# pixel filter (vbgs.splats.VBGS_COV_SCALE, VBGS_BLUR) on VALIDATION views, the best mean
+# over the object and the room, by `python -m experiments.run tune --scene object room
+# --components 20000 --frames 60 --size 128 --grid prior.cov_scale=0.25,0.5,0.6,0.7
+# prior.surface_thickness=0.03,0.1,0.3,1 splat_scale=1.0,1.2,1.4,1.6,1.8
+# splat_blur=0,0.02,0.05 --out results/tuning/prior` (results/tuning/prior/mean.md):
+# validation PSNR object / room 26.12 / 20.57 dB at cov_scale 0.6, thickness 0.1 (scale
+# 1.2, blur 0.02); 26.25 / 20.38 at 0.5, 0.1 (1.4, 0.02); the isotropic prior at 0.5
+# (thickness 1, the earlier default): 24.38 / 20.13, at its best 0.25: 25.18 / 20.17.
+SURFACE_COV_SCALE = 0.6
+SURFACE_THICKNESS = 0.1
+SURFACE_PRIOR = PriorConfig(cov_scale=SURFACE_COV_SCALE, surface_thickness=SURFACE_THICKNESS)
 
 
 class Mixture(NamedTuple):

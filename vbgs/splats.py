@@ -261,13 +261,13 @@ def load_ply(path) -> Splats:
 # the two differ by (nu - 4) / nu, which the scale absorbs. 3DGS adds 0.3 px² to every
 # splat and its optimiser shrinks the splats to make up for it; VBGS covariances are fitted
 # to the points, so 0.3 bled past every silhouette (at 0.3, 50k components scored below
-# 20k). Both are chosen together on VALIDATION views (never test views), the best mean
-# over the object and the room, by
-# `python -m experiments.run tune --scene {object,room} --components 20000 --frames 60
-# --size 128` (stream init, opacity from evidence; results/tuning/{object,room}.md):
-# validation PSNR object / room at scale 1.2, blur 0.02: 24.38 / 20.13 (best mean); 1.2,
-# 0.05: 24.29 / 20.12; 1.4, 0: 24.50 / 19.65; 1.0, 0.15: 23.59 / 20.17; the earlier
-# 0.85, 0.3: 22.40 / 19.95 dB.
+# 20k). Both are chosen on VALIDATION views (never test views) together with the scene
+# prior (vbgs.model.SURFACE_PRIOR, where the command and the table are: the best mean over
+# the object and the room, results/tuning/prior/mean.md). Validation PSNR object / room
+# with that prior at scale 1.2, blur 0.02: 26.12 / 20.57 dB; 1.4, 0.02: 25.83 / 19.92;
+# 1.2, 0: 24.86 / 20.52; 1.0, 0.05: 25.04 / 20.56. With the earlier isotropic prior scale
+# 1.2 and blur 0.02 were also the best (24.38 / 20.13; results/tuning/{object,room}.md),
+# the 3DGS-like 0.85, 0.3 gave 22.40 / 19.95 dB.
 # Opacity comes from evidence (vbgs.opacity); VBGS_OPACITY is the constant of the old
 # rule (`opacity_rule="constant"`), kept for comparison.
 VBGS_OPACITY = 0.5

@@ -200,3 +200,68 @@ def test_batch_prior_is_growth_from_the_empty_state_to_the_bit():
     fast = grow.batch_prior(uv, rgb, 100, key=key)
     for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(state.prior), strict=True):
         assert a.dtype == b.dtype and np.asarray(a).tobytes() == np.asarray(b).tobytes()
+
+
+def _tilted_plane(n: int = 400, seed: int = 0):
+    """Points on the plane through (1, 2, 3) with unit normal ``normal``, ``[n, 3]``."""
+    rng = np.random.default_rng(seed)
+    normal = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
+    a = np.cross(normal, [0.0, 0.0, 1.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(normal, a)
+    uv = rng.uniform(-1, 1, (n, 2))
+    return np.array([1.0, 2.0, 3.0]) + uv[:, :1] * a + uv[:, 1:] * b, normal
+
+
+def test_local_normals_of_a_plane_and_a_sphere():
+    pts, normal = _tilted_plane()
+    got = grow.local_normals(pts, np.arange(0, 400, 37))
+    np.testing.assert_allclose(np.abs(got @ normal), 1.0, atol=1e-6)  # sign is free
+    rng = np.random.default_rng(1)
+    sphere = rng.normal(size=(4000, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    got = grow.local_normals(sphere, np.arange(10))
+    assert np.abs(np.sum(got * sphere[:10], 1)).min() > 0.99  # radial
+
+
+def test_surface_scales_flatten_along_the_normal_only():
+    n = np.array([[0.0, 0.6, 0.8]])
+    out = grow.surface_scales(4.0 * np.eye(3), n, 0.1)[0]
+    np.testing.assert_allclose(out @ n[0], 4.0 * 0.1**2 * n[0], atol=1e-12)
+    t = np.array([1.0, 0.0, 0.0])  # in the plane: untouched
+    np.testing.assert_allclose(out @ t, 4.0 * t, atol=1e-12)
+    np.testing.assert_allclose(grow.surface_scales(4.0 * np.eye(3), n, 1.0)[0], 4.0 * np.eye(3))
+
+
+def test_components_grown_on_a_surface_get_a_prior_flat_along_it():
+    pts, normal = _tilted_plane(900)
+    rgb = np.full((len(pts), 3), 0.5, np.float32)
+    pts = pts.astype(np.float32)
+    rule = grow.calibrate(pts, 100, 50)
+    for thickness in (0.1, 1.0):
+        config = model.PriorConfig(surface_thickness=thickness)
+        state = grow.start_empty(pts, 100, rule.cell, config)
+        state, info = grow.grow(state, pts, rgb, rule, key=jax.random.key(0), config=config)
+        assert info.n_new > 20
+        scale = np.asarray(state.prior.space.scale, np.float64)[info.slots]
+        free = scale[0, 0, 0] if thickness == 1.0 else None
+        along = np.einsum("i,mij,j->m", normal, scale, normal)
+        within = np.linalg.eigvalsh(scale)[:, -1]
+        if thickness == 1.0:  # isotropic: every slot keeps its empty prior
+            np.testing.assert_allclose(scale, np.broadcast_to(free * np.eye(3), scale.shape),
+                                       rtol=1e-6)
+        else:
+            np.testing.assert_allclose(along / within, thickness**2, rtol=0.05)
+        # the fitted posterior of a flat prior is flat too: thin along the normal
+        post = np.asarray(state.posterior.space.scale, np.float64)[info.slots]
+        assert np.all(np.einsum("i,mij,j->m", normal, post, normal) <= within * 1.0001)
+
+
+def test_two_d_models_ignore_the_surface_thickness():
+    xy = lattice(12)
+    config = model.PriorConfig(surface_thickness=0.1)
+    rule = grow.calibrate(xy, 40, 40)
+    state = grow.start_empty(xy, 40, rule.cell, config)
+    state, info = grow.grow(state, xy, colours(xy), rule, key=jax.random.key(0), config=config)
+    scale = np.asarray(state.prior.space.scale)[info.slots]
+    np.testing.assert_allclose(scale, np.broadcast_to(scale[0, 0, 0] * np.eye(2), scale.shape))

@@ -20,31 +20,34 @@ def frames():
 K = 400
 
 
-def _start(frames):
+def _start(frames, config=model.PriorConfig()):
     """The growth rule and the empty state of a stream of ``frames``."""
     rule = grow.calibrate(frames[0][0], K, 0.3 * K, refine=0.05)
-    return rule, grow.start_empty(frames[0][0], K, rule.cell)
+    return rule, grow.start_empty(frames[0][0], K, rule.cell, config)
 
 
-@pytest.mark.parametrize(("assign", "estep"), [("prior", "sparse"), ("prior", "dense"),
-                                               ("posterior", "sparse"), ("posterior", "dense")])
-def test_a_grown_stepper_equals_a_fresh_one(frames, assign, estep, monkeypatch):
+@pytest.mark.parametrize(("assign", "estep", "config"), [
+    ("prior", "sparse", model.PriorConfig()), ("prior", "dense", model.PriorConfig()),
+    ("posterior", "sparse", model.PriorConfig()), ("posterior", "dense", model.PriorConfig()),
+    # grown rows with their own (surface-aligned) scale matrices
+    ("prior", "sparse", model.SURFACE_PRIOR), ("posterior", "dense", model.SURFACE_PRIOR)])
+def test_a_grown_stepper_equals_a_fresh_one(frames, assign, estep, config, monkeypatch):
     # small row blocks: a frame's growth spans several, so the E[log pi] shift of the
     # rows between blocks is checked too (one block of 512 would cover all of K=400)
     monkeypatch.setattr(stepper, "ROW_BLOCK", 16)
-    rule, state = _start(frames)
+    rule, state = _start(frames, config)
     size = max(len(f[0]) for f in frames)  # one padded size: one compiled step
     kept, n_grown = None, []
     for i, (xyz, rgb) in enumerate(frames):
-        state, info = grow.grow(state, xyz, rgb, rule, key=jax.random.key(i))
+        state, info = grow.grow(state, xyz, rgb, rule, key=jax.random.key(i), config=config)
         n_grown.append(info.n_new)
         if kept is None:
             kept = stepper.Stepper(state.prior, assign=assign, estep=estep, grows=True,
-                                   max_points=size)
+                                   max_points=size, config=config)
         else:
             kept.grow(state.prior, info.slots)
         fresh = stepper.Stepper(state.prior, assign=assign, estep=estep, grows=True,
-                                max_points=size)
+                                max_points=size, config=config)
         a, ainfo = kept(state, xyz, rgb)
         b, binfo = fresh(state, xyz, rgb)
         if assign == "prior":  # the terms themselves, row by row
