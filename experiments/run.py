@@ -9,6 +9,7 @@ Commands:
   tune        choose render settings on validation views (never test views); writes a table
   oracle      render splats built from a view's ground truth: is the renderer right here?
   colour-gap  the streamed (lumped) colour fit against exact least squares (a diagnostic)
+  render-bound  VBGS's splats refined by gradient: colours, + opacities, + geometry (a diagnostic)
   bench       benchmarks: image, estep, raster, depth
 """
 
@@ -341,6 +342,41 @@ def _colour_gap(args) -> dict:
             "size": args.size, "init": args.init, "ridge": task.colour_ridge, **gap}
 
 
+def _add_render_bound(sub):
+    p = sub.add_parser("render-bound", help="held-out scores of VBGS's splats refined by Adam on "
+                                            "every training frame: colours, colours and "
+                                            "opacities, everything (a diagnostic)")
+    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    add_choice(p, "--format", FORMAT)
+    p.add_argument("--components", type=int, default=20000)
+    p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
+    p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
+    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    add_choice(p, "--init", INIT)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--steps", type=int, default=900, help="Adam steps of each refinement")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _render_bound(args) -> dict:
+    from experiments.render_bound import render_bound
+    from experiments.scene_task import SceneTask, load_task_scene
+
+    if args.test_views < 1 or args.steps < 1:
+        raise ValueError(f"--test-views and --steps must be at least 1, got "
+                         f"{args.test_views} and {args.steps}")
+    task = SceneTask(scene=args.scene, format=args.format, components=args.components,
+                     frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
+                     init=args.init, seed=args.seed)
+    check_fewer_components(args.components, args.frames * args.size**2,
+                           f"at most {args.frames} frames x {args.size}x{args.size}",
+                           "use fewer --components, a larger --size or more --frames")
+    bound = render_bound(task, load_task_scene(task), steps=args.steps,
+                         progress=sys.stderr.isatty())
+    return {"scene": args.scene, "components": args.components, "frames": args.frames,
+            "size": args.size, "init": args.init, **bound}
+
+
 def _add_bench(sub):
     p = sub.add_parser("bench", help="benchmarks; figures are printed and written as CSV/markdown")
     p.add_argument("target", choices=["image", "estep", "stream", "raster", "depth"],
@@ -458,6 +494,7 @@ COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_sc
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
             "colour-gap": (_add_colour_gap, _colour_gap),
+            "render-bound": (_add_render_bound, _render_bound),
             "sweep": (_sweep_cli("add_sweep"), _sweep_cli("run_sweep")),
             "report": (_sweep_cli("add_report"), _sweep_cli("run_report"))}
 

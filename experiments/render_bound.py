@@ -1,0 +1,115 @@
+"""Diagnostic: how much of the gap to the gradient baseline is the picture, how much the
+geometry (``python -m experiments.run render-bound``).
+
+The VBGS learner streams the scene once; its final splats are then refined by Adam on
+the gradient baseline's loss (L1 + SSIM, plus its depth term: :mod:`vbgs.baseline.loss`)
+over every training frame, ``steps`` steps on frames drawn uniformly, three ways:
+
+* ``colours``: the colours only, everything else frozen;
+* ``colours_opacities``: colours and opacities, the means and covariances frozen: the
+  best that any rule turning VBGS's geometry into colour and opacity could reach (the
+  colour fit of :mod:`vbgs.colour_fit` and the opacity of :mod:`vbgs.opacity` are such
+  rules);
+* ``everything``: means, scales and rotations too, from VBGS's splats.
+
+Each is scored on the held-out test views beside the learner's own splats. The
+refinements read every training frame again, so they are yardsticks, never a
+learner's method, and nothing is tuned here: the test views only report. Learning rates
+are the baseline's (3DGS's, :class:`vbgs.baseline.TrainConfig`), splats are drawn with
+the VBGS learner's pixel filter throughout.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from experiments.learners.gradient_learner import DEFAULT_CONFIG
+from experiments.protocol import evaluate
+from experiments.tune import learn_once
+from vbgs.baseline import camera_extent, frame_arrays, trainable
+from vbgs.baseline.loss import frame_loss
+from vbgs.baseline.params import Params, logit, to_splats
+from vbgs.baseline.train import make_optimizer
+from vbgs.raster import exact_capacity, rasterize
+from vbgs.splats import Splats, scale_rotation_from_covs
+
+# What each refinement trains (Params fields); the rest keep VBGS's values.
+REFINED = {
+    "colours": ("colour_logits",),
+    "colours_opacities": ("colour_logits", "opacity_logits"),
+    "everything": ("colour_logits", "opacity_logits", "means", "log_scales", "rotations"),
+}
+EPS = 1e-4  # colours and opacities are clipped to [EPS, 1 - EPS] before the logit
+
+
+def params_from_splats(splats: Splats) -> Params:
+    """The gradient baseline's parameters for ``splats`` (every row active)."""
+    scales, quats = scale_rotation_from_covs(np.asarray(splats.covs, np.float64))
+    clip = lambda a: jnp.clip(jnp.asarray(a, jnp.float32), EPS, 1.0 - EPS)  # noqa: E731
+    return Params(jnp.asarray(splats.means, jnp.float32),
+                  jnp.asarray(np.log(scales), jnp.float32), jnp.asarray(quats, jnp.float32),
+                  logit(clip(splats.opacities)), logit(clip(splats.colours)),
+                  jnp.ones(splats.count, bool))
+
+
+def _step(optimizer, refined: tuple[str, ...], blur: float, capacity: int):
+    """The jitted Adam step of one refinement: gradients of frozen fields are zero, so
+    Adam leaves them where they are."""
+
+    def loss_fn(theta, active, rgb, depth, camera, background):
+        out = rasterize(to_splats(theta._replace(active=active)), camera,
+                        background=background, blur=blur, capacity=capacity)
+        return frame_loss(out, rgb, depth, depth_weight=DEFAULT_CONFIG.depth_weight)
+
+    @jax.jit
+    def step(params, opt_state, rgb, depth, camera, background):
+        theta = trainable(params)
+        loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
+                                                  background)
+        grads = grads._replace(**{f: jnp.zeros_like(getattr(grads, f))
+                                  for f in Params._fields[:-1] if f not in refined})
+        updates, opt_state = optimizer.update(grads, opt_state, theta)
+        return optax.apply_updates(theta, updates)._replace(active=params.active), opt_state, loss
+
+    return step
+
+
+def refine(splats: Splats, frames: list, background, *, what: str, steps: int, blur: float,
+           extent: float, seed: int = 0) -> Splats:
+    """``splats`` after ``steps`` Adam steps on ``frames`` refining ``what`` (a key of
+    :data:`REFINED`)."""
+    capacity = max(exact_capacity(splats, f.camera, blur=blur) for f in frames)
+    capacity = 1 << int(np.ceil(np.log2(max(capacity, 1))))  # a power of two: one compile
+    optimizer = make_optimizer(replace(DEFAULT_CONFIG, lr_decay_steps=steps), extent)
+    step = _step(optimizer, REFINED[what], blur, capacity)
+    params = params_from_splats(splats)
+    opt_state = optimizer.init(trainable(params))
+    arrays = [frame_arrays(f) for f in frames]
+    bg = jnp.asarray(background, jnp.float32)
+    for i in np.random.default_rng(seed).integers(0, len(arrays), steps):
+        params, opt_state, _ = step(params, opt_state, *arrays[int(i)], bg)
+    return to_splats(params)
+
+
+def render_bound(task, scene, *, steps: int = 900, progress: bool = False) -> dict:
+    """Held-out PSNR/SSIM of the learner's splats and of each refinement (module
+    docstring), with the seconds each refinement took."""
+    learner, background = learn_once(task, scene, progress=progress)
+    splats = learner.splats(drop_unused=True)
+    extent = camera_extent([f.camera.position for f in scene.train])
+    ev = evaluate(splats, scene.test, background, learner.blur)
+    out = {"steps": steps, "vbgs_psnr": ev.psnr, "vbgs_ssim": ev.ssim}
+    for what in REFINED:
+        start = time.perf_counter()
+        refined = refine(splats, scene.train, background, what=what, steps=steps,
+                         blur=learner.blur, extent=extent, seed=task.seed)
+        out[f"{what}_seconds"] = time.perf_counter() - start
+        ev = evaluate(refined, scene.test, background, learner.blur)
+        out[f"{what}_psnr"], out[f"{what}_ssim"] = ev.psnr, ev.ssim
+    return out

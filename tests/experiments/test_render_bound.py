@@ -1,0 +1,71 @@
+"""``python -m experiments.run render-bound``: VBGS's splats refined by gradient, each
+refinement touching only what it names."""
+
+import json
+
+import numpy as np
+import pytest
+
+from experiments.protocol import evaluate
+from experiments.render_bound import params_from_splats, refine
+from experiments.run import main
+from experiments.scene_task import SceneTask, load_task_scene
+from experiments.tune import learn_once
+from vbgs.baseline import camera_extent, to_splats
+
+TINY = SceneTask(components=150, frames=3, n_test=1, n_val=0, size=16)
+
+
+@pytest.fixture(scope="module")
+def learned():
+    scene = load_task_scene(TINY)
+    learner, background = learn_once(TINY, scene)
+    return scene, learner.splats(drop_unused=True), background, learner.blur
+
+
+def test_params_from_splats_give_the_splats_back(learned):
+    _, splats, _, _ = learned
+    back = to_splats(params_from_splats(splats))
+    np.testing.assert_allclose(back.means, splats.means, atol=1e-6)
+    np.testing.assert_allclose(back.covs, splats.covs, rtol=1e-3,
+                               atol=1e-4 * float(np.abs(splats.covs).max()))
+    np.testing.assert_allclose(back.colours, np.clip(splats.colours, 1e-4, 1 - 1e-4), atol=1e-5)
+    np.testing.assert_allclose(back.opacities, np.clip(splats.opacities, 1e-4, 1 - 1e-4),
+                               atol=1e-5)
+
+
+@pytest.mark.parametrize("what", ["colours", "colours_opacities"])
+def test_a_refinement_moves_only_what_it_names_and_fits_the_frames_better(learned, what):
+    scene, splats, background, blur = learned
+    start = to_splats(params_from_splats(splats))
+    extent = camera_extent([f.camera.position for f in scene.train])
+    out = refine(splats, scene.train, background, what=what, steps=40, blur=blur,
+                 extent=extent)
+    np.testing.assert_array_equal(out.means, start.means)
+    np.testing.assert_array_equal(out.covs, start.covs)
+    if what == "colours":
+        np.testing.assert_array_equal(out.opacities, start.opacities)
+    else:
+        assert np.abs(np.asarray(out.opacities) - np.asarray(start.opacities)).max() > 1e-3
+    assert np.abs(np.asarray(out.colours) - np.asarray(start.colours)).max() > 1e-3
+    before = evaluate(splats, scene.train, background, blur).psnr  # training frames
+    assert evaluate(out, scene.train, background, blur).psnr > before + 0.1
+
+
+def test_render_bound_command_scores_each_refinement(capsys):
+    argv = ["render-bound", "--components", "150", "--frames", "3", "--size", "16",
+            "--test-views", "1", "--steps", "5", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    for name in ("vbgs", "colours", "colours_opacities", "everything"):
+        assert 5.0 < out[f"{name}_psnr"] < 60.0 and 0.0 < out[f"{name}_ssim"] <= 1.0
+    assert out["steps"] == 5 and out["everything_seconds"] > 0
+
+
+def test_render_bound_refuses_bad_input_before_any_work(capsys, monkeypatch):
+    import experiments.render_bound as render_bound
+
+    monkeypatch.setattr(render_bound, "render_bound",
+                        lambda *a, **k: pytest.fail("the diagnostic started"))
+    assert main(["render-bound", "--steps", "0"]) == 2
+    assert "--test-views and --steps must be at least 1" in capsys.readouterr().err
