@@ -305,9 +305,9 @@ def _oracle(args) -> dict:
     return {"scene": args.scene, **asdict(oracle_score(load_task_scene(task), args.view))}
 
 
-def _add_colour_gap(sub):
-    p = sub.add_parser("colour-gap", help="held-out scores of the streamed colour fit against "
-                                          "exact least squares and the posterior colours")
+def _add_diagnostic_scene(p) -> None:
+    """The scene arguments of a diagnostic command (colour-gap, render-bound): one VBGS
+    stream, scored on held-out test views."""
     p.add_argument("--scene", default="object", help="object | room | a dataset folder")
     add_choice(p, "--format", FORMAT)
     p.add_argument("--components", type=int, default=20000)
@@ -316,65 +316,68 @@ def _add_colour_gap(sub):
     p.add_argument("--size", type=int, default=128, help="image size (longer side)")
     add_choice(p, "--init", INIT)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _diagnostic_task(args, count: str, **settings):
+    """The SceneTask of a diagnostic, checked before any work: ``--test-views`` and the
+    flag named ``count`` at least 1, fewer components than pixels."""
+    value = getattr(args, count.replace("-", "_"))
+    if args.test_views < 1 or value < 1:
+        raise ValueError(f"--test-views and --{count} must be at least 1, got "
+                         f"{args.test_views} and {value}")
+    from experiments.scene_task import SceneTask
+
+    task = SceneTask(scene=args.scene, format=args.format, components=args.components,
+                     frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
+                     init=args.init, seed=args.seed, **settings)
+    check_fewer_components(args.components, args.frames * args.size**2,
+                           f"at most {args.frames} frames x {args.size}x{args.size}",
+                           "use fewer --components, a larger --size or more --frames")
+    return task
+
+
+def _diagnostic_header(args) -> dict:
+    return {"scene": args.scene, "components": args.components, "frames": args.frames,
+            "size": args.size, "init": args.init}
+
+
+def _add_colour_gap(sub):
+    p = sub.add_parser("colour-gap", help="held-out scores of the streamed colour fit against "
+                                          "exact least squares and the posterior colours")
+    _add_diagnostic_scene(p)
     p.add_argument("--iterations", type=int, default=30, help="conjugate-gradient iterations")
     p.add_argument("--ridge", type=float, default=None,
                    help="colour ridge in pixels (default: the task's, vbgs.colour_fit.RIDGE)")
-    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
 def _colour_gap(args) -> dict:
     from experiments.colour_gap import colour_gap
-    from experiments.scene_task import SceneTask, load_task_scene
+    from experiments.scene_task import load_task_scene
 
-    if args.test_views < 1 or args.iterations < 1:
-        raise ValueError(f"--test-views and --iterations must be at least 1, got "
-                         f"{args.test_views} and {args.iterations}")
-    task = SceneTask(scene=args.scene, format=args.format, components=args.components,
-                     frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
-                     init=args.init, seed=args.seed,
-                     **({} if args.ridge is None else {"colour_ridge": args.ridge}))
-    check_fewer_components(args.components, args.frames * args.size**2,
-                           f"at most {args.frames} frames x {args.size}x{args.size}",
-                           "use fewer --components, a larger --size or more --frames")
+    task = _diagnostic_task(args, "iterations",
+                            **({} if args.ridge is None else {"colour_ridge": args.ridge}))
     gap = colour_gap(task, load_task_scene(task), iterations=args.iterations,
                      progress=sys.stderr.isatty())
-    return {"scene": args.scene, "components": args.components, "frames": args.frames,
-            "size": args.size, "init": args.init, "ridge": task.colour_ridge, **gap}
+    return {**_diagnostic_header(args), "ridge": task.colour_ridge, **gap}
 
 
 def _add_render_bound(sub):
     p = sub.add_parser("render-bound", help="held-out scores of VBGS's splats refined by Adam on "
                                             "every training frame: colours, colours and "
                                             "opacities, everything (a diagnostic)")
-    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
-    add_choice(p, "--format", FORMAT)
-    p.add_argument("--components", type=int, default=20000)
-    p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
-    p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
-    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
-    add_choice(p, "--init", INIT)
-    p.add_argument("--seed", type=int, default=0)
+    _add_diagnostic_scene(p)
     p.add_argument("--steps", type=int, default=900, help="Adam steps of each refinement")
-    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
 def _render_bound(args) -> dict:
     from experiments.render_bound import render_bound
-    from experiments.scene_task import SceneTask, load_task_scene
+    from experiments.scene_task import load_task_scene
 
-    if args.test_views < 1 or args.steps < 1:
-        raise ValueError(f"--test-views and --steps must be at least 1, got "
-                         f"{args.test_views} and {args.steps}")
-    task = SceneTask(scene=args.scene, format=args.format, components=args.components,
-                     frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
-                     init=args.init, seed=args.seed)
-    check_fewer_components(args.components, args.frames * args.size**2,
-                           f"at most {args.frames} frames x {args.size}x{args.size}",
-                           "use fewer --components, a larger --size or more --frames")
+    task = _diagnostic_task(args, "steps")
     bound = render_bound(task, load_task_scene(task), steps=args.steps,
                          progress=sys.stderr.isatty())
-    return {"scene": args.scene, "components": args.components, "frames": args.frames,
-            "size": args.size, "init": args.init, **bound}
+    return {**_diagnostic_header(args), **bound}
 
 
 def _add_bench(sub):
