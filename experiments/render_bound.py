@@ -24,19 +24,16 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from experiments.learners.gradient_learner import DEFAULT_CONFIG
 from experiments.protocol import evaluate
 from experiments.tune import learn_once
 from vbgs.baseline import camera_extent, frame_arrays, trainable
-from vbgs.baseline.loss import frame_loss
 from vbgs.baseline.params import Params, logit, to_splats
-from vbgs.baseline.train import make_optimizer
-from vbgs.raster import exact_capacity, rasterize
+from vbgs.baseline.train import make_optimizer, make_step
+from vbgs.raster import exact_capacity
 from vbgs.splats import Splats, scale_rotation_from_covs
 
 # What each refinement trains (Params fields); the rest keep VBGS's values.
@@ -58,36 +55,16 @@ def params_from_splats(splats: Splats) -> Params:
                   jnp.ones(splats.count, bool))
 
 
-def _step(optimizer, refined: tuple[str, ...], blur: float, capacity: int):
-    """The jitted Adam step of one refinement: gradients of frozen fields are zero, so
-    Adam leaves them where they are."""
-
-    def loss_fn(theta, active, rgb, depth, camera, background):
-        out = rasterize(to_splats(theta._replace(active=active)), camera,
-                        background=background, blur=blur, capacity=capacity)
-        return frame_loss(out, rgb, depth, depth_weight=DEFAULT_CONFIG.depth_weight)
-
-    @jax.jit
-    def step(params, opt_state, rgb, depth, camera, background):
-        theta = trainable(params)
-        loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
-                                                  background)
-        grads = grads._replace(**{f: jnp.zeros_like(getattr(grads, f))
-                                  for f in Params._fields[:-1] if f not in refined})
-        updates, opt_state = optimizer.update(grads, opt_state, theta)
-        return optax.apply_updates(theta, updates)._replace(active=params.active), opt_state, loss
-
-    return step
-
-
 def refine(splats: Splats, frames: list, background, *, what: str, steps: int, blur: float,
            extent: float, seed: int = 0) -> Splats:
     """``splats`` after ``steps`` Adam steps on ``frames`` refining ``what`` (a key of
     :data:`REFINED`)."""
     capacity = max(exact_capacity(splats, f.camera, blur=blur) for f in frames)
     capacity = 1 << int(np.ceil(np.log2(max(capacity, 1))))  # a power of two: one compile
-    optimizer = make_optimizer(replace(DEFAULT_CONFIG, lr_decay_steps=steps), extent)
-    step = _step(optimizer, REFINED[what], blur, capacity)
+    config = replace(DEFAULT_CONFIG, lr_decay_steps=steps, raster_capacity=capacity, blur=blur)
+    optimizer = make_optimizer(config, extent)
+    step = make_step(config, optimizer, frozen=tuple(f for f in Params._fields[:-1]
+                                                     if f not in REFINED[what]))
     params = params_from_splats(splats)
     opt_state = optimizer.init(trainable(params))
     arrays = [frame_arrays(f) for f in frames]

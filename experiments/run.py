@@ -229,17 +229,15 @@ def _tune(args) -> dict:
         about = (f"{len(scene.train)} training frames streamed once {stream}; scores are "
                  f"means over {len(scene.val)} validation views (no test view is rendered). "
                  f"Best first.")
-        per_scene[name] = rows
-        files += write_tuning(rows, args.out, name, command_line(argv), _inert_note(
-            about, inert_parameters(rows, grid)))
+        per_scene[name], inert = rows, inert_parameters(rows, grid)
+        files += write_tuning(rows, args.out, name, command_line(argv), _inert_note(about, inert))
     if len(per_scene) > 1:  # one setting for every scene: the best mean
         rows = mean_over_scenes(per_scene, grid)
         about = (f"Validation PSNR, SSIM and depth L1 of each setting averaged over the scenes "
                  f"{', '.join(per_scene)} (their own tables beside this one), each streamed "
                  f"once {stream}. Best mean PSNR first: the setting to use for all of them.")
-        files += write_tuning(rows, args.out, "mean", command_line(argv), _inert_note(
-            about, inert_parameters(rows, grid)))
-    inert = inert_parameters(rows, grid)
+        inert = inert_parameters(rows, grid)
+        files += write_tuning(rows, args.out, "mean", command_line(argv), _inert_note(about, inert))
     best = {k: v for k, v in rows[0].items() if k not in inert}  # inert values mean nothing
     return {"best": best, "rows": rows, "no_effect": inert, "files": [str(p) for p in files]}
 

@@ -164,11 +164,11 @@ def local_normals(x: np.ndarray, chosen: np.ndarray,
     return np.linalg.eigh(cov)[1][:, :, 0]  # eigenvalues ascending: the smallest's vector
 
 
-def surface_scales(scale: np.ndarray, normals: np.ndarray, thickness: float) -> np.ndarray:
-    """NIW scale matrices ``[m, 3, 3]`` flattened along ``normals [m, 3]``: an isotropic
-    ``scale [3, 3]`` (``s I``) becomes ``s (I - n n^T + thickness^2 n n^T)``."""
+def surface_scales(s: float, normals: np.ndarray, thickness: float) -> np.ndarray:
+    """NIW scale matrices ``[m, 3, 3]``: the isotropic ``s I`` flattened along ``normals
+    [m, 3]``, ``s (I - n n^T + thickness^2 n n^T)``."""
     outer = np.einsum("mi,mj->mij", normals, normals)
-    return scale[None] - (1.0 - thickness**2) * scale[0, 0] * outer
+    return s * (np.eye(normals.shape[1]) - (1.0 - thickness**2) * outer)
 
 
 def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float,
@@ -313,8 +313,8 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     dtype = prior.alpha.dtype
     scales = None
     if prior.dim == 3 and config.surface_thickness != 1.0 and len(x) >= 3:
-        empty_scale = np.asarray(prior.space.scale[slots[0]], np.float64)  # s I
-        scales = surface_scales(empty_scale, local_normals(x, chosen),
+        s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
+        scales = surface_scales(s, local_normals(x, chosen),
                                 config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha), scales)

@@ -226,11 +226,11 @@ def test_local_normals_of_a_plane_and_a_sphere():
 
 def test_surface_scales_flatten_along_the_normal_only():
     n = np.array([[0.0, 0.6, 0.8]])
-    out = grow.surface_scales(4.0 * np.eye(3), n, 0.1)[0]
+    out = grow.surface_scales(4.0, n, 0.1)[0]
     np.testing.assert_allclose(out @ n[0], 4.0 * 0.1**2 * n[0], atol=1e-12)
     t = np.array([1.0, 0.0, 0.0])  # in the plane: untouched
     np.testing.assert_allclose(out @ t, 4.0 * t, atol=1e-12)
-    np.testing.assert_allclose(grow.surface_scales(4.0 * np.eye(3), n, 1.0)[0], 4.0 * np.eye(3))
+    np.testing.assert_allclose(grow.surface_scales(4.0, n, 1.0)[0], 4.0 * np.eye(3))
 
 
 def test_components_grown_on_a_surface_get_a_prior_flat_along_it():

@@ -35,7 +35,7 @@ from vbgs.baseline.densify import DensifyConfig, relocate
 from vbgs.baseline.loss import SSIM_LAMBDA, frame_loss
 from vbgs.baseline.params import Params, to_splats, trainable
 from vbgs.camera import Camera
-from vbgs.raster import DEFAULT_CAPACITY, DEFAULT_TILE, rasterize
+from vbgs.raster import BLUR_VARIANCE, DEFAULT_CAPACITY, DEFAULT_TILE, rasterize
 
 CAMERA_EXTENT_MARGIN = 1.1  # 3DGS enlarges the camera radius by 10%
 ADAM_EPS = 1e-15  # 3DGS's Adam epsilon
@@ -60,6 +60,7 @@ class TrainConfig:
     densify: DensifyConfig | None = field(default_factory=DensifyConfig)  # None: off
     tile: int = DEFAULT_TILE
     raster_capacity: int = DEFAULT_CAPACITY
+    blur: float = BLUR_VARIANCE  # px², the pixel filter the splats are rendered with
 
     def __post_init__(self):
         if self.lr_decay_steps < 1:
@@ -151,17 +152,19 @@ def frame_arrays(frame) -> FrameArrays:
     return FrameArrays(jnp.asarray(frame.rgb, f32), jnp.asarray(frame.depth, f32), camera)
 
 
-def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, on_trace=None):
+def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, on_trace=None,
+              frozen: tuple[str, ...] = ()):
     """The jitted ``step(params, opt_state, rgb, depth, camera, background) ->
     (params, opt_state, loss)`` (``*frame_arrays(frame)`` gives rgb, depth, camera):
     render over ``background [3]`` (an argument, so a background that is re-estimated
     as frames arrive costs no recompile), :func:`vbgs.baseline.loss.frame_loss`, one
     optimiser update; one compile per image size (the camera's static width and
-    height). ``on_trace()`` (optional) is called each time it is traced."""
+    height). ``on_trace()`` (optional) is called each time it is traced. ``frozen``
+    names Params fields whose gradients are zeroed, so Adam leaves them where they are."""
 
     def loss_fn(theta: Params, active, rgb, depth, camera: Camera, background):
         out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
-                        tile=config.tile, capacity=config.raster_capacity)
+                        tile=config.tile, capacity=config.raster_capacity, blur=config.blur)
         return frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
                           depth_weight=config.depth_weight)
 
@@ -172,6 +175,7 @@ def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, o
         theta = trainable(params)
         loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
                                                   background)
+        grads = grads._replace(**{f: jnp.zeros_like(getattr(grads, f)) for f in frozen})
         updates, opt_state = optimizer.update(grads, opt_state, theta)
         theta = optax.apply_updates(theta, updates)
         return theta._replace(active=params.active), opt_state, loss
