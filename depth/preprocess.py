@@ -11,7 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from vbgs.pixels import PIXEL_CENTRE_OFFSET, pixel_centre
+from vbgs.render.pixels import PIXEL_CENTRE_OFFSET, pixel_centre
 
 UINT8_MAX = 255.0
 RANGE_TOLERANCE = 1e-3  # float frames may stray this far outside [0, 1] (rounding)

@@ -1,4 +1,4 @@
-"""Timing of the tiled splat rasterizer (:func:`vbgs.raster.rasterize`).
+"""Timing of the tiled splat rasterizer (:func:`vbgs.render.raster.rasterize`).
 
 The scene is deterministic: ``count`` splats on a bumpy sphere of radius ~1 seen
 from distance ~3.6 with a 50° horizontal field of view, each with per-axis
@@ -15,8 +15,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.camera import Camera, from_fov, look_at
-from vbgs.raster import (
+from vbgs.render.camera import Camera, from_fov, look_at
+from vbgs.render.raster import (
     DEFAULT_CAPACITY,
     DEFAULT_TILE,
     DEPTH_CHUNK,
@@ -24,7 +24,7 @@ from vbgs.raster import (
     required_capacity,
     resolve_impl,
 )
-from vbgs.splats import Splats, covs_from_scale_rotation
+from vbgs.render.splats import Splats, covs_from_scale_rotation
 
 SPLAT_SIGMA = 0.015  # median per-axis standard deviation, scene units
 SIGMA_SPREAD = 0.4  # log-normal spread of the per-axis sigmas
@@ -81,13 +81,13 @@ def bench_rasterizer(
     """Forward and forward+backward wall times of ``rasterize`` for every size x count.
 
     ``capacity=None`` uses, per scene, the smallest multiple of DEPTH_CHUNK that
-    drops nothing (:func:`vbgs.raster.required_capacity`). Each row: size, splats, tile, capacity, forward_s and forward_backward_s
+    drops nothing (:func:`vbgs.render.raster.required_capacity`). Each row: size, splats, tile, capacity, forward_s and forward_backward_s
     (median of ``repeats`` calls after one warm-up call), compile_s and
     compile_backward_s (the warm-up calls, i.e. tracing + XLA compile + one run),
     and dropped (splat-tile overlaps beyond ``capacity``; 0 means the render is exact).
     The backward pass is the gradient of a photometric L2 loss w.r.t. all splat arrays.
     ``impl``: the rasterizer's compositing ("auto", "xla", "pallas"; see
-    :func:`vbgs.raster.resolve_impl`); each row names the one used (Pallas off a GPU runs
+    :func:`vbgs.render.raster.resolve_impl`); each row names the one used (Pallas off a GPU runs
     in interpret mode, far slower: a correctness run, not a speed figure), the backend
     and the device.
     """

@@ -3,7 +3,7 @@ profile of one frame.
 
 End to end means what a learner pays per arriving frame: unprojecting the RGB-D frame
 to points, padding on the host, the candidate search, the compiled E-/M-step and
-waiting for the result (:class:`vbgs.stepper.Stepper`). Building the stepper (prior
+waiting for the result (:class:`vbgs.inference.stepper.Stepper`). Building the stepper (prior
 terms, candidate structure) is reported as ``setup_s``; the compilation inside it and
 the whole time of frames whose call compiled as ``compile_s``; ``s_per_frame``
 averages the frames that did not compile.
@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
-from vbgs import candidates, grid, model, stepper
+from vbgs.inference import candidates, grid, model, stepper
 from vbgs.compilation import CompileTimer
 
 PROFILE_REPEATS = 3
@@ -179,7 +179,7 @@ def speedups(rows: list[dict]) -> list[dict]:
 def sharded_row(n_devices: int, k: int, scene_name: str, *, frames: int, size: int,
                 estep: str) -> dict:
     """:func:`stream_row` with the components split over ``n_devices`` devices."""
-    from vbgs import sharding
+    from vbgs.inference import sharding
     from vbgs.data.formats import load_scene
 
     scene = load_scene(scene_name, size=size, n_train=frames, n_test=1, seed=0)
@@ -200,7 +200,7 @@ DEVICE_NOTE = ("Rows by device count: the components are split over N devices (o
 def device_rows(counts, k: int, scene_name: str, *, frames: int, size: int,
                 estep: str = "sparse") -> list[dict]:
     """One :func:`sharded_row` per device count, each in a fresh process. On a CPU the
-    process gets that many host devices (:func:`vbgs.sharding.host_device_flags`, which
+    process gets that many host devices (:func:`vbgs.inference.sharding.host_device_flags`, which
     also keeps XLA:CPU's all-reduce from starving on a machine with fewer cores than
     devices); on an accelerator the process's own devices are used."""
     import json
@@ -209,7 +209,7 @@ def device_rows(counts, k: int, scene_name: str, *, frames: int, size: int,
     import sys
     from pathlib import Path
 
-    from vbgs import sharding
+    from vbgs.inference import sharding
 
     root = str(Path(__file__).resolve().parents[1])  # this checkout's packages first
     uneven = [n for n in counts if n < 1 or k % n]

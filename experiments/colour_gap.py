@@ -10,7 +10,7 @@ are then coloured four ways and scored on the held-out views:
 * ``lumped_final``: the same lumped solve, every training frame re-rendered with the
   final splats (separates the lumping from the frames' older geometry);
 * ``exact``: the full least squares over every training frame rendered with the final
-  splats, solved by conjugate gradients (:func:`vbgs.colour_fit.exact_colours`). It
+  splats, solved by conjugate gradients (:func:`vbgs.render.colour_fit.exact_colours`). It
   needs every frame again, so it is a yardstick only, never a learner's method.
 
 Nothing is tuned here: the test views only report.
@@ -25,7 +25,7 @@ import jax.numpy as jnp
 
 from experiments.protocol import evaluate
 from experiments.tune import learn_once
-from vbgs import colour_fit
+from vbgs.render import colour_fit
 
 
 def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> dict:

@@ -18,13 +18,13 @@ import numpy as np
 
 from experiments.init_schemes import oracle_start
 from experiments.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
-from vbgs import grow, model
-from vbgs.bound import StreamBound, batch_bound
+from vbgs.inference import grow, model
+from vbgs.inference.bound import StreamBound, batch_bound
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.io_atomic import write_atomic
-from vbgs.fit import fit, stream
-from vbgs.metrics import psnr, ssim
-from vbgs.render import render_image
+from vbgs.inference.fit import fit, stream
+from vbgs.render.metrics import psnr, ssim
+from vbgs.render.image import render_image
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ def image_prior(task: ImageTask, uv, rgb, key: jax.Array) -> model.Mixture:
 def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.Array,
                    k_fit: jax.Array, uv, rgb, *, progress: bool
                    ) -> tuple[model.State, StreamBound]:
-    """One pass over the patches, with the streaming bound (:mod:`vbgs.bound`).
+    """One pass over the patches, with the streaming bound (:mod:`vbgs.inference.bound`).
     ``init="stream"`` grows from the first patch, which gets its share of K by pixels
     (the image's size is the sensor's, known before any data); ``data`` and ``random``
     start from the whole image ``uv``, ``rgb`` (an oracle start). With ``reassign`` on,

@@ -1,7 +1,7 @@
 """Where a learner starts (``init``), declared once for the CLI, the tasks and the tables:
 
 * ``stream`` (default): from the first batch; components are added as data arrive
-  (:mod:`vbgs.grow`); nothing later in the stream is read;
+  (:mod:`vbgs.inference.grow`); nothing later in the stream is read;
 * ``data``: components on points drawn from the **whole** stream, in the bounds of the
   whole scene: an **oracle start** for a stream (it peeks at the future);
 * ``random``: uniform in the whole scene's bounds: an oracle start too (the bounds).

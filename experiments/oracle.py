@@ -32,11 +32,11 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.camera import project, unproject, valid_depth
+from vbgs.render.camera import project, unproject, valid_depth
 from vbgs.data.scene import Frame, Scene
-from vbgs.metrics import psnr
-from vbgs.raster import NEAR, exact_capacity, rasterize, surface_depth
-from vbgs.splats import Splats
+from vbgs.render.metrics import psnr
+from vbgs.render.raster import NEAR, exact_capacity, rasterize, surface_depth
+from vbgs.render.splats import Splats
 
 ORACLE_SIGMA_PX = 0.4  # splat standard deviation in pixels of the source view
 ORACLE_OPACITY = 0.99  # nearly opaque

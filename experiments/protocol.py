@@ -6,7 +6,7 @@ how it is scored, and the typed record of a run.
   (:mod:`experiments.learners`).
 * **Background**: with ``task.background == "auto"`` the background colour is
   estimated from the pixels without depth of the frames that have arrived
-  (:mod:`vbgs.background`); learners train with it and every view is rendered and
+  (:mod:`vbgs.render.background`); learners train with it and every view is rendered and
   scored over it. ``"R,G,B"`` fixes it instead.
 * :func:`stream_protocol` (continual): training frames arrive one at a time in the
   task's ``order``; nothing is replayed unless the learner has a replay buffer.
@@ -39,13 +39,13 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from experiments.init_schemes import oracle_start
-from vbgs import background as bg
-from vbgs.camera import unproject
+from vbgs.render import background as bg
+from vbgs.render.camera import unproject
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
-from vbgs.metrics import depth_l1, psnr, ssim
-from vbgs.raster import BLUR_VARIANCE, exact_capacity, rasterize, surface_depth
-from vbgs.splats import Splats, save_ply
+from vbgs.render.metrics import depth_l1, psnr, ssim
+from vbgs.render.raster import BLUR_VARIANCE, exact_capacity, rasterize, surface_depth
+from vbgs.render.splats import Splats, save_ply
 
 EARLY_FRACTION = 0.1  # the first 10% of the stream defines the "early" views
 CURVE_POINTS = 10  # evaluations of the early views along the stream
@@ -57,7 +57,7 @@ class Learner(Protocol):
     """A continual scene learner: sees each frame once, shows its splats at any time."""
 
     replay_bytes: int  # bytes of frames it holds for replay (0: none)
-    blur: float  # px², the pixel filter its splats are rendered with (vbgs.raster.rasterize)
+    blur: float  # px², the pixel filter its splats are rendered with (vbgs.render.raster.rasterize)
 
     def learn(self, frame: Frame, background: np.ndarray) -> None: ...
 
@@ -158,7 +158,7 @@ def render_view(splats: Splats, frame: Frame, background, blur: float = BLUR_VAR
                 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Render one view: rgb ``[h, w, 3]``, alpha-normalised depth ``[h, w]`` (0 where
     uncovered) and the number of splats the tiles dropped (0: the capacity is chosen
-    so that nothing is, :func:`vbgs.raster.exact_capacity`); ``blur``: the learner's
+    so that nothing is, :func:`vbgs.render.raster.exact_capacity`); ``blur``: the learner's
     pixel filter (px², :attr:`Learner.blur`)."""
     out = rasterize(splats, frame.camera, background=background, blur=blur,
                     capacity=exact_capacity(splats, frame.camera, blur=blur))

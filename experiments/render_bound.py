@@ -8,7 +8,7 @@ over every training frame, ``steps`` steps on frames drawn uniformly, three ways
 * ``colours``: the colours only, everything else frozen;
 * ``colours_opacities``: colours and opacities, the means and covariances frozen: the
   best that any rule turning VBGS's geometry into colour and opacity could reach (the
-  colour fit of :mod:`vbgs.colour_fit` and the opacity of :mod:`vbgs.opacity` are such
+  colour fit of :mod:`vbgs.render.colour_fit` and the opacity of :mod:`vbgs.render.opacity` are such
   rules);
 * ``everything``: means, scales and rotations too, from VBGS's splats.
 
@@ -33,8 +33,8 @@ from experiments.tune import learn_once
 from vbgs.baseline import camera_extent, frame_arrays, trainable
 from vbgs.baseline.params import Params, logit, to_splats
 from vbgs.baseline.train import make_optimizer, make_step
-from vbgs.raster import exact_capacity
-from vbgs.splats import Splats, scale_rotation_from_covs
+from vbgs.render.raster import exact_capacity
+from vbgs.render.splats import Splats, scale_rotation_from_covs
 
 # What each refinement trains (Params fields); the rest keep VBGS's values.
 REFINED = {

@@ -346,7 +346,7 @@ def _add_colour_gap(sub):
     _add_diagnostic_scene(p)
     p.add_argument("--iterations", type=int, default=30, help="conjugate-gradient iterations")
     p.add_argument("--ridge", type=float, default=None,
-                   help="colour ridge in pixels (default: the task's, vbgs.colour_fit.RIDGE)")
+                   help="colour ridge in pixels (default: the task's, vbgs.render.colour_fit.RIDGE)")
 
 
 def _colour_gap(args) -> dict:

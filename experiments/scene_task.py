@@ -28,13 +28,13 @@ from experiments.settings import (
     PROTOCOL,
     REPLAY_DEFAULT,
 )
-from vbgs import model
-from vbgs.background import parse_background
-from vbgs.colour_fit import RIDGE as COLOUR_RIDGE
+from vbgs.inference import model
+from vbgs.render.background import parse_background
+from vbgs.render.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
 from vbgs.io_atomic import write_atomic
-from vbgs.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
+from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
 
 
 @dataclass(frozen=True)
@@ -55,12 +55,12 @@ class SceneTask:
     candidates: int = 16
     init: str = INIT.default  # see experiments.init_schemes
     seed: int = 0
-    opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.opacity) | constant
+    opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.render.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
     splat_scale: float = VBGS_COV_SCALE
     splat_blur: float = VBGS_BLUR  # px², the pixel filter VBGS splats are rendered with
     # VBGS splat colours: the posterior colour means | fitted to the training pixels
-    # (vbgs.colour_fit; why off by default: experiments.settings.COLOUR_RULE)
+    # (vbgs.render.colour_fit; why off by default: experiments.settings.COLOUR_RULE)
     colour_rule: str = COLOUR_RULE.default
     colour_ridge: float = COLOUR_RIDGE  # pixels' worth of weight on the posterior colour (fit)
     depth_model: str | None = None
@@ -73,7 +73,7 @@ class SceneTask:
     steps_per_frame: int = 50
     steps: int = 3000
     protocol: str = PROTOCOL.default
-    # VBGS: skip points explained within this many nats (None: learn every point; vbgs.skip)
+    # VBGS: skip points explained within this many nats (None: learn every point; vbgs.inference.skip)
     skip_margin: float | None = None
     prior: model.PriorConfig = model.SURFACE_PRIOR  # frozen: safe to share
 

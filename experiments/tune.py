@@ -18,7 +18,7 @@ no change here.
 Writes ``<out>/<scene>.csv`` and ``<out>/<scene>.md``, both headed by the command that
 made them; rows are sorted by validation PSNR, best first.
 
-The model's hyperparameters (:class:`vbgs.model.PriorConfig`, the task's ``prior``) can
+The model's hyperparameters (:class:`vbgs.inference.model.PriorConfig`, the task's ``prior``) can
 be tuned on the same views: a grid entry ``prior.NAME=V1,V2`` (e.g.
 ``prior.cov_scale=0.2,0.3,0.5``) changes the fit, so the stream is learned once per
 value, and every render setting of the grid is scored on each of those streams.
@@ -39,7 +39,7 @@ from experiments.bench import machine
 from experiments.learners import LEARNERS
 from experiments.protocol import evaluate_validation, stream_frames
 from vbgs.data.streams import stream_order
-from vbgs.model import PriorConfig
+from vbgs.inference.model import PriorConfig
 
 # Task fields that change what is learned (or what is scored): a re-render cannot tune them.
 # opacity_rule too: a learner gathers opacity evidence while learning only under its rule.
@@ -71,7 +71,7 @@ def is_prior_setting(name: str) -> bool:
 
 def with_setting(task, setting: dict):
     """``task`` with the grid ``setting`` applied: task fields by name, ``prior.NAME``
-    entries to the task's :class:`vbgs.model.PriorConfig`."""
+    entries to the task's :class:`vbgs.inference.model.PriorConfig`."""
     prior = {n[len(PRIOR_PREFIX):]: v for n, v in setting.items() if is_prior_setting(n)}
     plain = {n: v for n, v in setting.items() if not is_prior_setting(n)}
     if prior:

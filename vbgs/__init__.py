@@ -7,7 +7,7 @@ thread pool; when they outnumber the pool's threads (the cores), an operation ca
 on work queued behind it, and the computation never finishes. Seen here on a 2-core CPU:
 a posterior-assignment stream (object, 128 px, 20k components) hung in one run of four,
 at a different frame each time, and none of four with the flag; sharded updates over
-host devices timed out in their all-reduce (:mod:`vbgs.sharding`). The flag is read when
+host devices timed out in their all-reduce (:mod:`vbgs.inference.sharding`). The flag is read when
 JAX starts its CPU backend, so it takes effect when ``vbgs`` is imported before any JAX
 computation has run.
 """

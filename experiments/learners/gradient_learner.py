@@ -1,7 +1,7 @@
 """The gradient 3DGS baseline (:mod:`vbgs.baseline`) as a scene learner.
 
 :class:`GradientLearner` starts where VBGS starts, with the same key: under
-``init="stream"`` from the first frame's grown prior (:mod:`vbgs.grow`), adding
+``init="stream"`` from the first frame's grown prior (:mod:`vbgs.inference.grow`), adding
 splats on each arriving frame's new ground by the same rule (and densifying within
 the capacity from live splats, :mod:`vbgs.baseline.densify`), with the scene extent
 of the first frame (:func:`stream_extent`); under the oracle starts ``data`` and
@@ -32,7 +32,7 @@ import numpy as np
 
 from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points
-from vbgs import grow
+from vbgs.inference import grow
 from vbgs.baseline import (
     TrainConfig,
     Trainer,
@@ -47,8 +47,8 @@ from vbgs.baseline import (
 from vbgs.baseline.params import place
 from vbgs.baseline.densify import DEAD_OPACITY
 from vbgs.data.scene import Frame, Scene
-from vbgs.raster import ALPHA_MIN, BLUR_VARIANCE
-from vbgs.splats import Splats, prune
+from vbgs.render.raster import ALPHA_MIN, BLUR_VARIANCE
+from vbgs.render.splats import Splats, prune
 
 TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
 # The depth L1 term is on for scenes: the baseline sees the depth VBGS sees. Measured on
@@ -57,8 +57,8 @@ TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
 SCENE_DEPTH_WEIGHT = 0.1
 DEFAULT_CONFIG = TrainConfig(depth_weight=SCENE_DEPTH_WEIGHT)  # lr_decay_steps set per run
 # The splats start isotropic at sigma = START_COV_SCALE * ell (half the cell each covers,
-# the general prior's scale, vbgs.model.PriorConfig), whatever covariance the task's prior
-# gives VBGS's model (tuned for VBGS, flattened along surfaces: vbgs.model.SURFACE_PRIOR).
+# the general prior's scale, vbgs.inference.model.PriorConfig), whatever covariance the task's prior
+# gives VBGS's model (tuned for VBGS, flattened along surfaces: vbgs.inference.model.SURFACE_PRIOR).
 START_COV_SCALE = 0.5
 
 
@@ -80,7 +80,7 @@ class GradientLearner:
     """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
 
     PROTOCOLS = ("continual", "static")
-    blur = BLUR_VARIANCE  # renders as it trains: 3DGS's low-pass dilation (vbgs.raster)
+    blur = BLUR_VARIANCE  # renders as it trains: 3DGS's low-pass dilation (vbgs.render.raster)
 
     def __init__(self, task, scene: Scene, config: TrainConfig = DEFAULT_CONFIG):
         self.task = task
@@ -102,7 +102,7 @@ class GradientLearner:
         self.state = self.trainer.init(params, key=jax.random.fold_in(self.key, TRAIN_KEY))
 
     def _grow(self, frame: Frame) -> None:
-        """Stream start: the first frame's grown prior (as VBGS's, :mod:`vbgs.grow`);
+        """Stream start: the first frame's grown prior (as VBGS's, :mod:`vbgs.inference.grow`);
         later frames add splats on their new ground by the same rule, in free rows."""
         t = self.task
         xyz, rgb = frame_points(frame)

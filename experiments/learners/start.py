@@ -10,15 +10,15 @@ import jax
 import numpy as np
 
 from experiments.protocol import frame_points
-from vbgs import model
+from vbgs.inference import model
 from vbgs.data.scene import Scene
 
 
 # The share of the capacity K a 3-D stream's first frame gets (it fixes the cell side
-# of :mod:`vbgs.grow`); measured on the object scene, see the README.
+# of :mod:`vbgs.inference.grow`); measured on the object scene, see the README.
 FIRST_FRAME_SHARE = 0.1
 # Share of the empty slots a frame may spend refining ground already covered (finer
-# cells, see vbgs.grow); what is left stays for new ground in later frames.
+# cells, see vbgs.inference.grow); what is left stays for new ground in later frames.
 REFINE_SHARE = 0.05
 
 

@@ -1,13 +1,13 @@
-"""VBGS as a continual scene learner: each arriving frame is one :func:`vbgs.model.update`.
+"""VBGS as a continual scene learner: each arriving frame is one :func:`vbgs.inference.model.update`.
 
 With ``task.init == "stream"`` the learner starts empty and, before each frame is
 learned, adds components where the frame shows ground the model has no component for
-(:func:`vbgs.grow.grow`); the first frame fixes the cell side by getting
+(:func:`vbgs.inference.grow.grow`); the first frame fixes the cell side by getting
 FIRST_FRAME_SHARE of the capacity. ``data`` and ``random`` start from the prior of
 :func:`experiments.learners.start.scene_prior` (an oracle start).
 
 With ``task.colour_rule == "fit"`` each frame also adds its terms of the colour
-least squares (:mod:`vbgs.colour_fit`), its blending weights W_f rendered from the
+least squares (:mod:`vbgs.render.colour_fit`), its blending weights W_f rendered from the
 posterior just after the frame's update: the model that learned the frame is the
 best one to say which components paint its pixels, and under stream init a component
 grown late has rows from the frames that arrived after it only, as it should.
@@ -20,11 +20,12 @@ import jax
 
 from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
 from experiments.protocol import SceneResult, frame_points
-from vbgs import colour_fit, grow, model, opacity, skip
-from vbgs.bound import StreamBound, batch_bound
+from vbgs.render import colour_fit, opacity
+from vbgs.inference import grow, model, skip
+from vbgs.inference.bound import StreamBound, batch_bound
 from vbgs.data.scene import Frame, Scene
-from vbgs.splats import Splats, from_posterior, mixture_geometry
-from vbgs.stepper import Stepper
+from vbgs.render.splats import Splats, from_posterior, mixture_geometry
+from vbgs.inference.stepper import Stepper
 
 
 class VbgsLearner:
@@ -50,7 +51,7 @@ class VbgsLearner:
     @property
     def blur(self) -> float:
         """The pixel filter (px²) its splats are rendered with: the task's ``splat_blur``
-        (:data:`vbgs.splats.VBGS_BLUR`)."""
+        (:data:`vbgs.render.splats.VBGS_BLUR`)."""
         return self.task.splat_blur
 
     @property
@@ -62,7 +63,7 @@ class VbgsLearner:
 
     def _sync_stepper(self, grown) -> None:
         """Build the stepper on the first frame; after growth (the slots ``grown``) hand it
-        the grown reference (:meth:`vbgs.stepper.Stepper.grow`: no recompilation)."""
+        the grown reference (:meth:`vbgs.inference.stepper.Stepper.grow`: no recompilation)."""
         t = self.task
         if self.step is None:
             grows = t.init == "stream"
@@ -153,7 +154,7 @@ class VbgsLearner:
                               else None, colours=colours)
 
     def diagnose(self, frame: Frame) -> None:
-        """Add the last frame's streaming bound ``B_t`` (:mod:`vbgs.bound`; untimed) over
+        """Add the last frame's streaming bound ``B_t`` (:mod:`vbgs.inference.bound`; untimed) over
         the points it learned (none when the whole frame was skipped)."""
         if self._last is None:
             return
@@ -164,8 +165,8 @@ class VbgsLearner:
                                                 n_candidates=t.candidates))
 
     def details(self, result: SceneResult) -> dict:
-        """The streaming bound (:meth:`vbgs.bound.StreamBound.summary`), the share of
-        points beyond the stream start's reach (:func:`vbgs.grow.reach_of`) and, when
+        """The streaming bound (:meth:`vbgs.inference.bound.StreamBound.summary`), the share of
+        points beyond the stream start's reach (:func:`vbgs.inference.grow.reach_of`) and, when
         skipping is on, the share of points skipped and the frames skipped whole."""
         skipped = {}
         if self.step is not None and self.step.reach is not None:

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 
 from experiments.run import main
-from vbgs.splats import load_ply
+from vbgs.render.splats import load_ply
 
 TINY = ["--scene", "object", "--components", "600", "--frames", "6", "--test-views", "2",
         "--size", "32"]

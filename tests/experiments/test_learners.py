@@ -9,7 +9,7 @@ import pytest
 from experiments.learners import LEARNERS, GradientLearner, VbgsLearner
 from experiments.protocol import frame_points
 from experiments.scene_task import SceneTask, prepare_scene, run_scene
-from vbgs import grow
+from vbgs.inference import grow
 
 
 class FirstFrameOnly(list):
@@ -87,7 +87,7 @@ def test_each_learner_is_scored_with_its_own_pixel_filter(scene):
     """VBGS splats are drawn with the task's splat_blur, the gradient baseline's with the
     filter it trained under: the record's renders are those renders."""
     from experiments.protocol import render_view, stream_protocol
-    from vbgs.raster import BLUR_VARIANCE
+    from vbgs.render.raster import BLUR_VARIANCE
 
     assert GradientLearner.blur == BLUR_VARIANCE
     psnrs = {}

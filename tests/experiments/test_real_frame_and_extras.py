@@ -9,7 +9,7 @@ import numpy as np
 
 from experiments.oracle import masked_psnr, oracle_splats, render_oracle
 from experiments.run import main
-from vbgs.camera import valid_depth
+from vbgs.render.camera import valid_depth
 from vbgs.data.formats import load_scene
 
 SIZE = 48

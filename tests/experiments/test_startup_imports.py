@@ -11,7 +11,7 @@ NOT_FOR_A_FIT = ("optax", "pandas", "tabulate", "matplotlib", "tqdm", "dask", "o
                  "skimage.io", "vbgs.baseline", "experiments.sweep.cli",
                  "experiments.sweep.backends",
                  # a bundled photo comes resized from the cache; pixel grids need no
-                 # KD-tree (vbgs.grow.lattice_step)
+                 # KD-tree (vbgs.inference.grow.lattice_step)
                  "skimage.transform", "scipy.ndimage", "scipy.spatial")
 
 CODE = f"""

@@ -4,7 +4,7 @@ import jax
 import numpy as np
 import pytest
 
-from vbgs import model
+from vbgs.inference import model
 from vbgs.data.images import as_rgb, image_to_points, load_image, patch_stream
 from vbgs.data.streams import stream_order
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from vbgs import model
+from vbgs.inference import model
 from vbgs.baseline import (
     DensifyConfig,
     TrainConfig,
@@ -36,10 +36,10 @@ from vbgs.baseline.image import (
 )
 from vbgs.baseline.loss import depth_loss, ssim_of
 from vbgs.baseline.train import ADAM
-from vbgs.camera import unproject
+from vbgs.render.camera import unproject
 from vbgs.data.synthetic import object_scene
-from vbgs.metrics import SSIM_SIGMA
-from vbgs.raster import rasterize
+from vbgs.render.metrics import SSIM_SIGMA
+from vbgs.render.raster import rasterize
 
 K = 300  # splats in the tiny scene
 

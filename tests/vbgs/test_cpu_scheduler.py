@@ -14,7 +14,7 @@ def _flags_after_import(xla_flags: str | None) -> str:
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     if xla_flags is not None:
         env["XLA_FLAGS"] = xla_flags
-    code = ("import os, json, vbgs.model, jax; jax.numpy.zeros(1).block_until_ready(); "
+    code = ("import os, json, vbgs.inference.model, jax; jax.numpy.zeros(1).block_until_ready(); "
             "print(json.dumps(os.environ.get('XLA_FLAGS')))")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, check=True)

@@ -1,7 +1,7 @@
 """Gradient 3D Gaussian Splatting baseline: parameters, loss, Adam step, densification
 within a fixed capacity, and replay buffers for continual training.
 
-``params_from_prior`` starts from the same place as VBGS (a :func:`vbgs.model.init`
+``params_from_prior`` starts from the same place as VBGS (a :func:`vbgs.inference.model.init`
 prior); ``Trainer`` runs the jitted step; ``parse_replay`` builds the buffers the
 continual protocol uses. The 2-D image variant is in :mod:`vbgs.baseline.image`.
 """

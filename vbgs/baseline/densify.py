@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from vbgs.baseline.params import Params, logit, rotation_matrices
-from vbgs.precision import mat_vec
+from vbgs.inference.precision import mat_vec
 
 DEAD_OPACITY = 0.005  # below this a splat is dead and its row is reused
 SPLIT_SCALE_DIVISOR = 1.6  # 3DGS: children of a split get scale / 1.6

@@ -1,6 +1,6 @@
 """2-D gradient baseline: fit normalised 2-D Gaussians to one image with Adam.
 
-The render is normalised the way VBGS renders images (:mod:`vbgs.render`):
+The render is normalised the way VBGS renders images (:mod:`vbgs.render.image`):
 
     Î(x) = Σ_k w_k(x) c_k / Σ_k w_k(x),   w_k(x) = o_k N(x | μ_k, Σ_k),
 
@@ -31,8 +31,8 @@ import optax
 from vbgs.baseline.loss import image_loss
 from vbgs.baseline.params import Params, colours, rotation_matrices, trainable
 from vbgs.baseline.train import TrainConfig, Trainer
-from vbgs.pixels import pixel_centres
-from vbgs.precision import mat_vec, matmul
+from vbgs.render.pixels import pixel_centres
+from vbgs.inference.precision import mat_vec, matmul
 
 IMAGE_STEPS = 2000  # default number of Adam steps for an image fit
 PIXEL_CHUNK = 1024  # pixels per chunk of the dense candidate pass (bounds [chunk, K] blocks)
@@ -48,7 +48,7 @@ def quadratic_coefficients(params: Params) -> jax.Array:
     The precision comes straight from the factors, ``P = Σ⁻¹ = R diag(s⁻²) Rᵀ =
     [[a, b], [b, c]]`` and ``log|Σ| = 2 Σ_i log s_i``; then ``-½(x-μ)ᵀP(x-μ) =
     -½a u² - b uv - ½c v² + (Pμ)·x - ½μᵀPμ``, plus ``log o - log 2π - ½ log|Σ|``.
-    P is a full float32 product (:func:`vbgs.precision.matmul`), Pμ an elementwise sum.
+    P is a full float32 product (:func:`vbgs.inference.precision.matmul`), Pμ an elementwise sum.
     """
     rot = rotation_matrices(params)  # [K, 2, 2]
     prec = matmul(rot * jnp.exp(-2.0 * params.log_scales)[:, None, :], jnp.swapaxes(rot, -1, -2))
@@ -69,7 +69,7 @@ def pixel_features(xy: jax.Array) -> jax.Array:
 
 def dense_logits(params: Params, xy: jax.Array) -> jax.Array:
     """``log w_k(x)`` ``[p, K]`` for every position ``xy [p, 2]`` and every splat: ``φ(x) · W_k``
-    at full float32 precision (:func:`vbgs.precision.matmul`). Its terms (u² ~ 10⁴ px² at
+    at full float32 precision (:func:`vbgs.inference.precision.matmul`). Its terms (u² ~ 10⁴ px² at
     256 px) are far larger than their sum, which TF32 operands would not survive."""
     return matmul(pixel_features(xy), quadratic_coefficients(params).T)
 

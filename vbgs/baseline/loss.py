@@ -3,7 +3,7 @@
     L = (1 - λ) · mean |Î - I| + λ · (1 - SSIM(Î, I)) + w_depth · L_depth
 
 with λ = SSIM_LAMBDA = 0.2 as in 3DGS, SSIM with the 3DGS papers' 11x11 Gaussian
-window (sigma 1.5; the constants of :mod:`vbgs.metrics`), and the depth term
+window (sigma 1.5; the constants of :mod:`vbgs.render.metrics`), and the depth term
 
     L_depth = Σ_p m_p |D_p / α_p - d_p| / max(1, Σ_p m_p),
     m_p = [d_p valid] · [α_p > DEPTH_MIN_ALPHA],
@@ -21,8 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.metrics import SSIM_SIGMA, ssim_window
-from vbgs.precision import tensordot
+from vbgs.render.metrics import SSIM_SIGMA, ssim_window
+from vbgs.inference.precision import tensordot
 
 SSIM_LAMBDA = 0.2  # weight of (1 - SSIM); 3DGS's λ_D-SSIM
 DEPTH_MIN_ALPHA = 0.5  # depth is compared where the render covers the pixel this much
@@ -59,7 +59,7 @@ def ssim_filter(height: int, width: int, window: int):
 
 def ssim_of(render, target) -> jax.Array:
     """Mean SSIM of ``[h, w, 3]`` images: dm-pix's, with the 3DGS window (11x11 Gaussian,
-    σ 1.5; smaller images use :func:`vbgs.metrics.ssim_window`) and a faster blur."""
+    σ 1.5; smaller images use :func:`vbgs.render.metrics.ssim_window`) and a faster blur."""
     height, width = target.shape[0], target.shape[1]
     window = ssim_window(height, width)
     return dm_pix.ssim(render, target, max_val=1.0, filter_size=window, filter_sigma=SSIM_SIGMA,
@@ -88,7 +88,7 @@ def depth_loss(depth_sum, alpha, target_depth) -> jax.Array:
 
 def frame_loss(out, rgb, depth, *, ssim_weight: float = SSIM_LAMBDA,
                depth_weight: float = 0.0) -> jax.Array:
-    """The full loss of one rendered view ``out`` (a :class:`vbgs.raster.RenderOutput`)
+    """The full loss of one rendered view ``out`` (a :class:`vbgs.render.raster.RenderOutput`)
     against the frame's ``rgb [h, w, 3]`` and ``depth [h, w]``."""
     loss = image_loss(out.rgb, rgb, ssim_weight)
     if depth_weight:

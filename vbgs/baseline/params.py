@@ -27,9 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs import expfam
-from vbgs.precision import matmul
-from vbgs.splats import Splats, covs_from_scale_rotation, rotations_from_quaternions
+from vbgs.inference import expfam
+from vbgs.inference.precision import matmul
+from vbgs.render.splats import Splats, covs_from_scale_rotation, rotations_from_quaternions
 
 INIT_OPACITY = 0.1  # 3DGS's initial opacity
 COLOUR_EPS = 1e-3  # initial colours are clipped to [eps, 1 - eps] before the logit
@@ -98,7 +98,7 @@ def covariances(params: Params) -> jax.Array:
 
 
 def to_splats(params: Params) -> Splats:
-    """3-D params as :class:`vbgs.splats.Splats` (inactive rows at opacity 0). Differentiable."""
+    """3-D params as :class:`vbgs.render.splats.Splats` (inactive rows at opacity 0). Differentiable."""
     if params.dim != 3:
         raise ValueError(f"Splats are 3-D; these params are {params.dim}-D")
     return Splats(params.means, covariances(params), colours(params), opacities(params))
@@ -171,7 +171,7 @@ def place(params: Params, rows, means, colours, scales, *,
 
 def params_from_prior(prior, *, capacity: int | None = None, active=None,
                       opacity: float = INIT_OPACITY) -> Params:
-    """Params starting where VBGS starts: a :func:`vbgs.model.init` prior's component means
+    """Params starting where VBGS starts: a :func:`vbgs.inference.model.init` prior's component means
     (``space.mean + origin``), colour means, and per-axis sigma ``sqrt(diag E[Σ])`` of the
     prior's expected covariance (isotropic for the default prior)."""
     cov = expfam.niw_expected_covariance(prior.space)  # [n, d, d]

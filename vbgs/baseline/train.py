@@ -34,8 +34,8 @@ import optax
 from vbgs.baseline.densify import DensifyConfig, relocate
 from vbgs.baseline.loss import SSIM_LAMBDA, frame_loss
 from vbgs.baseline.params import Params, to_splats, trainable
-from vbgs.camera import Camera
-from vbgs.raster import BLUR_VARIANCE, DEFAULT_CAPACITY, DEFAULT_TILE, rasterize
+from vbgs.render.camera import Camera
+from vbgs.render.raster import BLUR_VARIANCE, DEFAULT_CAPACITY, DEFAULT_TILE, rasterize
 
 CAMERA_EXTENT_MARGIN = 1.1  # 3DGS enlarges the camera radius by 10%
 ADAM_EPS = 1e-15  # 3DGS's Adam epsilon

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 from skimage import io as skio
 
-from vbgs.camera import Camera, opengl_to_opencv
+from vbgs.render.camera import Camera, opengl_to_opencv
 from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
 from vbgs.data.images import read_rgb
 from vbgs.data.scene import (

@@ -1,7 +1,7 @@
 """Images as point clouds: bundled photos, pixels <-> (u, v, r, g, b) rows, patch streams.
 
 Pixel ``(row, col)`` becomes the point ``(u, v) = (col + 0.5, row + 0.5)`` (the pixel
-centre, as in :mod:`vbgs.camera`) with its colour in [0, 1].
+centre, as in :mod:`vbgs.render.camera`) with its colour in [0, 1].
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 from skimage import data as skdata
 
 from vbgs.io_atomic import write_atomic
-from vbgs.pixels import pixel_centres
+from vbgs.render.pixels import pixel_centres
 from vbgs.data.streams import stream_order
 
 # Photos shipped inside scikit-image (no download needed).

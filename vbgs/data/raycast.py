@@ -28,7 +28,7 @@ import numpy as np
 from skimage import data as skdata
 from skimage.transform import resize
 
-from vbgs.camera import Camera, pixel_grid
+from vbgs.render.camera import Camera, pixel_grid
 
 T_MIN = 1e-6  # smallest accepted ray parameter: ignores hits at the ray origin
 TEXTURE_SIZE = 256  # textures are resized once to TEXTURE_SIZE x TEXTURE_SIZE

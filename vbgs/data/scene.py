@@ -1,6 +1,6 @@
 """RGB-D data types, and the small utilities every source of frames shares.
 
-Conventions (see :mod:`vbgs.camera`):
+Conventions (see :mod:`vbgs.render.camera`):
 
 * ``rgb`` is float32 ``[h, w, 3]`` in [0, 1];
 * ``depth`` is float32 ``[h, w]`` z-depth (distance along the camera's optical
@@ -20,8 +20,8 @@ from typing import NamedTuple
 import numpy as np
 from skimage.transform import resize
 
-from vbgs.camera import Camera, unproject
-from vbgs.pixels import pixel_centre
+from vbgs.render.camera import Camera, unproject
+from vbgs.render.pixels import pixel_centre
 
 
 class Frame(NamedTuple):
@@ -67,7 +67,7 @@ def validate_frame(frame: Frame, what: str = "frame") -> Frame:
     """
     rgb, depth, cam = frame.rgb, frame.depth, frame.camera
     if not isinstance(cam, Camera):
-        raise TypeError(f"{what}: camera must be a vbgs.camera.Camera, got {type(cam).__name__}")
+        raise TypeError(f"{what}: camera must be a vbgs.render.camera.Camera, got {type(cam).__name__}")
     shape = (int(cam.height), int(cam.width))
     if not isinstance(rgb, np.ndarray) or rgb.shape != shape + (3,):
         raise ValueError(

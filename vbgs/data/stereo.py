@@ -24,7 +24,7 @@ comes out between 2.11 m (motorcycle front) and 5.02 m (back wall), median 2.75 
 93% of pixels have depth.
 
 Middlebury principal points count pixel centres at integer coordinates; the
-library puts centres at ``col + 0.5`` (:mod:`vbgs.camera`), so 0.5 is added.
+library puts centres at ``col + 0.5`` (:mod:`vbgs.render.camera`), so 0.5 is added.
 The pose is the identity: the left camera defines the world frame.
 
 :func:`motorcycle_scene` wraps the frame as a one-view :class:`Scene` named
@@ -39,9 +39,9 @@ from __future__ import annotations
 import numpy as np
 from skimage import data as skdata
 
-from vbgs.camera import Camera
+from vbgs.render.camera import Camera
 from vbgs.data.scene import Frame, Scene, bounds_from_frames, resize_frame
-from vbgs.pixels import pixel_centre
+from vbgs.render.pixels import pixel_centre
 
 MOTORCYCLE_FOCAL = 994.978  # px, at the shipped 741 x 500 size
 MOTORCYCLE_CX = 311.193  # px, left camera, integer-centred pixels

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbgs.camera import from_fov, look_at
+from vbgs.render.camera import from_fov, look_at
 from vbgs.data.raycast import Cylinder, Disc, Sphere, Surface, bounds_of, box, render
 from vbgs.data.scene import Frame, Scene
 

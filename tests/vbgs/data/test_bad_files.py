@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from skimage import io as skio
 
-from vbgs.camera import look_at
+from vbgs.render.camera import look_at
 from vbgs.data.blender import load_blender
 from vbgs.data.depth_png import read_depth_png, write_depth_png
 from vbgs.data.images import read_image_file

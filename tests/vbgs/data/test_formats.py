@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from skimage import io as skio
 
-from vbgs.camera import look_at
+from vbgs.render.camera import look_at
 from vbgs.data.depth_png import write_depth_png
 from vbgs.data.formats import (
     REPLICA_INTRINSICS,

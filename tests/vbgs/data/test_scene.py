@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from vbgs.camera import Camera, look_at, project
+from vbgs.render.camera import Camera, look_at, project
 from vbgs.data.scene import (
     Frame,
     Scene,

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from vbgs.camera import project, unproject
+from vbgs.render.camera import project, unproject
 from vbgs.data.raycast import camera_rays, cast, distance_to_surfaces, render
 from vbgs.data.scene import validate_scene
 from vbgs.data.stereo import disparity_to_depth, stereo_motorcycle_frame

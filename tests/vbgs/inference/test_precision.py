@@ -1,0 +1,151 @@
+"""Right answers whatever the matmul precision: TF32 products emulated on the CPU.
+
+NVIDIA GPUs run float32 products in TF32 by default (10-bit mantissa operands). The
+helper :mod:`tf32` rounds the operands of every default-precision product that way, so
+these tests guard on CI what only a GPU would show. The last tests remove the
+protection (products at default precision) and show the fit collapsing, so they fail
+if the protection is ever lost.
+"""
+
+import importlib.util
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from vbgs.inference import model, precision
+from vbgs.baseline import TrainConfig, Trainer, camera_extent, params_from_prior, to_splats
+from vbgs.render.camera import unproject
+from vbgs.data.images import image_to_points, load_image
+from vbgs.data.synthetic import object_scene
+from vbgs.inference.fit import fit
+from vbgs.render.metrics import psnr
+from vbgs.inference.model import used_components
+from vbgs.render.raster import rasterize
+from vbgs.render.image import render_image
+
+_spec = importlib.util.spec_from_file_location("tf32", Path(__file__).with_name("tf32.py"))
+tf32 = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(tf32)
+
+SIZE, K, ITERS = 48, 1000, 2
+
+
+def _fit_image():
+    img = load_image("astronaut", SIZE)
+    uv, rgb = image_to_points(img)
+    prior = model.init(uv, rgb, K, key=jax.random.key(0), scheme="data")
+    post, _ = fit(prior, uv, rgb, iters=ITERS)
+    used = int(used_components(post.alpha - prior.alpha).sum())
+    return psnr(render_image(post, SIZE, SIZE), img), used
+
+
+@pytest.fixture(scope="module")
+def reference_fit():
+    return _fit_image()
+
+
+def test_round_tf32_keeps_ten_mantissa_bits():
+    x = jnp.asarray([1.0, 1.0 + 2**-11, 1.0 + 3 * 2**-11, 1.0 + 2**-10, np.pi, -2.5e-8],
+                    jnp.float32)
+    out = np.asarray(tf32.round_tf32(x))
+    # ties go to even; 1 + 2^-10 is representable; pi -> 3.140625 (= 3217 / 1024)
+    np.testing.assert_array_equal(out[:5], np.float32([1.0, 1.0, 1.0 + 2**-9, 1.0 + 2**-10,
+                                                       3.140625]))
+    assert abs(out[5] / -2.5e-8 - 1) < 2**-11
+
+
+def test_emulation_changes_default_products_only():
+    a = jnp.asarray(np.random.default_rng(0).normal(size=(8, 8)), jnp.float32)
+    with tf32.emulated_tf32():
+        default = np.asarray(a @ a)
+        highest = np.asarray(precision.matmul(a, a))
+    exact = np.asarray(a, np.float64) @ np.asarray(a, np.float64)
+    assert np.abs(default - exact).max() > 1e-4  # rounded operands
+    assert np.abs(highest - exact).max() < 1e-5
+
+
+def test_image_fit_unchanged_under_tf32(reference_fit):
+    with tf32.emulated_tf32():
+        emulated = _fit_image()
+    assert abs(emulated[0] - reference_fit[0]) < 0.1, (emulated, reference_fit)
+    assert emulated[1] == reference_fit[1]
+
+
+def test_image_fit_degrades_without_explicit_precision(reference_fit, monkeypatch):
+    """Products at default precision (the protection removed) collapse under TF32."""
+    monkeypatch.setattr(precision, "PRODUCT_PRECISION", jax.lax.Precision.DEFAULT)
+    with tf32.emulated_tf32():
+        emulated = _fit_image()
+    assert emulated[0] < reference_fit[0] - 3.0, (emulated, reference_fit)
+
+
+@pytest.mark.parametrize("estep", ["dense", "sparse"])
+def test_scene_update_unchanged_under_tf32(estep):
+    scene = object_scene(size=24, n_train=2, n_test=1, seed=0)
+    xyz, rgb = unproject(scene.train[0].camera, scene.train[0].rgb, scene.train[0].depth)
+    prior = model.init(xyz, rgb, 300, key=jax.random.key(0), scheme="data", bounds=scene.bounds)
+    ref, ref_info = model.update(model.start(prior), xyz, rgb, estep=estep)
+    with tf32.emulated_tf32():
+        emu, emu_info = model.update(model.start(prior), xyz, rgb, estep=estep)
+    np.testing.assert_allclose(emu.stats.count, ref.stats.count, rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(emu_info.point_loglik, ref_info.point_loglik, rtol=1e-5, atol=1e-3)
+
+
+# --------------------------------------------------------------------------- 3-D splats
+
+
+@pytest.fixture(scope="module")
+def splat_scene():
+    """A 24 px object scene (2 training views) and baseline params from the VBGS data init."""
+    scene = object_scene(size=24, n_train=2, n_test=1, seed=0)
+    xyz, rgb = (np.concatenate(a) for a in zip(
+        *[unproject(f.camera, f.rgb, f.depth) for f in scene.train], strict=True))
+    prior = model.init(xyz, rgb, 150, key=jax.random.key(0), scheme="data", bounds=scene.bounds)
+    return scene, params_from_prior(prior)
+
+
+def _render(scene, params):
+    """Covariances from scales and rotations, projection and compositing of the test view:
+    rgb and depth ``[2, h, w, 3]``."""
+    out = rasterize(to_splats(params), scene.test[0].camera, background=scene.background,
+                    capacity=256, impl="xla")
+    return np.stack([np.asarray(out.rgb), np.asarray(out.depth)[..., None].repeat(3, -1)])
+
+
+def _baseline_fit(scene, params, steps=6):
+    """A few gradient-baseline steps (rasterizer, SSIM loss, Adam): losses and final params."""
+    extent = camera_extent([f.camera.position for f in scene.train])
+    config = TrainConfig(lr_decay_steps=steps, depth_weight=0.1, raster_capacity=256)
+    trainer = Trainer(config, extent=extent)
+    state = trainer.init(params, key=jax.random.key(1))
+    state, losses = trainer.train(state, scene.train, steps,
+                                  jnp.asarray(scene.background, jnp.float32))
+    return np.asarray(losses), state.params
+
+
+def test_render_unchanged_under_tf32(splat_scene, monkeypatch):
+    """Equal under emulated TF32; and the guard bites: with the products at default
+    precision (the protection removed) TF32 moves the render."""
+    reference = _render(*splat_scene)
+    with tf32.emulated_tf32():
+        emulated = _render(*splat_scene)
+    assert reference[0].max() > 0.3  # the object is in view
+    np.testing.assert_allclose(emulated, reference, atol=1e-5)
+    monkeypatch.setattr(precision, "PRODUCT_PRECISION", jax.lax.Precision.DEFAULT)
+    with tf32.emulated_tf32():
+        unprotected = _render(*splat_scene)
+    assert np.abs(unprotected - reference).max() > 1e-3
+
+
+def test_baseline_fit_unchanged_under_tf32(splat_scene):
+    ref_losses, ref_params = _baseline_fit(*splat_scene)
+    with tf32.emulated_tf32():
+        emu_losses, emu_params = _baseline_fit(*splat_scene)
+    moved = np.abs(np.asarray(ref_params.means - splat_scene[1].means)).max()
+    assert moved > 1e-3, moved  # the steps really change the splats
+    np.testing.assert_allclose(emu_losses, ref_losses, rtol=1e-5)
+    for name, emu, ref in zip(ref_params._fields, emu_params, ref_params, strict=True):
+        np.testing.assert_allclose(emu, ref, rtol=1e-5, atol=1e-6, err_msg=name)

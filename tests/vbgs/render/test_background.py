@@ -1,0 +1,51 @@
+"""The background colour estimated from pixels without depth, as frames arrive."""
+
+import numpy as np
+import pytest
+
+from vbgs.render import background as bg
+
+
+def frame(seed, empty_fraction, sky=(0.4, 0.6, 0.9)):
+    rng = np.random.default_rng(seed)
+    rgb = rng.uniform(0, 1, (20, 30, 3))
+    depth = rng.uniform(1, 5, (20, 30))
+    no_depth = rng.uniform(size=(20, 30)) < empty_fraction
+    rgb[no_depth] = sky
+    depth[no_depth] = rng.choice([0.0, np.nan, np.inf], no_depth.sum())
+    return rgb, depth
+
+
+def test_sky_colour_is_recovered_and_order_free():
+    frames = [frame(s, 0.3) for s in range(4)]
+    forward, backward = bg.empty(), bg.empty()
+    for rgb, depth in frames:
+        forward = bg.observe(forward, rgb, depth)
+    for rgb, depth in frames[::-1]:
+        backward = bg.observe(backward, rgb, depth)
+    np.testing.assert_allclose(bg.colour(forward), [0.4, 0.6, 0.9], atol=1e-6)
+    np.testing.assert_allclose(bg.colour(forward), bg.colour(backward), atol=1e-7)
+
+
+def test_beyond_max_depth_counts_as_background():
+    rgb, depth = frame(0, 0.0)
+    rgb[:5] = (1.0, 1.0, 1.0)
+    depth[:5] = 100.0  # sensor returns beyond its range
+    est = bg.observe(bg.empty(), rgb, depth, max_depth=50.0)
+    np.testing.assert_allclose(bg.colour(est), [1.0, 1.0, 1.0], atol=1e-6)
+
+
+def test_fully_measured_frames_fall_back_to_the_mean_colour():
+    rgb, depth = frame(1, 0.0)
+    est = bg.observe(bg.empty(), rgb, depth)
+    assert est.empty_count == 0
+    np.testing.assert_allclose(bg.colour(est), rgb.reshape(-1, 3).mean(0), atol=1e-6)
+    np.testing.assert_array_equal(bg.colour(bg.empty()), np.zeros(3))
+
+
+def test_parse_background():
+    assert bg.parse_background("auto") is None
+    np.testing.assert_allclose(bg.parse_background("1,0.5,0"), [1.0, 0.5, 0.0])
+    for bad in ("1,1", "red", "2,0,0"):
+        with pytest.raises(ValueError, match="R,G,B"):
+            bg.parse_background(bad)

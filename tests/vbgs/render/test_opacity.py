@@ -1,0 +1,67 @@
+"""Opacity from evidence: rays that end on a component against rays that pass through it."""
+
+import jax.numpy as jnp
+import numpy as np
+
+from vbgs.render import opacity
+from vbgs.render.camera import from_fov
+from vbgs.render.raster import NEAR
+
+
+def toy():
+    """Three small components on the optical axis of a camera facing a wall at z = 2:
+    one on the wall, one floating in front of it, one hidden behind it; and a fourth
+    beside the wall where the camera sees sky (no depth)."""
+    cam = from_fov(32, 32, np.deg2rad(60), np.eye(4))
+    depth = np.full((32, 32), 2.0)
+    depth[:, 24:] = 0.0  # sky on the right
+    means = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 1.0], [0.0, 0.0, 3.0], [0.8, 0.0, 2.0]])
+    covs = np.tile(0.02**2 * np.eye(3), (4, 1, 1))
+    return cam, depth, means, covs
+
+
+def test_hits_passes_and_occlusion():
+    cam, depth, means, covs = toy()
+    ev = opacity.observe(opacity.no_evidence(4), means, covs, cam, depth)
+    hits, passes = np.asarray(ev.hits), np.asarray(ev.passes)
+    assert hits[0] > 0 and passes[0] == 0  # on the surface
+    assert hits[1] == 0 and passes[1] > 0  # floating in front of it
+    assert hits[2] == 0 and passes[2] == 0  # occluded: no evidence either way
+    assert hits[3] == 0 and passes[3] > 0  # in front of the sky
+    # The counts are rays: the footprint area in pixels, whatever the distance.
+    area = 2 * np.pi * ((cam.fx * 0.02 / 2.0) ** 2 + 0.3)  # isotropic: 2π det(Σ')^½
+    np.testing.assert_allclose(hits[0], area, rtol=1e-4)
+    o = np.asarray(opacity.expected_opacity(ev))
+    np.testing.assert_allclose(o[0], (1 + area) / (2 + area), rtol=1e-5)  # Beta(1 + h, 1)
+    np.testing.assert_allclose(o[1], 1 / (2 + passes[1]), rtol=1e-5)  # Beta(1, 1 + m)
+    assert o[2] == 0.5  # the Beta(1, 1) prior mean
+    # Ten such frames: the wall's component is nearly opaque, the floating one nearly clear.
+    for _ in range(9):
+        ev = opacity.observe(ev, means, covs, cam, depth)
+    o = np.asarray(opacity.expected_opacity(ev))
+    assert o[0] > 0.95 and o[1] < 0.05 and o[3] < 0.05
+
+
+def test_evidence_adds_up_in_any_order():
+    cam, depth, means, covs = toy()
+    rng = np.random.default_rng(0)
+    frames = []
+    for _ in range(4):
+        pose = np.eye(4)
+        pose[:3, 3] = rng.uniform(-0.2, 0.2, 3)
+        frames.append((cam._replace(pose=pose), depth + rng.uniform(-0.05, 0.05)))
+    forward, backward = opacity.no_evidence(4), opacity.no_evidence(4)
+    for c, d in frames:
+        forward = opacity.observe(forward, means, covs, c, d)
+    for c, d in frames[::-1]:
+        backward = opacity.observe(backward, means, covs, c, d)
+    np.testing.assert_allclose(forward.hits, backward.hits, rtol=1e-6)
+    np.testing.assert_allclose(forward.passes, backward.passes, rtol=1e-6)
+
+
+def test_components_behind_the_camera_or_the_near_plane_get_nothing():
+    cam, depth, _, _ = toy()
+    means = jnp.asarray([[0.0, 0.0, -1.0], [0.0, 0.0, 0.5 * NEAR]])
+    ev = opacity.observe(opacity.no_evidence(2), means, jnp.tile(0.01 * jnp.eye(3), (2, 1, 1)),
+                         cam, depth)
+    assert float(jnp.max(ev.hits)) == 0.0 and float(jnp.max(ev.passes)) == 0.0

@@ -1,0 +1,87 @@
+"""Sparse E-step: each point scores only the few components nearest to it.
+
+The dense E-step costs ``n x k``. Here a KD-tree over the component means (rebuilt on
+every call, so it follows means that move) gives each point its ``C`` spatially
+nearest components, and responsibilities are computed over those alone: a truncated
+variational posterior ``q(z_n)`` supported on the candidates. The ELBO stays a valid
+lower bound, and cost grows with ``n x C``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import jax.numpy as jnp
+import numpy as np
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
+
+
+# Candidates per point by default: enough that the truncated responsibilities match
+# the dense ones to within rendering precision for splat-sized components.
+DEFAULT_CANDIDATES = 16
+
+
+def nearest_components(means, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
+    """Indices ``[n, C]`` of the ``C`` component means ``[k, d]`` nearest to each point
+    ``x [n, d]`` (Euclidean, host KD-tree), ``C = min(n_candidates, k)``."""
+    return query(means_tree(means), x, n_candidates)
+
+
+def means_tree(means) -> cKDTree:
+    """A KD-tree over component means ``[k, d]`` (build once while the means are fixed)."""
+    from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
+
+    return cKDTree(np.asarray(means, np.float64))
+
+
+def query(tree: cKDTree, x, n_candidates: int = DEFAULT_CANDIDATES) -> np.ndarray:
+    """:func:`nearest_components` against a prebuilt :func:`means_tree`."""
+    return query_with_distance(tree, x, n_candidates)[1]
+
+
+def query_with_distance(tree: cKDTree, x, n_candidates: int = DEFAULT_CANDIDATES
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`query` and each point's distance to its nearest mean: ``([n], [n, C])``."""
+    c = int(min(n_candidates, tree.n))
+    if c < 1:
+        raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
+    dist, idx = tree.query(np.asarray(x, np.float64), k=c, workers=-1)
+    return (np.asarray(dist).reshape(len(x), c)[:, 0],
+            np.asarray(idx, np.int32).reshape(len(x), c))
+
+
+def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
+                     colour_noise: float) -> jnp.ndarray:
+    """``l_nc``: log-joint of each point with its candidates, ``[n, C]``, in centred form
+    ``const_k - 1/2 (x_n - m_k)^T P_k (x_n - m_k) - |c_n - mc_k|^2 / (2 sigma_c^2)``
+    with ``k = cand_nc`` (see :class:`vbgs.inference.model.Terms`); ``x [n, d]``, ``c [n, 3]``.
+
+    Elementwise products of centred quantities only: exact whatever the backend's
+    matmul precision (TF32 included), and no large terms cancel. The terms are packed
+    into one ``[rows, k]`` table and gathered once, one contiguous ``[n, C]`` plane per
+    row, and the quadratic form is unrolled over the ``d (d + 1) / 2`` distinct entries
+    of the symmetric ``P_k`` (fast on CPUs, where small trailing axes vectorise badly).
+    """
+    d = x.shape[1]
+    k = terms.mean.shape[0]
+    table = jnp.concatenate([terms.mean.T, terms.prec.reshape(k, d * d).T,
+                             terms.colour_mean.T, terms.const[None]], 0)  # [d + d*d + 4, k]
+    g = table[:, cand]  # [rows, n, C]
+    diff = [x[:, i, None] - g[i] for i in range(d)]  # d x [n, C]
+    maha = 0.0
+    for i in range(d):
+        for j in range(i, d):
+            p_ij = g[d + i * d + j]
+            maha = maha + (1.0 if i == j else 2.0) * p_ij * diff[i] * diff[j]
+    base = d + d * d
+    colour = sum((c[:, i, None] - g[base + i]) ** 2 for i in range(3))
+    return g[base + 3] - 0.5 * maha - 0.5 * colour / colour_noise**2
+
+
+def scatter_moments(acc: jnp.ndarray, resp: jnp.ndarray, phi: jnp.ndarray,
+                    cand: jnp.ndarray) -> jnp.ndarray:
+    """``acc[k] += sum_{n, c: cand_nc = k} r_nc phi_n``; acc ``[k, F]``, resp ``[n, C]``."""
+    contrib = resp[:, :, None] * phi[:, None, :]  # [n, C, F]
+    return acc.at[cand.reshape(-1)].add(contrib.reshape(-1, phi.shape[-1]))

@@ -1,0 +1,364 @@
+"""Stream initialisation: components are allocated as data arrive, nothing is read ahead.
+
+A continual learner knows only the batches that have arrived. Here the model keeps
+its fixed capacity K (static shapes, see :mod:`vbgs.inference.model`) but starts with every
+slot **empty**: an empty slot has a negligible Dirichlet concentration
+``alpha = EMPTY_ALPHA`` (so ``E[log pi_k] ~ -1/EMPTY_ALPHA`` and it takes no
+responsibility) and sits far outside the data (so the sparse E-step never picks it
+as a candidate). Before each batch is learned, :func:`grow` fills empty slots:
+
+* space is cut into squares (2-D) or cubes (3-D) of side ``cell`` about the model's
+  origin; a point is **poorly explained** when no active component's mean lies in
+  its cell: the current model has nothing there (new ground);
+* every such cell gets one new component, placed on one of its points chosen at
+  random under ``key`` (prior spatial and colour means = that point), with the prior
+  strengths of :func:`vbgs.inference.model.make_prior` at cell length ``ell = cell``;
+* then, if ``refine > 0``, ground already covered is refined: the same rule at cells
+  of side ``cell / 2^l`` (l = 1 .. levels-1, coarse first), spending at most the share
+  ``refine`` of the empty slots per batch, so slots stay for new ground later;
+* at most ``max_new`` slots per batch (the bounded rate), never more than the empty
+  slots left (the budget K).
+
+The origin is the centre of the first batch's box (a frame for precision) and the
+cell side is fixed on the first batch by :func:`calibrate`: the area the batch covers
+(:func:`covered_area`) over the number of components it should get. No bounds of
+unseen data are read. The state's prior changes as it grows, so under prior
+assignment the posterior is no longer independent of the order (as with
+:mod:`vbgs.inference.reassign`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vbgs.inference.model import LOCAL_MAX_ITERS, Mixture, PriorConfig, State, check_points_host, m_step, start
+from vbgs.inference.model import _make_prior  # compiled make_prior
+from vbgs.inference.model import update as model_update
+
+# Compiled: eager, their many small ops dispatch one by one (m_step ~0.1 s at K=20k) and
+# each op is one more executable for a new process to load.
+_m_step = jax.jit(m_step)
+_start = jax.jit(start, static_argnames=("config",))
+
+# Concentration of an empty slot: E[log pi] = digamma(1e-6) ~ -1e6, no responsibility.
+EMPTY_ALPHA = 1e-6
+# Empty slots sit this many cells from the origin (beyond any data the first batch
+# suggests), each one cell further along the first axis, so KD-trees stay balanced.
+EMPTY_DISTANCE_CELLS = 1e4
+# The most components one batch may add, as a share of the capacity K (the bounded rate).
+MAX_NEW_SHARE = 0.5
+# Cell levels (each half the side of the one before) that refinement may use.
+LEVELS = 4
+# Batch points whose covariance gives a grown component's surface normal (the component's
+# point and its nearest neighbours in the batch: a 3x3 patch of pixels and a few more).
+NORMAL_NEIGHBOURS = 12
+# Points farther than this many level-0 cells from every component are beyond the
+# model's reach (see reach_of): more than the cell diagonal sqrt(3), so ground the rule
+# has covered (a component in the point's own cell) is always within reach.
+REACH_CELLS = 2.0
+
+class GrowInfo(NamedTuple):
+    n_new: int  # components allocated by this call
+    n_ground: int  # of which on new ground (level-0 cells without a component)
+    n_active: int  # active components after the call
+    slots: np.ndarray  # [n_new] the slots filled (the rows of the prior that changed)
+
+
+def is_active(prior: Mixture) -> np.ndarray:
+    """``[k]`` bool: slots holding a component (not empty)."""
+    return np.asarray(prior.alpha) > 10 * EMPTY_ALPHA
+
+
+def cell_index(x: np.ndarray, cell: float) -> np.ndarray:
+    """Integer cell coordinates ``[n, d]`` of centred positions ``x [n, d]``."""
+    return np.floor(np.asarray(x, np.float64) / cell).astype(np.int64)
+
+
+def covered_area(xyz) -> float:
+    """The area the points ``xyz [n, d]`` cover: ``n s^2`` with ``s`` the median distance
+    from a point to its nearest neighbour (each point owns an ``s x s`` patch: exact for
+    pixels on a grid; the data are taken to be 2-D, an image or the surfaces a depth
+    camera sees)."""
+    pts = np.asarray(xyz, np.float64)
+    if len(pts) < 2:
+        return 1.0
+    spacing = lattice_step(pts)
+    if spacing is None:
+        from scipy.spatial import cKDTree  # 0.2-0.4 s to import: only off the lattice
+
+        dist, _ = cKDTree(pts).query(pts, k=2, workers=-1)
+        spacing = float(np.median(dist[:, 1]))
+    return len(pts) * spacing**2 if spacing > 0 else 1.0
+
+
+def lattice_step(pts: np.ndarray) -> float | None:
+    """Every point's nearest-neighbour distance when ``pts [n, d]`` (float64) are a full
+    axis-aligned lattice, each node once (an image's pixel centres), else None.
+
+    On such a lattice the nearest neighbour is one step along the axis of the smallest
+    step (the neighbour differs in that coordinate only, by exactly the step that
+    ``np.diff`` finds), so the distance is ``sqrt(step^2) = step`` bit for bit: what a
+    KD-tree query returns, without the tree."""
+    axes = [np.unique(pts[:, j]) for j in range(pts.shape[1])]
+    if math.prod(len(a) for a in axes) != len(pts):
+        return None
+    steps = [np.diff(a) for a in axes if len(a) > 1]
+    if not steps or any((s != s[0]).any() for s in steps):
+        return None  # a single point's repeats, or uneven steps
+    if len(np.unique(pts, axis=0)) != len(pts):
+        return None  # repeated points: n nodes, yet not all of them
+    return float(min(s[0] for s in steps))
+
+
+def empty_prior(n_components: int, origin, cell: float, config: PriorConfig = PriorConfig(),
+                dtype=jnp.float32) -> Mixture:
+    """A prior of ``n_components`` empty slots about ``origin [d]`` at cell length
+    ``cell`` (the prior strengths a filled slot takes). The means are summed on the
+    host (the same float32 sum as on the device) and arrays are put, not converted:
+    every eager ``jnp`` conversion or op is one more executable a fresh process loads."""
+    dtype = np.dtype(dtype)
+    origin = np.asarray(origin, dtype)
+    d = origin.shape[0]
+    offset = np.zeros((n_components, d))
+    offset[:, :] = EMPTY_DISTANCE_CELLS * cell
+    offset[:, 0] += cell * np.arange(n_components)
+    means = origin + offset.astype(dtype)
+    prior = _make_prior(means, np.zeros((n_components, 3), dtype), origin, cell, config)
+    return prior._replace(alpha=jax.device_put(np.full((n_components,), EMPTY_ALPHA, dtype)))
+
+
+def start_empty(xyz, n_components: int, cell: float,
+                config: PriorConfig = PriorConfig()) -> State:
+    """The state before any data: every slot empty, origin at the centre of the first
+    batch's box ``xyz [n, d]`` (a frame for precision, nothing more)."""
+    return _start(_empty_about(xyz, n_components, cell, config), config)
+
+
+def _empty_about(xyz, n_components: int, cell: float, config: PriorConfig) -> Mixture:
+    """:func:`empty_prior` about the centre of ``xyz``'s box, in ``xyz``'s dtype."""
+    pts = np.asarray(xyz)
+    dtype = jax.dtypes.canonicalize_dtype(pts.dtype)  # as jnp.asarray(xyz) would hold it
+    pts = pts.astype(np.float64)
+    origin = 0.5 * (pts.min(0) + pts.max(0))
+    return empty_prior(n_components, origin, cell, config, dtype)
+
+
+def local_normals(x: np.ndarray, chosen: np.ndarray,
+                  neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
+    """Unit surface normals ``[m, 3]`` at the points ``x[chosen]`` of a batch ``x [n, 3]``:
+    the eigenvector of the smallest eigenvalue of the covariance of each point's
+    ``neighbours`` nearest batch points (local PCA; the sign is arbitrary, as a normal's
+    is in a covariance)."""
+    from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
+
+    k = min(neighbours, len(x))
+    _, idx = cKDTree(x).query(x[chosen], k=k, workers=-1)
+    patch = x[np.asarray(idx).reshape(len(chosen), k)]  # [m, k, 3]
+    centred = patch - patch.mean(1, keepdims=True)
+    cov = np.einsum("mki,mkj->mij", centred, centred) / k
+    return np.linalg.eigh(cov)[1][:, :, 0]  # eigenvalues ascending: the smallest's vector
+
+
+def surface_scales(s: float, normals: np.ndarray, thickness: float) -> np.ndarray:
+    """NIW scale matrices ``[m, 3, 3]``: the isotropic ``s I`` flattened along ``normals
+    [m, 3]``, ``s (I - n n^T + thickness^2 n n^T)``."""
+    outer = np.einsum("mi,mj->mij", normals, normals)
+    return s * (np.eye(normals.shape[1]) - (1.0 - thickness**2) * outer)
+
+
+def _fill(prior: Mixture, slots: np.ndarray, x_new, c_new, alpha: float,
+          scales=None) -> Mixture:
+    """Put components on centred positions ``x_new [m, d]`` with colours ``c_new [m, 3]``
+    (and NIW scale matrices ``scales [m, d, d]`` when given) into the empty ``slots
+    [m]`` (on the host: m changes from batch to batch, and a device scatter would
+    compile once per m)."""
+
+    def put(a, rows):
+        out = np.array(a)
+        out[slots] = rows
+        return jax.device_put(out)  # jnp.asarray would compile a copy per shape
+
+    if scales is not None:
+        prior = prior._replace(space=prior.space._replace(scale=put(prior.space.scale, scales)))
+    space = prior.space._replace(mean=put(prior.space.mean, x_new))
+    colour = prior.colour._replace(mean=put(prior.colour.mean, c_new))
+    return prior._replace(space=space, colour=colour, alpha=put(prior.alpha, alpha))
+
+
+class Growth(NamedTuple):
+    """The growth rule's settings, fixed on the first batch (hyperparameters, not state).
+
+    cell: side of the level-0 cells (new ground);
+    levels: cell sides ``cell / 2^l`` for l < levels (finer levels refine);
+    refine: share of the empty slots that refinement (levels >= 1) may take per batch;
+    max_new: the most components one batch may add (the bounded rate).
+    """
+
+    cell: float
+    levels: int
+    refine: float
+    max_new: int
+
+
+def reach_of(rule: Growth) -> float:
+    """``REACH_CELLS x cell``: how far from every component a point may lie and still be
+    learned. Once the budget K is spent, new ground gets no component; its points, forced
+    onto the nearest components (responsibilities sum to one at any distance), would
+    stretch them across the gap into needles (measured on the room: after frame 25 of
+    60, up to half of each frame's points lay over 2 cells from every component), so
+    the stepper leaves them out (:class:`vbgs.inference.stepper.Stepper`, ``reach``)."""
+    return REACH_CELLS * rule.cell
+
+
+def calibrate(xyz, n_components: int, first_cells: float, *, refine: float = 0.0,
+              levels: int = LEVELS, rate: float = MAX_NEW_SHARE) -> Growth:
+    """The rule for a stream whose first batch ``xyz [n, d]`` should get about
+    ``first_cells`` level-0 components: the cell side is ``sqrt(A / first_cells)`` for
+    the area ``A`` the batch covers (:func:`covered_area`); at most ``ceil(rate * K)``
+    new components per batch."""
+    first_cells = float(min(max(first_cells, 1.0), n_components))
+    if not 0 < rate <= 1:
+        raise ValueError(f"the growth rate must be in (0, 1] of the capacity, got {rate!r}")
+    if not 0 <= refine <= 1:
+        raise ValueError(f"the refinement share must be in [0, 1], got {refine!r}")
+    cell = float(np.sqrt(covered_area(xyz) / first_cells))
+    return Growth(cell, int(levels), float(refine), int(np.ceil(rate * n_components)))
+
+
+def host_rng(key: jax.Array) -> np.random.Generator:
+    """A numpy generator seeded by ``key`` (host-side choices whose sizes change from
+    batch to batch would compile a device kernel per size)."""
+    return np.random.default_rng(np.asarray(jax.random.key_data(key)).ravel().tolist())
+
+
+def cell_ids(cells: np.ndarray) -> np.ndarray:
+    """``[n]`` labels 0, 1, ... of the distinct rows of integer cell coordinates
+    ``cells [n, d]`` (equal rows, equal labels). The rows are packed into one int64 each
+    when their box allows (a 1-D unique sorts far faster than a unique over rows)."""
+    lo = cells.min(0)
+    span = cells.max(0) - lo + 1
+    if np.prod(span.astype(np.float64)) >= 2.0**62:  # too wide to pack: unique over rows
+        return np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
+    key = np.ravel_multi_index(tuple((cells - lo).T), tuple(int(v) for v in span))
+    return np.unique(key, return_inverse=True)[1].reshape(-1)
+
+
+def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
+          quota: int) -> np.ndarray:
+    """Up to ``quota`` points of ``x [n, d]`` (indices), one per cell of side ``cell``
+    that holds none of ``taken [m, d]``, cells taken in the random ``order [n]``."""
+    if quota <= 0:
+        return np.zeros(0, np.int64)
+    ids = cell_ids(cell_index(np.concatenate([taken, x]), cell))
+    occupied = np.zeros(ids.max() + 1, bool)
+    occupied[ids[: len(taken)]] = True
+    point_ids = ids[len(taken):]
+    poor = order[~occupied[point_ids[order]]]  # points in empty cells, in random order
+    _, first = np.unique(point_ids[poor], return_index=True)  # one point per cell
+    return poor[np.sort(first)][:quota]
+
+
+def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
+           key: jax.Array) -> tuple[np.ndarray, int]:
+    """Where a batch adds components: indices into ``x [n, d]`` (positions about the
+    grid's origin) given the means ``taken [m, d]`` of the components in use and
+    ``n_empty`` free slots. First one per level-0 cell holding no component (new ground),
+    then refinement at finer levels within its share of the slots left; at most
+    ``rule.max_new`` in all; random choices under ``key``. Returns ``(indices, n_ground)``."""
+    order = host_rng(key).permutation(len(x))  # random order of the points
+    budget = int(min(rule.max_new, n_empty))
+    chosen = _pick(x, taken, rule.cell, order, budget)  # new ground
+    n_ground = len(chosen)
+    refine = int(min(budget - n_ground, np.floor(rule.refine * (n_empty - n_ground))))
+    for level in range(1, rule.levels):
+        if refine <= 0:
+            break
+        more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level, order,
+                     refine)
+        chosen = np.concatenate([chosen, more])
+        refine -= len(more)
+    return chosen, n_ground
+
+
+def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
+         config: PriorConfig = PriorConfig()) -> tuple[State, GrowInfo]:
+    """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
+    ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
+    ``key``."""
+    prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
+                               config=config)
+    if info.n_new == 0:
+        return state, info
+    return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
+
+
+def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
+                 key: jax.Array, config: PriorConfig) -> tuple[Mixture, GrowInfo]:
+    """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
+    xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
+    active = is_active(prior)
+    empty = np.flatnonzero(~active)
+    x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)  # [n, d]
+    taken = np.asarray(posterior.space.mean, np.float64)[active]  # [m, d]
+    chosen, n_ground = select(x, taken, len(empty), rule, key=key)
+    n_new = len(chosen)
+    if n_new == 0:
+        return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
+    slots = empty[:n_new]
+    dtype = prior.alpha.dtype
+    scales = None
+    if prior.dim == 3 and config.surface_thickness != 1.0 and len(x) >= 3:
+        s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
+        scales = surface_scales(s, local_normals(x, chosen),
+                                config.surface_thickness).astype(dtype)
+    new_prior = _fill(prior, slots, x[chosen].astype(dtype),
+                      np.asarray(rgb)[chosen].astype(dtype), float(config.alpha), scales)
+    return new_prior, GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots)
+
+
+def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,
+           assign: str = "prior", config: PriorConfig = PriorConfig(),
+           refine: float = 0.0, local_iters: int = LOCAL_MAX_ITERS,
+           callback=None) -> State:
+    """Continual learning from empty slots: each ``(xyz, rgb)`` batch is seen once;
+    before it is learned (:func:`vbgs.inference.model.update`), :func:`grow` fills empty slots
+    on its poorly explained points. The cell side is fixed on the first batch so that
+    it gets about ``first_cells`` components. ``callback(i, state, info, grown)``
+    observes each batch (``grown``: the state after growth, before the batch).
+
+    Under posterior assignment each batch's update is solved by local coordinate
+    ascent, at most ``local_iters`` E-steps (:func:`vbgs.inference.model.local_cavi`): the
+    components grown for the batch start at their prior, and a single E-step would
+    score them so against neighbours fitted to earlier batches (1: that single step).
+    Prior assignment ignores ``local_iters`` (its E-step does not depend on the model)."""
+    state, rule = None, None
+    for i, (xyz, rgb) in enumerate(batches):
+        if state is None:
+            rule = calibrate(xyz, n_components, first_cells, refine=refine)
+            state = start_empty(xyz, n_components, rule.cell, config)
+        key, sub = jax.random.split(key)
+        grown, _ = grow(state, xyz, rgb, rule, key=sub, config=config)
+        state, info = model_update(grown, xyz, rgb, assign=assign, config=config,
+                                   local_iters=local_iters)
+        if callback is not None:
+            callback(i, state, info, grown)
+    if state is None:
+        raise ValueError("the stream is empty: no batch arrived")
+    return state
+
+
+def batch_prior(xyz, rgb, n_components: int, *, key: jax.Array,
+                config: PriorConfig = PriorConfig()) -> Mixture:
+    """The stream start when one batch ``xyz [n, d]``, ``rgb [n, 3]`` is all there is
+    (a batch fit): the grown prior with ``min(K, n)`` components spread over it."""
+    rule = calibrate(xyz, n_components, n_components, rate=1.0, refine=1.0)
+    empty = _empty_about(xyz, n_components, rule.cell, config)
+    # grow from the empty state (posterior = prior), without the state: its start and
+    # M-step would be two more executables for a fresh process to load, then dropped
+    prior, _ = _grown_prior(empty, empty, xyz, rgb, rule, key=key, config=config)
+    return prior

@@ -1,0 +1,277 @@
+"""A compiled per-batch update for streams: what :func:`vbgs.inference.model.update` does, with the
+work that does not change from batch to batch done once per stream.
+
+Under prior assignment the assigning model is the fixed prior, so its E-step terms
+(precisions, log-determinants, digammas), its KL to itself and the candidate lists of
+the sparse E-step (:mod:`vbgs.inference.grid`) are built once, when the :class:`Stepper` is made.
+Every batch is then one call of one compiled function (candidate search, E-step,
+M-step, ELBO) on points padded to a size that only grows, so a stream of similar
+frames compiles once; nothing is copied back to the host unless the caller asks.
+
+The sparse E-step's candidates come from the device grid (:mod:`vbgs.inference.grid`, searched
+inside the compiled function) or from a host KD-tree over the fixed means
+(:mod:`vbgs.inference.candidates`, built once); ``search="auto"`` takes the KD-tree on a CPU, where
+host and device share memory and the tree is faster, and the grid on an accelerator
+unless building it would be costly (:data:`vbgs.inference.grid.MAX_BUILD_COST`).
+
+A stream whose reference grows (:mod:`vbgs.inference.grow` fills empty slots of the fixed
+capacity K) keeps its stepper: :meth:`Stepper.grow` recomputes the terms of the filled
+rows only (padded to a power of two, so a few small functions compile per stream) and
+shifts every other row's ``E[log pi_k]`` by the change of ``psi(sum_k alpha_k)``; the
+terms keep their ``[K, ...]`` shapes, so the compiled step is not recompiled. Such a
+stepper is built with ``grows=True`` and searches candidates with the host KD-tree
+(rebuilt on growth): the grid's layout is a static argument planned from the means,
+and re-planning it would recompile the step.
+
+Under posterior assignment the terms are recomputed inside the compiled function from
+the current posterior and the candidates come from a KD-tree over the current means,
+rebuilt every batch, because the means move.
+
+The slow references are :func:`vbgs.inference.model.update` (dense, or sparse with the KD-tree);
+tests hold the stepper equal to them.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Literal, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.special import digamma
+
+from vbgs.inference import candidates, expfam, grid, model
+from vbgs.inference.model import Assign, EStep, Info, Mixture, PriorConfig, State
+
+
+Search = Literal["auto", "grid", "kdtree"]
+
+
+# Headroom left when the padded size grows (see Stepper.padded_size).
+GROWTH = 1.25
+
+
+class StepConfig(NamedTuple):
+    """Static settings of the compiled step (hashable)."""
+
+    assign: str
+    estep: str
+    colour_noise: float
+    chunk: int
+    grid: grid.GridSpec | None  # set when the compiled step searches candidates itself
+
+
+class Fixed(NamedTuple):
+    """Arrays built once per stream under prior assignment (None otherwise); arguments
+    of the compiled step, so new values of the same shapes (growth) do not recompile it."""
+
+    reference: object  # [k, F] feature weights (dense) or model.Terms (sparse)
+    kl: jnp.ndarray  # KL(prior || prior) = 0 exactly (computing it would add only rounding)
+    lists: grid.CellLists | None
+
+
+# Rows recomputed on growth go in blocks of this many (the last padded), so the row
+# update compiles once per stream (each block size would compile it again, ~3 s).
+ROW_BLOCK = 512
+
+
+def _reference(q: Mixture, estep: str, colour_noise: float, alpha_total=None):
+    if estep == "dense":
+        return model.log_joint_weights(q, colour_noise, alpha_total)
+    return model.component_terms(q, colour_noise, alpha_total)
+
+
+@partial(jax.jit, static_argnames=("estep", "colour_noise"))
+def _prior_terms(prior: Mixture, estep: str, colour_noise: float):
+    """The prior's E-step terms, compiled as one function (eager, their many small ops
+    would each compile)."""
+    return _reference(prior, estep, colour_noise)
+
+
+def _take_rows(q: Mixture, rows) -> Mixture:
+    """The components ``rows [m]`` of ``q`` (the origin is shared)."""
+    take = partial(jax.tree.map, lambda a: a[rows])
+    return Mixture(take(q.space), take(q.colour), q.alpha[rows], q.origin)
+
+
+@partial(jax.jit, static_argnames=("estep", "colour_noise"))
+def _grown_terms(reference, old_alpha, prior: Mixture, rows, estep: str, colour_noise: float):
+    """The E-step terms of ``prior`` from those of a reference with concentrations
+    ``old_alpha [k]`` that differs from it only in ``rows [m]`` (repeats allowed).
+
+    The rows are recomputed; every other row keeps its terms except ``E[log pi_k] =
+    psi(alpha_k) - psi(sum alpha)``, which moves by ``psi(sum old_alpha) -
+    psi(sum alpha)`` (the constant of :class:`vbgs.inference.model.Terms`, the last column of the
+    dense feature weights)."""
+    total = prior.alpha.sum()
+    shift = digamma(old_alpha.sum()) - digamma(total)
+    fresh = _reference(_take_rows(prior, rows), estep, colour_noise, total)
+    if estep == "dense":  # [k, F]
+        return reference.at[:, -1].add(shift).at[rows].set(fresh)
+    shifted = reference._replace(const=reference.const + shift)
+    return jax.tree.map(lambda a, f: a.at[rows].set(f), shifted, fresh)
+
+
+def row_blocks(rows) -> list[np.ndarray]:
+    """``rows [m]`` in blocks of :data:`ROW_BLOCK`, the last padded by repeating its first
+    entry (setting a row twice to the same value is harmless); none when m = 0."""
+    rows = np.asarray(rows, np.int32).reshape(-1)
+    blocks = [rows[i:i + ROW_BLOCK] for i in range(0, len(rows), ROW_BLOCK)]
+    return [np.concatenate([b, np.full(ROW_BLOCK - len(b), b[0], np.int32)]) for b in blocks]
+
+
+@partial(jax.jit, static_argnames=("config",))
+def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig):
+    """One batch: candidates (prior, sparse), E-step, statistics, M-step and ELBO.
+    x ``[n, d]`` centred, c ``[n, 3]``, w ``[n]`` (0 for padding)."""
+    if config.assign == "prior":
+        reference, kl = fixed.reference, fixed.kl
+        if config.grid is not None:
+            cand = grid.search(fixed.lists, state.prior.space.mean, x, w, config.grid)
+    else:
+        q = state.posterior
+        reference = _reference(q, config.estep, config.colour_noise)
+        kl = model.kl(q, state.prior, config.colour_noise)
+    batch, lse = model.e_step_with(reference, x, c, w, config.colour_noise, config.chunk,
+                                   cand if config.estep == "sparse" else None)
+    stats = expfam.add_stats(state.stats, batch)
+    elbo = jnp.sum(lse * w) - kl
+    # the prior is reattached by the caller (see model._update: passing an input through
+    # next to the ELBO reduction made XLA:CPU hang)
+    return model.m_step(state.prior, stats), stats, Info(elbo, lse)
+
+
+class Stepper:
+    """``stepper(state, xyz, rgb) -> (state, info)``: :func:`vbgs.inference.model.update` for a
+    stream from ``prior``, compiled once per padded size (see the module docstring).
+
+    ``info.point_loglik`` stays on the device at the padded size: its first ``n``
+    entries belong to the batch's ``n`` points (slicing it per batch would compile a
+    slice per point count).
+
+    ``max_points``: the most points a batch will hold, if known; batches are padded to
+    a size that only grows (the first batch's bucket, or ``max_points``'s), so a stream
+    of similar frames compiles one function.
+
+    ``grows``: the reference will grow (:meth:`grow`); candidates then come from the
+    host KD-tree (see the module docstring).
+
+    ``reach``: points farther than this from every mean of the assigning model (world
+    units) are left out of the update (weight 0; counted in ``unreached``). No component
+    explains them, and responsibilities, which sum to one whatever the distance, would
+    otherwise hand them to the nearest components and stretch those across the gap into
+    needles (a stream whose budget of components has run out). Sparse E-step with the
+    KD-tree only (its query gives the distance for free). ``learned``: the last batch's
+    points within reach, ``[n]`` bool (None without ``reach``).
+    """
+
+    def __init__(self, prior: Mixture, *, assign: Assign = "prior",
+                 config: PriorConfig = PriorConfig(), estep: EStep = "dense",
+                 n_candidates: int = candidates.DEFAULT_CANDIDATES,
+                 max_points: int | None = None, search: Search = "auto",
+                 grows: bool = False, reach: float | None = None):
+        if assign not in ("prior", "posterior"):
+            raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
+        if estep not in ("dense", "sparse"):
+            raise ValueError(f"unknown E-step {estep!r}: use 'dense' or 'sparse'")
+        self.prior, self.assign, self.estep = prior, assign, estep
+        self.colour_noise = float(config.colour_noise)
+        self.n_candidates = int(min(n_candidates, prior.n_components))
+        if self.n_candidates < 1:
+            raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
+        if search not in ("auto", "grid", "kdtree"):
+            raise ValueError(f"unknown candidate search {search!r}: use 'auto', 'grid' or 'kdtree'")
+        if grows and search == "grid":
+            raise ValueError("a growing reference cannot use the grid search (its layout is "
+                             "planned from the means): use search='kdtree' or 'auto'")
+        # the grid is built once, so it serves only a fixed assigning model; on a CPU the
+        # host KD-tree reads the device's own memory (the grid is not even planned)
+        fixed_sparse = assign == "prior" and estep == "sparse" and not grows
+        if not fixed_sparse or (search == "auto" and jax.default_backend() == "cpu"):
+            search = "kdtree"
+        spec = grid.plan(prior.space.mean, self.n_candidates) if search != "kdtree" else None
+        if search == "auto":
+            cheap = grid.build_cost(prior.space.mean, spec) <= grid.MAX_BUILD_COST
+            search = "grid" if cheap else "kdtree"
+        self.search = search
+        self.spec, self.fixed, self._tree = None, None, None
+        if assign == "prior":
+            lists = None
+            if estep == "sparse" and self.search == "grid":
+                self.spec = spec
+                lists = grid.build(prior.space.mean, self.spec)
+            elif estep == "sparse":
+                self._tree = candidates.means_tree(prior.space.mean)
+            self.fixed = Fixed(_prior_terms(prior, estep, self.colour_noise),
+                               jnp.zeros((), prior.alpha.dtype), lists)
+        self.size = model.bucket_size(max_points) if max_points else 0
+        self._origin = np.asarray(prior.origin)
+        if reach is not None and (self.estep != "sparse" or self.spec is not None
+                                  or not reach > 0):
+            raise ValueError(f"reach={reach!r} needs a positive distance, the sparse E-step "
+                             "and the KD-tree search (estep='sparse', search='kdtree')")
+        self.reach = reach
+        self.unreached = 0  # points left out of the updates so far (beyond reach)
+        self.learned: np.ndarray | None = None  # [n] the last batch's points within reach
+
+    def grow(self, prior: Mixture, rows) -> None:
+        """Take the grown reference ``prior``, which differs from the stepper's only in
+        the components ``rows [m]`` (the slots :func:`vbgs.inference.grow.grow` filled): their terms
+        are recomputed, the other rows' ``E[log pi_k]`` shifted (:func:`_grown_terms`),
+        the KD-tree rebuilt; the compiled step is reused."""
+        if self.spec is not None:
+            raise ValueError("this stepper searches a grid planned from the means: build it "
+                             "with grows=True to let its reference grow")
+        if prior.n_components != self.prior.n_components or prior.dim != self.prior.dim:
+            raise ValueError(f"the grown reference has {prior.n_components} {prior.dim}-D "
+                             f"components, the stepper {self.prior.n_components} "
+                             f"{self.prior.dim}-D ones: growth fills slots, it adds none")
+        blocks = row_blocks(rows)
+        if self.fixed is not None and blocks:
+            reference, old_alpha = self.fixed.reference, self.prior.alpha
+            for block in blocks:  # after the first block the sum of alpha is the new one
+                reference = _grown_terms(reference, old_alpha, prior, jax.device_put(block),
+                                         self.estep, self.colour_noise)
+                old_alpha = prior.alpha
+            self.fixed = self.fixed._replace(reference=reference)
+            if self._tree is not None:
+                self._tree = candidates.means_tree(prior.space.mean)
+        self.prior = prior
+
+    def padded_size(self, n: int) -> int:
+        """The size batches of ``n`` points are padded to: it only grows, and when it
+        does it leaves :data:`GROWTH` headroom, so frames of a stream that vary in size
+        a little share one compiled step."""
+        if n > self.size:
+            self.size = model.bucket_size(int(n * GROWTH))
+        return self.size
+
+    def _chunk(self, size: int) -> int:
+        if self.estep == "dense":
+            return model.chunk_size(size, self.prior.n_components)
+        d = self.prior.dim
+        return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
+
+    def __call__(self, state: State, xyz, rgb) -> tuple[State, Info]:
+        xyz, rgb = model.check_points_host(xyz, rgb)
+        if xyz.shape[1] != self.prior.dim:
+            raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
+        size = self.padded_size(xyz.shape[0])
+        x, c, w = model.padded_batch(xyz, rgb, self._origin, size, self.prior.alpha.dtype)
+        cand = None
+        if self.estep == "sparse" and self.spec is None:
+            n = xyz.shape[0]
+            tree = self._tree or candidates.means_tree(state.posterior.space.mean)
+            cand = np.zeros((size, self.n_candidates), np.int32)  # padding: weight 0
+            nearest, cand[:n] = candidates.query_with_distance(tree, x[:n], self.n_candidates)
+            if self.reach is not None:
+                out = nearest > self.reach
+                w[:n][out] = 0.0
+                self.unreached += int(out.sum())
+                self.learned = ~out
+        config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
+                            self.spec)
+        posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)
+        return state._replace(posterior=posterior, stats=stats), info
+

@@ -1,0 +1,78 @@
+"""The background colour, learned from the data as frames arrive.
+
+Pixels without valid depth (sky, beyond the sensor's range, empty space behind an
+object) are not surface: no splat should explain them, and whatever the splats leave
+uncovered shows the background there. Its colour is estimated from exactly those
+pixels of the frames that have arrived so far, as a running mean:
+
+    b = Σ_frames Σ_{pixels without depth} c  /  #(pixels without depth).
+
+A stream where every pixel has depth (a closed room) has nothing to estimate from;
+there the background can only show through holes between splats, and the colour
+that minimises the expected squared error of a hole is the mean colour of all the
+pixels seen so far, which is then used instead. Both sums are additive over frames,
+so the estimate after a stream does not depend on the frames' order and never reads
+a frame that has not arrived.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from vbgs.render.camera import valid_depth
+
+# Fewer depth-less pixels than this fraction of all pixels seen are treated as
+# noise (a few dropped depth readings), not as a view of the background.
+MIN_EMPTY_FRACTION = 1e-3
+
+
+class BackgroundEstimate(NamedTuple):
+    """Running sums over the frames seen so far (float64; start from :func:`empty`)."""
+
+    empty_sum: np.ndarray  # [3] colour sum over pixels without valid depth
+    empty_count: int
+    all_sum: np.ndarray  # [3] colour sum over every pixel
+    all_count: int
+
+
+def empty() -> BackgroundEstimate:
+    """The estimate before any frame has arrived."""
+    return BackgroundEstimate(np.zeros(3), 0, np.zeros(3), 0)
+
+
+def observe(estimate: BackgroundEstimate, rgb: np.ndarray, depth: np.ndarray,
+            max_depth: float = np.inf) -> BackgroundEstimate:
+    """Add one frame: ``rgb [h, w, 3]`` in [0, 1] and ``depth [h, w]`` (0/NaN/inf or
+    beyond ``max_depth`` mark pixels without depth)."""
+    rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
+    no_depth = ~valid_depth(depth, max_depth).reshape(-1)
+    return BackgroundEstimate(
+        estimate.empty_sum + rgb[no_depth].sum(0), estimate.empty_count + int(no_depth.sum()),
+        estimate.all_sum + rgb.sum(0), estimate.all_count + rgb.shape[0],
+    )
+
+
+def colour(estimate: BackgroundEstimate) -> np.ndarray:
+    """The background colour ``[3]`` (float32): the mean over depth-less pixels where
+    enough were seen, else the mean over all pixels, else black (nothing seen yet)."""
+    if estimate.all_count == 0:
+        return np.zeros(3, np.float32)
+    if estimate.empty_count >= MIN_EMPTY_FRACTION * estimate.all_count:
+        return (estimate.empty_sum / estimate.empty_count).astype(np.float32)
+    return (estimate.all_sum / estimate.all_count).astype(np.float32)
+
+
+def parse_background(text: str) -> np.ndarray | None:
+    """``"auto"`` -> None (estimate it from the data); ``"R,G,B"`` (each in [0, 1]) -> [3]."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        values = np.array([float(v) for v in text.split(",")], np.float32)
+    except ValueError:
+        values = np.zeros(0)
+    if values.shape != (3,) or not np.all((values >= 0) & (values <= 1)):
+        raise ValueError(f"background must be 'auto' or R,G,B with each in [0, 1] "
+                         f"(e.g. 1,1,1 for white), got {text!r}")
+    return values

@@ -1,0 +1,162 @@
+"""Pinhole cameras and the RGB-D <-> coloured point conversions.
+
+Conventions (OpenCV, used everywhere inside the library):
+
+* camera axes: x right, y down, z forward (depth is the z coordinate, not the
+  ray length);
+* ``pose`` is camera-to-world, a 4x4 rigid transform: ``x_world = R x_cam + t``;
+* pixel ``(row, col)`` has its centre at image coordinates
+  ``(u, v) = (col + 0.5, row + 0.5)``, so with ``cx = width / 2`` the optical
+  axis passes through the middle of the image.
+
+Loaders that read OpenGL/Blender poses (x right, y up, z backward) convert them
+with :func:`opengl_to_opencv` at the boundary.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from vbgs.render.pixels import pixel_centres
+
+# Flip of the y and z camera axes: OpenGL/Blender camera frame <-> OpenCV frame.
+_GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+class Camera(NamedTuple):
+    """A pinhole camera.
+
+    fx, fy, cx, cy: intrinsics in pixels; width, height: image size in pixels;
+    pose: ``[4, 4]`` camera-to-world transform (OpenCV axes).
+
+    A JAX pytree whose leaves are the intrinsics and the pose; ``width`` and
+    ``height`` are static (part of the tree's structure), so a camera passes through
+    ``jax.jit`` as one argument and a jitted function compiles once per image size.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+    pose: np.ndarray  # [4, 4]
+
+    @property
+    def world_to_camera(self) -> np.ndarray:
+        """Inverse of the rigid ``pose``, ``[4, 4]``."""
+        rot, t = self.pose[:3, :3], self.pose[:3, 3]
+        out = np.eye(4, dtype=self.pose.dtype)
+        out[:3, :3] = rot.T
+        out[:3, 3] = -rot.T @ t
+        return out
+
+    @property
+    def intrinsics(self) -> np.ndarray:
+        """The ``[3, 3]`` calibration matrix K."""
+        return np.array(
+            [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], np.float64
+        )
+
+    @property
+    def position(self) -> np.ndarray:
+        """Camera centre in world coordinates, ``[3]``."""
+        return self.pose[:3, 3]
+
+
+def _camera_children(cam: Camera):
+    keys = ("fx", "fy", "cx", "cy", "pose")
+    return tuple((jax.tree_util.GetAttrKey(k), getattr(cam, k)) for k in keys), (cam.width, cam.height)
+
+
+def _camera_from_children(sizes, children) -> Camera:
+    fx, fy, cx, cy, pose = children
+    return Camera(fx, fy, cx, cy, *sizes, pose)
+
+
+jax.tree_util.register_pytree_with_keys(Camera, _camera_children, _camera_from_children)
+
+
+def from_fov(width: int, height: int, fov_x: float, pose: np.ndarray) -> Camera:
+    """A camera with square pixels and horizontal field of view ``fov_x`` (radians)."""
+    f = 0.5 * width / np.tan(0.5 * fov_x)
+    return Camera(f, f, width / 2.0, height / 2.0, int(width), int(height), np.asarray(pose, float))
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera-to-world pose (OpenCV axes) at ``eye`` looking at ``target``.
+
+    ``up`` is the world direction that should appear upwards in the image.
+    """
+    eye, target, up = (np.asarray(a, np.float64) for a in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:  # looking along `up`: pick any perpendicular
+        x = np.cross(z, np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0]))
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, z, eye
+    return pose
+
+
+def opengl_to_opencv(pose_gl: np.ndarray) -> np.ndarray:
+    """Convert a camera-to-world pose with OpenGL/Blender camera axes to OpenCV axes."""
+    return np.asarray(pose_gl, np.float64) @ _GL_TO_CV
+
+
+def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """Image coordinates ``u, v`` of every pixel centre, each ``[height, width]`` float64."""
+    uv = pixel_centres(camera.height, camera.width, np.float64).reshape(camera.height, camera.width, 2)
+    return uv[..., 0], uv[..., 1]
+
+
+def valid_depth(depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:
+    """Mask of usable depth: finite, strictly positive and not beyond ``max_depth``."""
+    depth = np.asarray(depth)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(depth) & (depth > 0) & (depth <= max_depth)
+
+
+def unproject(
+    camera: Camera, rgb: np.ndarray, depth: np.ndarray, max_depth: float = np.inf
+) -> tuple[np.ndarray, np.ndarray]:
+    """RGB-D frame -> coloured world points, skipping invalid depth.
+
+    rgb: ``[h, w, 3]`` in [0, 1]; depth: ``[h, w]`` z-depth in scene units
+    (0, NaN, inf or beyond ``max_depth`` mark missing depth).
+    Returns ``xyz [n, 3]`` (world) and ``rgb [n, 3]`` as float32.
+    """
+    rgb = np.asarray(rgb)
+    depth = np.asarray(depth)
+    shape = (camera.height, camera.width)
+    if rgb.shape != shape + (3,) or depth.shape != shape:
+        raise ValueError(
+            f"frame shapes rgb {rgb.shape} and depth {depth.shape} do not match the camera "
+            f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
+        )
+    mask = valid_depth(depth, max_depth)
+    u, v = pixel_grid(camera)
+    z = depth[mask].astype(np.float64)
+    x_cam = np.stack(
+        [(u[mask] - camera.cx) / camera.fx * z, (v[mask] - camera.cy) / camera.fy * z, z], -1
+    )
+    xyz = x_cam @ camera.pose[:3, :3].T + camera.pose[:3, 3]
+    return xyz.astype(np.float32), rgb[mask].astype(np.float32)
+
+
+def project(camera: Camera, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World points ``[n, 3]`` -> image coordinates ``uv [n, 2]`` and z-depth ``[n]``.
+
+    Points behind the camera get ``z <= 0``; their ``uv`` is meaningless.
+    """
+    w2c = camera.world_to_camera
+    x_cam = np.asarray(xyz, np.float64) @ w2c[:3, :3].T + w2c[:3, 3]
+    z = x_cam[:, 2]
+    safe = np.where(np.abs(z) > 1e-12, z, 1e-12)
+    uv = np.stack([camera.fx * x_cam[:, 0] / safe + camera.cx, camera.fy * x_cam[:, 1] / safe + camera.cy], -1)
+    return uv, z

@@ -1,0 +1,103 @@
+"""Opacity from evidence: per component, the rays that end on it against the rays that
+pass through it.
+
+A splat's opacity is the probability that a ray through its footprint stops there.
+Each frame is evidence about that, read off its depth map at a few pixels of the
+component's projected footprint (the centre and one standard deviation either side
+along u and v, ``N_SAMPLES`` = 5). With z the component's camera depth and
+``σ_z = sqrt(r_zᵀ Σ r_z)`` its standard deviation along the camera's z axis ``r_z``,
+a sample pixel whose observed depth D
+
+* is within ``PASS_SIGMAS`` σ_z of z: the ray **hit** the component;
+* is farther than ``z + PASS_SIGMAS σ_z``, or missing (no depth: sky, empty space):
+  the ray **passed through** it;
+* is nearer than ``z - PASS_SIGMAS σ_z``: the component was occluded, no evidence.
+
+Each sample stands for ``A / N_SAMPLES`` rays, ``A = 2π sqrt(det Σ')`` being the
+footprint's area in pixels (Σ' the projected covariance), so a component's hits ``h``
+and passes ``m`` are counts of rays, in the same units whatever its size. They are
+the sufficient statistics of a Beta posterior, additive over frames:
+
+    o ~ Beta(PRIOR_HITS + h, PRIOR_PASSES + m),   E[o] = (PRIOR_HITS + h) / (PRIOR_HITS + PRIOR_PASSES + h + m).
+
+Read against a fixed reference model (the prior, under prior assignment) the counts
+do not depend on the order of the frames, so the stream stays order-invariant; read
+against the current posterior they follow it, like posterior assignment does.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from vbgs.render.camera import Camera
+from vbgs.render.raster import BLUR_VARIANCE, NEAR, project
+from vbgs.render.splats import Splats
+
+PASS_SIGMAS = 2.0  # a surface within 2 sigma (camera z) of the component is a hit
+N_SAMPLES = 5  # footprint pixels read per component and frame: centre, +-1 sigma in u and v
+PRIOR_HITS = 1.0  # Beta(1, 1): uniform prior on opacity
+PRIOR_PASSES = 1.0
+
+
+class Evidence(NamedTuple):
+    """Rays that hit / passed through each component, summed over frames."""
+
+    hits: jax.Array  # [k]
+    passes: jax.Array  # [k]
+
+
+def no_evidence(k: int) -> Evidence:
+    """Before any frame: zero counts for ``k`` components."""
+    return Evidence(jnp.zeros(k, jnp.float32), jnp.zeros(k, jnp.float32))
+
+
+def expected_opacity(evidence: Evidence) -> jax.Array:
+    """``E[o]`` ``[k]`` under the Beta posterior (module docstring)."""
+    hits = PRIOR_HITS + evidence.hits
+    return hits / (hits + PRIOR_PASSES + evidence.passes)
+
+
+def observe(evidence: Evidence, means, covs, camera: Camera, depth) -> Evidence:
+    """Add one frame's evidence for components with world ``means [k, 3]`` and
+    ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
+    (0, NaN or inf where missing)."""
+    hits, passes = _frame_counts(
+        jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
+        *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
+        jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
+    )
+    return Evidence(evidence.hits + hits, evidence.passes + passes)
+
+
+@jax.jit
+def _frame_counts(means, covs, fx, fy, cx, cy, pose, depth):
+    """Hits and passes ``[k]`` of one frame (module docstring)."""
+    height, width = depth.shape
+    k = means.shape[0]
+    splats = Splats(means, covs, jnp.zeros((k, 3)), jnp.ones(k))
+    proj = project(splats, fx, fy, cx, cy, pose, NEAR, BLUR_VARIANCE, width=width,
+                   height=height)
+    a, b, c = proj.conic.T  # Σ'⁻¹ = [[a, b], [b, c]]
+    det_conic = a * c - b * b
+    area = 2.0 * jnp.pi / jnp.sqrt(det_conic)  # [k] ∫ exp(-½ dᵀ Σ'⁻¹ d) dd
+    sigma_u, sigma_v = jnp.sqrt(c / det_conic), jnp.sqrt(a / det_conic)  # sqrt of Σ' diagonal
+    zero = jnp.zeros(k)
+    offsets = jnp.stack([jnp.stack([zero, zero], -1), jnp.stack([sigma_u, zero], -1),
+                         jnp.stack([-sigma_u, zero], -1), jnp.stack([zero, sigma_v], -1),
+                         jnp.stack([zero, -sigma_v], -1)])  # [N_SAMPLES, k, 2]
+    uv = proj.uv[None] + offsets
+    col, row = jnp.floor(uv[..., 0]).astype(jnp.int32), jnp.floor(uv[..., 1]).astype(jnp.int32)
+    inside = (col >= 0) & (col < width) & (row >= 0) & (row < height) & proj.visible[None]
+    observed = depth[jnp.clip(row, 0, height - 1), jnp.clip(col, 0, width - 1)]  # [s, k]
+    has_depth = jnp.isfinite(observed) & (observed > 0)
+    axis_z = pose[:3, 2]  # camera z axis in world coordinates
+    sigma_z = jnp.sqrt(jnp.maximum(jnp.einsum("i,kij,j->k", axis_z, covs, axis_z), 0.0))
+    near_side = proj.depth - PASS_SIGMAS * sigma_z
+    far_side = proj.depth + PASS_SIGMAS * sigma_z
+    hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
+    passed = inside & (~has_depth | (observed > far_side))
+    per_sample = area / N_SAMPLES
+    return hit.sum(0) * per_sample, passed.sum(0) * per_sample
