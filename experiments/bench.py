@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
-from vbgs.inference import model
 from vbgs.data.images import image_to_points, load_image
+from vbgs.inference import model
 from vbgs.io_atomic import write_atomic, write_text_atomic
-from vbgs.render.metrics import psnr
 from vbgs.render.image import render_image
+from vbgs.render.metrics import psnr
 
 
 def machine() -> str:

@@ -18,8 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
-from vbgs.inference import candidates, grid, model, stepper
 from vbgs.compilation import CompileTimer
+from vbgs.inference import candidates, grid, model, stepper
 
 PROFILE_REPEATS = 3
 
@@ -179,8 +179,8 @@ def speedups(rows: list[dict]) -> list[dict]:
 def sharded_row(n_devices: int, k: int, scene_name: str, *, frames: int, size: int,
                 estep: str) -> dict:
     """:func:`stream_row` with the components split over ``n_devices`` devices."""
-    from vbgs.inference import sharding
     from vbgs.data.formats import load_scene
+    from vbgs.inference import sharding
 
     scene = load_scene(scene_name, size=size, n_train=frames, n_test=1, seed=0)
     mesh = sharding.mesh(n_devices)

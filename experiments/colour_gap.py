@@ -23,9 +23,10 @@ from dataclasses import replace
 
 import jax.numpy as jnp
 
-from experiments.protocol import evaluate
 from experiments.tune import learn_once
+from vbgs import mapping
 from vbgs.render import colour_fit
+from vbgs.render.views import evaluate
 
 
 def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> dict:
@@ -33,8 +34,9 @@ def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> 
     ``colour_ridge``), the CG iterations run and the seconds the exact solve took."""
     learner, background = learn_once(replace(task, colour_rule="fit"), scene,
                                      progress=progress)
-    base = learner.posterior_splats()  # [k] splats with the posterior colours
-    c_post = learner.state.posterior.colour.mean  # [k, 3]
+    posterior_colours = mapping.with_dotted(learner.config, "render.colour_rule", "posterior")
+    base = mapping.splats(learner.state, posterior_colours)  # [k] with the posterior colours
+    c_post = learner.state.mixture.posterior.colour.mean  # [k, 3]
     final = colour_fit.no_frames(base.count)
     for frame in scene.train:
         final = colour_fit.observe(final, base, frame.camera, frame.rgb, background,
@@ -46,7 +48,7 @@ def colour_gap(task, scene, *, iterations: int = 30, progress: bool = False) -> 
     exact_seconds = time.perf_counter() - start
     colourings = {
         "posterior": c_post,
-        "lumped_stream": colour_fit.solve(learner.colour, c_post, ridge),
+        "lumped_stream": colour_fit.solve(learner.state.colour, c_post, ridge),
         "lumped_final": colour_fit.solve(final, c_post, ridge),
         "exact": jnp.clip(exact, 0.0, 1.0),
     }

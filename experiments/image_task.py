@@ -18,13 +18,13 @@ import numpy as np
 
 from experiments.init_schemes import oracle_start
 from experiments.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
+from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.inference import grow, model
 from vbgs.inference.bound import StreamBound, batch_bound
-from vbgs.data.images import image_to_points, load_image, patch_stream
-from vbgs.io_atomic import write_atomic
 from vbgs.inference.fit import fit, stream
-from vbgs.render.metrics import psnr, ssim
+from vbgs.io_atomic import write_atomic
 from vbgs.render.image import render_image
+from vbgs.render.metrics import psnr, ssim
 
 
 @dataclass(frozen=True)

@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.render.camera import project, unproject, valid_depth
 from vbgs.data.scene import Frame, Scene
+from vbgs.render.camera import project, unproject, valid_depth
 from vbgs.render.metrics import psnr
 from vbgs.render.raster import NEAR, exact_capacity, rasterize, surface_depth
 from vbgs.render.splats import Splats

@@ -39,13 +39,13 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from experiments.init_schemes import oracle_start
-from vbgs.render import background as bg
-from vbgs.render.camera import unproject
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
-from vbgs.render.metrics import depth_l1, psnr, ssim
-from vbgs.render.raster import BLUR_VARIANCE, exact_capacity, rasterize, surface_depth
+from vbgs.render import background as bg
+from vbgs.render.camera import unproject
+from vbgs.render.raster import BLUR_VARIANCE
 from vbgs.render.splats import Splats, save_ply
+from vbgs.render.views import Evaluation, evaluate
 
 EARLY_FRACTION = 0.1  # the first 10% of the stream defines the "early" views
 CURVE_POINTS = 10  # evaluations of the early views along the stream
@@ -71,16 +71,6 @@ def diagnose(learner, frame: Frame) -> None:
     if hook is not None:
         hook(frame)
 
-
-@dataclass(frozen=True)
-class Evaluation:
-    """Mean scores over a set of views, and the renders ``[h, w, 3]`` per view."""
-
-    psnr: float
-    ssim: float
-    depth_l1: float  # nan where no view has ground-truth depth
-    dropped: int  # splats the rasterizer's tiles dropped, summed over views
-    renders: list
 
 
 @dataclass(frozen=True)
@@ -124,7 +114,8 @@ class SceneResult:
 def task_settings(task) -> dict:
     """The task's settings as a flat dict (hyperparameter objects left out)."""
     settings = asdict(task)
-    settings.pop("prior", None)
+    for nested in ("prior", "growth", "evidence"):
+        settings.pop(nested, None)
     return settings
 
 
@@ -154,31 +145,6 @@ def early_views(scene: Scene, order: np.ndarray) -> list[int]:
     return sorted(set(int(i) for i in nearest))
 
 
-def render_view(splats: Splats, frame: Frame, background, blur: float = BLUR_VARIANCE
-                ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Render one view: rgb ``[h, w, 3]``, alpha-normalised depth ``[h, w]`` (0 where
-    uncovered) and the number of splats the tiles dropped (0: the capacity is chosen
-    so that nothing is, :func:`vbgs.render.raster.exact_capacity`); ``blur``: the learner's
-    pixel filter (px², :attr:`Learner.blur`)."""
-    out = rasterize(splats, frame.camera, background=background, blur=blur,
-                    capacity=exact_capacity(splats, frame.camera, blur=blur))
-    return np.clip(np.asarray(out.rgb), 0, 1), surface_depth(out), int(out.dropped)
-
-
-def evaluate(splats: Splats, frames: list[Frame], background, blur: float = BLUR_VARIANCE
-             ) -> Evaluation:
-    """Mean PSNR, SSIM and depth L1 over ``frames``, plus the renders (rendered with the
-    pixel filter ``blur``, px²)."""
-    scores, renders, dropped = [], [], 0
-    for frame in frames:
-        rgb, depth, n = render_view(splats, frame, background, blur)
-        dropped += n
-        scores.append((psnr(rgb, frame.rgb), ssim(rgb, frame.rgb), depth_l1(depth, frame.depth)))
-        renders.append(rgb)
-    psnrs, ssims, l1s = np.asarray(scores).T
-    return Evaluation(float(psnrs.mean()), float(ssims.mean()),
-                      float(np.nanmean(l1s)) if np.isfinite(l1s).any() else float("nan"),
-                      dropped, renders)
 
 
 def evaluate_validation(splats: Splats, scene: Scene, background, blur: float = BLUR_VARIANCE

@@ -28,13 +28,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.learners.gradient_learner import DEFAULT_CONFIG
-from experiments.protocol import evaluate
 from experiments.tune import learn_once
 from vbgs.baseline import camera_extent, frame_arrays, trainable
 from vbgs.baseline.params import Params, logit, to_splats
 from vbgs.baseline.train import make_optimizer, make_step
 from vbgs.render.raster import exact_capacity
 from vbgs.render.splats import Splats, scale_rotation_from_covs
+from vbgs.render.views import evaluate
 
 # What each refinement trains (Params fields); the rest keep VBGS's values.
 REFINED = {

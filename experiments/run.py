@@ -110,8 +110,6 @@ def _add_fit_scene(sub):
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--steps", type=int, default=3000, help="gradient, static protocol")
     add_choice(p, "--protocol", PROTOCOL)
-    p.add_argument("--skip-margin", type=float, default=None, metavar="NATS",
-                   help="VBGS: skip points explained within NATS of their component's peak")
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
     add_choice(p, "--depth-kind", DEPTH_KIND)
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
@@ -141,7 +139,7 @@ def _fit_scene(args) -> dict:
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
                      depth_align=args.depth_align, background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
-                     skip_margin=args.skip_margin, **render)
+                     **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
                          f"held-out views), got {args.test_views}")

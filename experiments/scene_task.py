@@ -28,12 +28,13 @@ from experiments.settings import (
     PROTOCOL,
     REPLAY_DEFAULT,
 )
-from vbgs.inference import model
-from vbgs.render.background import parse_background
-from vbgs.render.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
+from vbgs.inference import model
 from vbgs.io_atomic import write_atomic
+from vbgs.mapping import EvidenceConfig, GrowthConfig
+from vbgs.render.background import parse_background
+from vbgs.render.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
 
 
@@ -73,9 +74,11 @@ class SceneTask:
     steps_per_frame: int = 50
     steps: int = 3000
     protocol: str = PROTOCOL.default
-    # VBGS: skip points explained within this many nats (None: learn every point; vbgs.inference.skip)
-    skip_margin: float | None = None
-    prior: model.PriorConfig = model.SURFACE_PRIOR  # frozen: safe to share
+    # VBGS's method constants without a flag (frozen: safe to share); tune reaches each by
+    # its dotted name (prior.cov_scale, growth.reach_cells, evidence.pass_sigmas)
+    prior: model.PriorConfig = model.SURFACE_PRIOR
+    growth: GrowthConfig = field(default_factory=GrowthConfig)
+    evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
 
     def __post_init__(self):
         for name in ("components", "frames", "size", "steps_per_frame", "steps"):

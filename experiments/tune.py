@@ -18,10 +18,12 @@ no change here.
 Writes ``<out>/<scene>.csv`` and ``<out>/<scene>.md``, both headed by the command that
 made them; rows are sorted by validation PSNR, best first.
 
-The model's hyperparameters (:class:`vbgs.inference.model.PriorConfig`, the task's ``prior``) can
-be tuned on the same views: a grid entry ``prior.NAME=V1,V2`` (e.g.
-``prior.cov_scale=0.2,0.3,0.5``) changes the fit, so the stream is learned once per
-value, and every render setting of the grid is scored on each of those streams.
+The method's other constants, the task's nested configs (``prior``: the
+:class:`vbgs.inference.model.PriorConfig`; ``growth`` and ``evidence``: the groups of
+:class:`vbgs.mapping.Config`), are tuned on the same views by dotted name: a grid entry
+``prior.cov_scale=0.2,0.3,0.5``, ``growth.reach_cells=1.5,2,3`` or
+``evidence.pass_sigmas=1,2,3`` changes the fit, so the stream is learned once per value,
+and every render setting of the grid is scored on each of those streams.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from experiments.bench import machine
 from experiments.learners import LEARNERS
 from experiments.protocol import evaluate_validation, stream_frames
 from vbgs.data.streams import stream_order
-from vbgs.inference.model import PriorConfig
+from vbgs.mapping import dotted_names, get_dotted, with_dotted
 
 # Task fields that change what is learned (or what is scored): a re-render cannot tune them.
 # opacity_rule too: a learner gathers opacity evidence while learning only under its rule.
@@ -47,7 +49,7 @@ FIT_FIELDS = frozenset({
     "scene", "format", "method", "components", "frames", "n_test", "n_val", "size", "order",
     "assign", "estep", "candidates", "init", "seed", "depth_model", "depth_kind",
     "depth_preset", "depth_align", "background", "replay", "steps_per_frame", "steps",
-    "protocol", "prior", "opacity_rule",
+    "protocol", "prior", "growth", "evidence", "opacity_rule",
 })
 
 # Render settings whose data a learner gathers while learning, under one value only (the
@@ -59,31 +61,36 @@ FIT_FIELDS = frozenset({
 GATHERED = {"colour_rule": "fit"}
 # Render settings that only the final solve reads, never what is gathered: no re-learning.
 SOLVE_ONLY = frozenset({"colour_ridge"})
-# Grid names with this prefix name a field of the task's PriorConfig (``prior.cov_scale``):
-# model hyperparameters, learned anew for each value.
-PRIOR_PREFIX = "prior."
+# Task fields holding a nested config of method constants, reached as ``NAME.FIELD``: model
+# hyperparameters, learned anew for each value.
+NESTED = ("prior", "growth", "evidence")
 
 
-def is_prior_setting(name: str) -> bool:
-    """True for a grid name that names a model hyperparameter (``prior.NAME``)."""
-    return name.startswith(PRIOR_PREFIX)
+def is_nested_setting(name: str) -> bool:
+    """True for a grid name that names a method constant of a nested config
+    (``prior.cov_scale``, ``growth.reach_cells``, ``evidence.pass_sigmas``)."""
+    return name.partition(".")[0] in NESTED and "." in name
+
+
+def nested_names() -> list[str]:
+    """Every dotted name the grid accepts."""
+    return [n for n in dotted_names() if n.partition(".")[0] in NESTED]
 
 
 def with_setting(task, setting: dict):
-    """``task`` with the grid ``setting`` applied: task fields by name, ``prior.NAME``
-    entries to the task's :class:`vbgs.inference.model.PriorConfig`."""
-    prior = {n[len(PRIOR_PREFIX):]: v for n, v in setting.items() if is_prior_setting(n)}
-    plain = {n: v for n, v in setting.items() if not is_prior_setting(n)}
-    if prior:
-        plain["prior"] = replace(task.prior, **prior)
-    return replace(task, **plain)
+    """``task`` with the grid ``setting`` applied: task fields by name, dotted names into
+    the task's nested configs (each refuses a value it cannot take)."""
+    for name, value in setting.items():
+        task = with_dotted(task, name, value) if is_nested_setting(name) else replace(
+            task, **{name: value})
+    return task
 
 
 def parse_grid(specs: list[str], task) -> dict[str, list]:
     """``["name=v1,v2", ...]`` -> ``{name: [v1, v2]}``, each value converted to the type
     of the task's current value of ``name`` (float when that is None)."""
     known = {f.name for f in fields(task)}
-    known_prior = {PRIOR_PREFIX + f.name for f in fields(PriorConfig)}
+    known_prior = set(nested_names())
     grid: dict[str, list] = {}
     for spec in specs:
         name, sep, values = spec.partition("=")
@@ -91,10 +98,10 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
         if not sep or not name or not values.strip():
             raise ValueError(f"--grid entry {spec!r}: write NAME=V1,V2,... "
                              f"(e.g. splat_scale=0.5,0.7,1.0)")
-        if is_prior_setting(name) and name not in known_prior:
-            raise ValueError(f"--grid: {name!r} is not a model hyperparameter; write one of "
+        if is_nested_setting(name) and name not in known_prior:
+            raise ValueError(f"--grid: {name!r} is not a method constant; write one of "
                              f"{', '.join(sorted(known_prior))}")
-        if name not in known and not is_prior_setting(name):
+        if name not in known and not is_nested_setting(name):
             raise ValueError(f"--grid: {name!r} is not a task setting; render settings: "
                              f"{', '.join(sorted(known - FIT_FIELDS))}")
         if name in FIT_FIELDS:
@@ -102,13 +109,14 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
                              f"cannot tune it; compare it with `python -m experiments.run sweep`")
         if name in grid:
             raise ValueError(f"--grid: {name!r} is given twice; list all its values in one entry")
-        if is_prior_setting(name):
+        if is_nested_setting(name):
+            kind = type(get_dotted(task, name))
             try:
-                grid[name] = [float(v.strip()) for v in values.split(",")]
+                grid[name] = [kind(v.strip()) for v in values.split(",")]
             except ValueError:
-                raise ValueError(f"--grid {name}: cannot read {values!r} as float "
+                raise ValueError(f"--grid {name}: cannot read {values!r} as {kind.__name__} "
                                  f"values") from None
-            for value in grid[name]:  # PriorConfig refuses what it cannot take
+            for value in grid[name]:  # the nested config refuses what it cannot take
                 with_setting(task, {name: value})
             continue
         current = getattr(task, name)
@@ -152,7 +160,7 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
     gather = {name: value for name, value in GATHERED.items()
               if name in grid or getattr(task, name, None) == value}
     relearn = {name: values for name, values in grid.items()
-               if is_prior_setting(name)
+               if is_nested_setting(name)
                or (gather and name not in gather and name not in SOLVE_ONLY)}
     rows = []
     for fixed in settings(relearn):  # [{}] when nothing is relearned: one stream in all

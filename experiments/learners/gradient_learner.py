@@ -30,9 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.learners.start import FIRST_FRAME_SHARE, REFINE_SHARE, init_key, scene_prior
+from experiments.learners.start import init_key, scene_prior
 from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points
-from vbgs.inference import grow
 from vbgs.baseline import (
     TrainConfig,
     Trainer,
@@ -44,9 +43,10 @@ from vbgs.baseline import (
     reset_moments,
     to_splats,
 )
-from vbgs.baseline.params import place
 from vbgs.baseline.densify import DEAD_OPACITY
+from vbgs.baseline.params import place
 from vbgs.data.scene import Frame, Scene
+from vbgs.inference import grow
 from vbgs.render.raster import ALPHA_MIN, BLUR_VARIANCE
 from vbgs.render.splats import Splats, prune
 
@@ -108,8 +108,10 @@ class GradientLearner:
         xyz, rgb = frame_points(frame)
         self.key, sub = jax.random.split(self.key)
         if self.state is None:
-            self.rule = grow.calibrate(xyz, t.components, FIRST_FRAME_SHARE * t.components,
-                                       refine=REFINE_SHARE)
+            g = t.growth  # the rule VBGS's map grows by (vbgs.mapping.GrowthConfig)
+            self.rule = grow.calibrate(xyz, t.components, g.first_frame_share * t.components,
+                                       refine=g.refine_share, levels=g.levels,
+                                       rate=g.max_new_share)
             start = grow.start_empty(xyz, t.components, self.rule.cell, self.prior)
             prior = grow.grow(start, xyz, rgb, self.rule, key=sub, config=self.prior)[0].prior
             self.origin = np.asarray(prior.origin, np.float64)

@@ -1,6 +1,6 @@
 """Where a scene learner starts: :func:`scene_prior` (the oracle starts ``data`` and
-``random`` of :mod:`experiments.init_schemes`, from every training frame) and the
-constants of the ``stream`` start. The key is ``jax.random.key(task.seed)`` for both
+``random`` of :mod:`experiments.init_schemes`, from every training frame); the ``stream``
+start grows by :class:`vbgs.mapping.GrowthConfig` (the task's ``growth``). The key is ``jax.random.key(task.seed)`` for both
 learners, so VBGS and the gradient baseline start from the same components.
 """
 
@@ -10,16 +10,8 @@ import jax
 import numpy as np
 
 from experiments.protocol import frame_points
-from vbgs.inference import model
 from vbgs.data.scene import Scene
-
-
-# The share of the capacity K a 3-D stream's first frame gets (it fixes the cell side
-# of :mod:`vbgs.inference.grow`); measured on the object scene, see the README.
-FIRST_FRAME_SHARE = 0.1
-# Share of the empty slots a frame may spend refining ground already covered (finer
-# cells, see vbgs.inference.grow); what is left stays for new ground in later frames.
-REFINE_SHARE = 0.05
+from vbgs.inference import model
 
 
 def init_key(task) -> jax.Array:

@@ -42,6 +42,7 @@ from experiments.settings import (
 )
 from experiments.sweep.tasks import TASKS, TaskUnavailable
 
+
 class ConfigError(ValueError):
     """A config that cannot run; the message names the file and the key."""
 

@@ -13,7 +13,6 @@ import pandas as pd
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after choosing the backend)
-from experiments.sweep.cells import as_picture  # noqa: E402
 from matplotlib.ticker import (  # noqa: E402
     FormatStrFormatter,
     LogLocator,
@@ -21,6 +20,7 @@ from matplotlib.ticker import (  # noqa: E402
     NullFormatter,
 )
 
+from experiments.sweep.cells import as_picture  # noqa: E402
 from vbgs.data.images import read_rgb  # noqa: E402
 
 # Settings that tell lines apart (when they vary); the others are averaged over.

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 
 from depth import PRESETS, OnnxDepth
+from depth import testing as om
 from depth.model_io import ModelIO, to_nhw
 from depth.preprocess import resize
 from depth.presets import IMAGENET_MEAN, IMAGENET_STD
-from depth import testing as om
 
 W = np.array([0.5, 0.3, 0.2], np.float32)
 B = 0.1

@@ -3,7 +3,6 @@
 import math
 
 import numpy as np
-
 import pytest
 
 from experiments.bench_stream import _prior, device_rows, speedups, stream_row

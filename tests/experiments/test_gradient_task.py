@@ -68,7 +68,7 @@ def test_static_run_has_no_forgetting_metrics():
 def test_gradient_learner_starts_where_vbgs_starts():
     task = tiny_task()
     scene, _ = prepare_scene(task)
-    vbgs_prior = VbgsLearner(task, scene).prior
+    vbgs_prior = VbgsLearner(task, scene).state.mixture.prior
     params = GradientLearner(task, scene).state.params
     np.testing.assert_allclose(params.means, vbgs_prior.space.mean + vbgs_prior.origin,
                                rtol=1e-6)

@@ -9,6 +9,7 @@ import pytest
 from experiments.learners import LEARNERS, GradientLearner, VbgsLearner
 from experiments.protocol import frame_points
 from experiments.scene_task import SceneTask, prepare_scene, run_scene
+from vbgs import mapping
 from vbgs.inference import grow
 
 
@@ -46,15 +47,16 @@ def test_gradient_learner_grows_where_vbgs_grows(scene):
     task = tiny(method="gradient")
     vbgs, gradient = VbgsLearner(task, scene), GradientLearner(task, scene)
     for frame in scene.train[:3]:
-        vbgs._grow(*frame_points(frame))
+        vbgs.state, _ = mapping.grow_components(vbgs.state, *frame_points(frame), vbgs.config)
         gradient._grow(frame)
-        active = grow.is_active(vbgs.prior)
+        prior = vbgs.state.mixture.prior
+        active = grow.is_active(prior)
         rows = np.asarray(gradient.state.params.active)
         assert rows.sum() == active.sum()
     # the same first-frame components; later frames are scored against each learner's own
     # (here: identical, untrained) means, so the same rows again
     np.testing.assert_allclose(np.asarray(gradient.state.params.means)[rows],
-                               np.asarray(vbgs.prior.space.mean + vbgs.prior.origin)[active],
+                               np.asarray(prior.space.mean + prior.origin)[active],
                                rtol=1e-6, atol=1e-6)
 
 
@@ -79,15 +81,17 @@ def test_the_streaming_bound_counts_only_the_points_learned():
     for frame in room.train:
         learner.learn(frame, np.zeros(3, np.float32))
         learner.diagnose(frame)
-    assert learner.step.reach is not None and learner.step.unreached > 0
-    assert learner.bound.n_points == learner.points_seen - learner.step.unreached
+    state = learner.state
+    assert state.n_unlearned > 0
+    assert learner.bound.n_points == state.n_points - state.n_unlearned
 
 
 def test_each_learner_is_scored_with_its_own_pixel_filter(scene):
     """VBGS splats are drawn with the task's splat_blur, the gradient baseline's with the
     filter it trained under: the record's renders are those renders."""
-    from experiments.protocol import render_view, stream_protocol
+    from experiments.protocol import stream_protocol
     from vbgs.render.raster import BLUR_VARIANCE
+    from vbgs.render.views import render_view
 
     assert GradientLearner.blur == BLUR_VARIANCE
     psnrs = {}

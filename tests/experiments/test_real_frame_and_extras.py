@@ -9,8 +9,8 @@ import numpy as np
 
 from experiments.oracle import masked_psnr, oracle_splats, render_oracle
 from experiments.run import main
-from vbgs.render.camera import valid_depth
 from vbgs.data.formats import load_scene
+from vbgs.render.camera import valid_depth
 
 SIZE = 48
 

@@ -153,6 +153,7 @@ def test_failed_cell_is_recorded_and_the_sweep_goes_on(tmp_path, capsys):
     ok = {k: (out / "cells" / f"{k}.json").stat().st_mtime_ns
           for k, r in records.items() if r["status"] == "ok"}
     from matplotlib.image import imsave
+
     from vbgs.data.images import load_image
 
     imsave(photo, load_image("coffee", 16))

@@ -35,8 +35,27 @@ def test_model_hyperparameters_are_tuned_as_prior_fields():
     assert task.prior.cov_strength == TINY.prior.cov_strength  # the other fields kept
 
 
+def test_every_method_constant_is_reached_by_its_dotted_name():
+    """Growth and evidence constants are tuned like the prior's (one stream per value),
+    typed by the field, and reach the learner's mapping config."""
+    from experiments.learners.vbgs_learner import task_config
+
+    grid = parse_grid(["growth.reach_cells=1.5,3", "growth.levels=2,4",
+                       "evidence.pass_sigmas=1,2"], TINY)
+    assert grid == {"growth.reach_cells": [1.5, 3.0], "growth.levels": [2, 4],
+                    "evidence.pass_sigmas": [1.0, 2.0]}
+    task = tune_module.with_setting(TINY, {"growth.reach_cells": 3.0, "growth.levels": 2,
+                                           "evidence.pass_sigmas": 1.0})
+    config = task_config(task)
+    assert (config.growth.reach_cells, config.growth.levels, config.evidence.pass_sigmas) == (
+        3.0, 2, 1.0)
+    assert config.growth.first_frame_share == TINY.growth.first_frame_share
+    with pytest.raises(ValueError, match="growth.reach_cells must be a positive"):
+        parse_grid(["growth.reach_cells=0"], TINY)
+
+
 @pytest.mark.parametrize("spec, message", [
-    (["prior.bogus=1"], "'prior.bogus' is not a model hyperparameter"),
+    (["prior.bogus=1"], "'prior.bogus' is not a method constant"),
     (["prior.cov_scale=-1"], "cov_scale must be a positive finite number"),
     (["prior.cov_scale=big"], "cannot read 'big' as float"),
     (["opacity"], "write NAME=V1,V2"),

@@ -4,9 +4,9 @@ import jax
 import numpy as np
 import pytest
 
-from vbgs.inference import model
 from vbgs.data.images import as_rgb, image_to_points, load_image, patch_stream
 from vbgs.data.streams import stream_order
+from vbgs.inference import model
 
 
 def test_nan_and_inf_pixels():

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from vbgs.inference import model
 from vbgs.baseline import (
     DensifyConfig,
     TrainConfig,
@@ -36,8 +35,9 @@ from vbgs.baseline.image import (
 )
 from vbgs.baseline.loss import depth_loss, ssim_of
 from vbgs.baseline.train import ADAM
-from vbgs.render.camera import unproject
 from vbgs.data.synthetic import object_scene
+from vbgs.inference import model
+from vbgs.render.camera import unproject
 from vbgs.render.metrics import SSIM_SIGMA
 from vbgs.render.raster import rasterize
 

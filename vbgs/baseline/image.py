@@ -31,8 +31,8 @@ import optax
 from vbgs.baseline.loss import image_loss
 from vbgs.baseline.params import Params, colours, rotation_matrices, trainable
 from vbgs.baseline.train import TrainConfig, Trainer
-from vbgs.render.pixels import pixel_centres
 from vbgs.inference.precision import mat_vec, matmul
+from vbgs.render.pixels import pixel_centres
 
 IMAGE_STEPS = 2000  # default number of Adam steps for an image fit
 PIXEL_CHUNK = 1024  # pixels per chunk of the dense candidate pass (bounds [chunk, K] blocks)

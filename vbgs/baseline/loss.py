@@ -21,8 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.render.metrics import SSIM_SIGMA, ssim_window
 from vbgs.inference.precision import tensordot
+from vbgs.render.metrics import SSIM_SIGMA, ssim_window
 
 SSIM_LAMBDA = 0.2  # weight of (1 - SSIM); 3DGS's λ_D-SSIM
 DEPTH_MIN_ALPHA = 0.5  # depth is compared where the render covers the pixel this much

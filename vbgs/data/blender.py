@@ -40,7 +40,6 @@ from pathlib import Path
 import numpy as np
 from skimage import io as skio
 
-from vbgs.render.camera import Camera, opengl_to_opencv
 from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
 from vbgs.data.images import read_rgb
 from vbgs.data.scene import (
@@ -54,6 +53,7 @@ from vbgs.data.scene import (
     validate_frame,
 )
 from vbgs.io_atomic import write_atomic, write_text_atomic
+from vbgs.render.camera import Camera, opengl_to_opencv
 
 BLENDER_BACKGROUND = (1.0, 1.0, 1.0)
 VAL_EVERY = 8  # without transforms_val.json, every 8th training frame is a validation view

@@ -38,7 +38,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from vbgs.render.camera import Camera
 from vbgs.data.blender import VAL_EVERY, load_blender, write_blender
 from vbgs.data.depth_png import read_depth_png
 from vbgs.data.images import read_rgb
@@ -55,6 +54,7 @@ from vbgs.data.scene import (
 )
 from vbgs.data.stereo import REAL_SCENES
 from vbgs.data.synthetic import SCENES, make_scene
+from vbgs.render.camera import Camera
 from vbgs.render.pixels import pixel_centre
 
 __all__ = [

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 from skimage import data as skdata
 
+from vbgs.data.streams import stream_order
 from vbgs.io_atomic import write_atomic
 from vbgs.render.pixels import pixel_centres
-from vbgs.data.streams import stream_order
 
 # Photos shipped inside scikit-image (no download needed).
 BUNDLED = (

@@ -39,8 +39,8 @@ from __future__ import annotations
 import numpy as np
 from skimage import data as skdata
 
-from vbgs.render.camera import Camera
 from vbgs.data.scene import Frame, Scene, bounds_from_frames, resize_frame
+from vbgs.render.camera import Camera
 from vbgs.render.pixels import pixel_centre
 
 MOTORCYCLE_FOCAL = 994.978  # px, at the shipped 741 x 500 size

@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbgs.render.camera import from_fov, look_at
 from vbgs.data.raycast import Cylinder, Disc, Sphere, Surface, bounds_of, box, render
 from vbgs.data.scene import Frame, Scene
+from vbgs.render.camera import from_fov, look_at
 
 OBJECT_BACKGROUND = (1.0, 1.0, 1.0)  # white, as NeRF-synthetic composites its RGBA images
 OBJECT_FOV_X = 0.6911112070083618  # radians: NeRF-synthetic's camera_angle_x

@@ -15,8 +15,21 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
-from vbgs.inference.model import (Assign, EStep, Info, Mixture, PriorConfig, State, _update, bucket_size,
-                        check_points_host, chunk_size, padded_batch, start, update)
+from vbgs.inference.model import (
+    Assign,
+    EStep,
+    Info,
+    Mixture,
+    PriorConfig,
+    State,
+    _update,
+    bucket_size,
+    check_points_host,
+    chunk_size,
+    padded_batch,
+    start,
+    update,
+)
 from vbgs.inference.reassign import MIN_COUNT, reassign, reassign_centred
 from vbgs.inference.stepper import Stepper
 

@@ -36,8 +36,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.inference.model import LOCAL_MAX_ITERS, Mixture, PriorConfig, State, check_points_host, m_step, start
-from vbgs.inference.model import _make_prior  # compiled make_prior
+from vbgs.inference.model import (
+    LOCAL_MAX_ITERS,
+    Mixture,
+    PriorConfig,
+    State,
+    _make_prior,  # compiled make_prior
+    check_points_host,
+    m_step,
+    start,
+)
 from vbgs.inference.model import update as model_update
 
 # Compiled: eager, their many small ops dispatch one by one (m_step ~0.1 s at K=20k) and
@@ -205,14 +213,14 @@ class Growth(NamedTuple):
     max_new: int
 
 
-def reach_of(rule: Growth) -> float:
-    """``REACH_CELLS x cell``: how far from every component a point may lie and still be
+def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
+    """``cells x cell`` (:data:`REACH_CELLS` by default): how far from every component a point may lie and still be
     learned. Once the budget K is spent, new ground gets no component; its points, forced
     onto the nearest components (responsibilities sum to one at any distance), would
     stretch them across the gap into needles (measured on the room: after frame 25 of
     60, up to half of each frame's points lay over 2 cells from every component), so
     the stepper leaves them out (:class:`vbgs.inference.stepper.Stepper`, ``reach``)."""
-    return REACH_CELLS * rule.cell
+    return cells * rule.cell
 
 
 def calibrate(xyz, n_components: int, first_cells: float, *, refine: float = 0.0,

@@ -33,6 +33,7 @@ tests hold the stepper equal to them.
 
 from __future__ import annotations
 
+import copy
 from functools import partial
 from typing import Literal, NamedTuple
 
@@ -44,8 +45,15 @@ from jax.scipy.special import digamma
 from vbgs.inference import candidates, expfam, grid, model
 from vbgs.inference.model import Assign, EStep, Info, Mixture, PriorConfig, State
 
-
 Search = Literal["auto", "grid", "kdtree"]
+
+
+class StepInfo(NamedTuple):
+    """:class:`vbgs.inference.model.Info` of a stepped batch, and which points it learned."""
+
+    elbo: jnp.ndarray  # scalar
+    point_loglik: jnp.ndarray  # [size] padded: the first n entries are the batch's
+    learned: np.ndarray | None  # [n] bool: within reach (None: no reach, every point)
 
 
 # Headroom left when the padded size grows (see Stepper.padded_size).
@@ -158,12 +166,15 @@ class Stepper:
     host KD-tree (see the module docstring).
 
     ``reach``: points farther than this from every mean of the assigning model (world
-    units) are left out of the update (weight 0; counted in ``unreached``). No component
+    units) are left out of the update (weight 0). No component
     explains them, and responsibilities, which sum to one whatever the distance, would
     otherwise hand them to the nearest components and stretch those across the gap into
     needles (a stream whose budget of components has run out). Sparse E-step with the
-    KD-tree only (its query gives the distance for free). ``learned``: the last batch's
-    points within reach, ``[n]`` bool (None without ``reach``).
+    KD-tree only (its query gives the distance for free). ``info.learned``: the batch's
+    points within reach, ``[n]`` bool on the host (None without ``reach``).
+
+    A stepper is not changed by a call or by growth (:meth:`grow` returns a new one that
+    shares the compiled step); only its padded size, a cache of the compiled shapes, grows.
     """
 
     def __init__(self, prior: Mixture, *, assign: Assign = "prior",
@@ -212,14 +223,13 @@ class Stepper:
             raise ValueError(f"reach={reach!r} needs a positive distance, the sparse E-step "
                              "and the KD-tree search (estep='sparse', search='kdtree')")
         self.reach = reach
-        self.unreached = 0  # points left out of the updates so far (beyond reach)
-        self.learned: np.ndarray | None = None  # [n] the last batch's points within reach
 
-    def grow(self, prior: Mixture, rows) -> None:
-        """Take the grown reference ``prior``, which differs from the stepper's only in
-        the components ``rows [m]`` (the slots :func:`vbgs.inference.grow.grow` filled): their terms
-        are recomputed, the other rows' ``E[log pi_k]`` shifted (:func:`_grown_terms`),
-        the KD-tree rebuilt; the compiled step is reused."""
+    def grow(self, prior: Mixture, rows) -> Stepper:
+        """A stepper for the grown reference ``prior``, which differs from this one's only
+        in the components ``rows [m]`` (the slots :func:`vbgs.inference.grow.grow` filled):
+        their terms are recomputed, the other rows' ``E[log pi_k]`` shifted
+        (:func:`_grown_terms`), the KD-tree rebuilt; the compiled step is reused and this
+        stepper is left as it was."""
         if self.spec is not None:
             raise ValueError("this stepper searches a grid planned from the means: build it "
                              "with grows=True to let its reference grow")
@@ -227,6 +237,7 @@ class Stepper:
             raise ValueError(f"the grown reference has {prior.n_components} {prior.dim}-D "
                              f"components, the stepper {self.prior.n_components} "
                              f"{self.prior.dim}-D ones: growth fills slots, it adds none")
+        grown = copy.copy(self)
         blocks = row_blocks(rows)
         if self.fixed is not None and blocks:
             reference, old_alpha = self.fixed.reference, self.prior.alpha
@@ -234,10 +245,11 @@ class Stepper:
                 reference = _grown_terms(reference, old_alpha, prior, jax.device_put(block),
                                          self.estep, self.colour_noise)
                 old_alpha = prior.alpha
-            self.fixed = self.fixed._replace(reference=reference)
+            grown.fixed = self.fixed._replace(reference=reference)
             if self._tree is not None:
-                self._tree = candidates.means_tree(prior.space.mean)
-        self.prior = prior
+                grown._tree = candidates.means_tree(prior.space.mean)
+        grown.prior = prior
+        return grown
 
     def padded_size(self, n: int) -> int:
         """The size batches of ``n`` points are padded to: it only grows, and when it
@@ -253,25 +265,23 @@ class Stepper:
         d = self.prior.dim
         return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
 
-    def __call__(self, state: State, xyz, rgb) -> tuple[State, Info]:
+    def __call__(self, state: State, xyz, rgb) -> tuple[State, StepInfo]:
         xyz, rgb = model.check_points_host(xyz, rgb)
         if xyz.shape[1] != self.prior.dim:
             raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
         size = self.padded_size(xyz.shape[0])
         x, c, w = model.padded_batch(xyz, rgb, self._origin, size, self.prior.alpha.dtype)
-        cand = None
+        cand, learned = None, None
         if self.estep == "sparse" and self.spec is None:
             n = xyz.shape[0]
             tree = self._tree or candidates.means_tree(state.posterior.space.mean)
             cand = np.zeros((size, self.n_candidates), np.int32)  # padding: weight 0
             nearest, cand[:n] = candidates.query_with_distance(tree, x[:n], self.n_candidates)
             if self.reach is not None:
-                out = nearest > self.reach
-                w[:n][out] = 0.0
-                self.unreached += int(out.sum())
-                self.learned = ~out
+                learned = nearest <= self.reach
+                w[:n][~learned] = 0.0
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)
         posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)
-        return state._replace(posterior=posterior, stats=stats), info
+        return state._replace(posterior=posterior, stats=stats), StepInfo(*info, learned)
 

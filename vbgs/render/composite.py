@@ -17,8 +17,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.render.pixels import pixel_centre
 from vbgs.inference.precision import matmul
+from vbgs.render.pixels import pixel_centre
 
 ALPHA_MAX = 0.99  # clamp on a single splat's alpha (keeps 1 - α > 0 for the gradients)
 ALPHA_MIN = 1.0 / 255.0  # contributions below one 8-bit colour step are skipped

@@ -11,10 +11,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.render.pixels import pixel_centres
-from vbgs.inference.model import (Mixture, features, bucket_size, chunk_size, feature_logits,
-                        log_joint_weights)
+from vbgs.inference.model import (
+    Mixture,
+    bucket_size,
+    chunk_size,
+    feature_logits,
+    features,
+    log_joint_weights,
+)
 from vbgs.inference.precision import matmul
+from vbgs.render.pixels import pixel_centres
 
 
 @partial(jax.jit, static_argnames=("chunk",))

@@ -54,17 +54,20 @@ def no_evidence(k: int) -> Evidence:
     return Evidence(jnp.zeros(k, jnp.float32), jnp.zeros(k, jnp.float32))
 
 
-def expected_opacity(evidence: Evidence) -> jax.Array:
-    """``E[o]`` ``[k]`` under the Beta posterior (module docstring)."""
-    hits = PRIOR_HITS + evidence.hits
-    return hits / (hits + PRIOR_PASSES + evidence.passes)
+def expected_opacity(evidence: Evidence, prior_hits: float = PRIOR_HITS,
+                     prior_passes: float = PRIOR_PASSES) -> jax.Array:
+    """``E[o]`` ``[k]`` under the Beta(prior_hits + h, prior_passes + m) posterior."""
+    hits = prior_hits + evidence.hits
+    return hits / (hits + prior_passes + evidence.passes)
 
 
-def observe(evidence: Evidence, means, covs, camera: Camera, depth) -> Evidence:
+def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
+            pass_sigmas: float = PASS_SIGMAS) -> Evidence:
     """Add one frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
-    (0, NaN or inf where missing)."""
+    (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z)."""
     hits, passes = _frame_counts(
+        jnp.float32(pass_sigmas),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
@@ -73,7 +76,7 @@ def observe(evidence: Evidence, means, covs, camera: Camera, depth) -> Evidence:
 
 
 @jax.jit
-def _frame_counts(means, covs, fx, fy, cx, cy, pose, depth):
+def _frame_counts(pass_sigmas, means, covs, fx, fy, cx, cy, pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring)."""
     height, width = depth.shape
     k = means.shape[0]
@@ -95,8 +98,8 @@ def _frame_counts(means, covs, fx, fy, cx, cy, pose, depth):
     has_depth = jnp.isfinite(observed) & (observed > 0)
     axis_z = pose[:3, 2]  # camera z axis in world coordinates
     sigma_z = jnp.sqrt(jnp.maximum(jnp.einsum("i,kij,j->k", axis_z, covs, axis_z), 0.0))
-    near_side = proj.depth - PASS_SIGMAS * sigma_z
-    far_side = proj.depth + PASS_SIGMAS * sigma_z
+    near_side = proj.depth - pass_sigmas * sigma_z
+    far_side = proj.depth + pass_sigmas * sigma_z
     hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
     passed = inside & (~has_depth | (observed > far_side))
     per_sample = area / N_SAMPLES

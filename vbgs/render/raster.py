@@ -81,6 +81,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.inference.precision import matmul
 from vbgs.render.camera import Camera
 from vbgs.render.composite import (  # noqa: F401 (ALPHA_MAX, DEPTH_CHUNK: re-exported, the spec's constants)
     ALPHA_MAX,
@@ -90,7 +91,6 @@ from vbgs.render.composite import (  # noqa: F401 (ALPHA_MAX, DEPTH_CHUNK: re-ex
     composite_tiles,
     transmittance,
 )
-from vbgs.inference.precision import matmul
 from vbgs.render.raster_pallas import composite_tiles_pallas
 from vbgs.render.splats import Splats, check_splats
 

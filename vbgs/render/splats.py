@@ -22,8 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.io_atomic import write_atomic
 from vbgs.inference.precision import matmul
+from vbgs.io_atomic import write_atomic
 
 # Degree-0 real spherical harmonic, 1 / (2 sqrt(pi)): rgb = 0.5 + SH_C0 * f_dc.
 SH_C0 = 0.28209479177387814

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from skimage import io as skio
 
-from vbgs.render.camera import look_at
 from vbgs.data.blender import load_blender
 from vbgs.data.depth_png import read_depth_png, write_depth_png
 from vbgs.data.images import read_image_file
+from vbgs.render.camera import look_at
 
 FLIP = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenGL <-> OpenCV camera axes
 

@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 from skimage import io as skio
 
-from vbgs.render.camera import look_at
 from vbgs.data.depth_png import write_depth_png
 from vbgs.data.formats import (
     REPLICA_INTRINSICS,
@@ -17,6 +16,7 @@ from vbgs.data.formats import (
     write_blender,
 )
 from vbgs.data.synthetic import make_scene
+from vbgs.render.camera import look_at
 
 FLIP = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenGL <-> OpenCV camera axes
 

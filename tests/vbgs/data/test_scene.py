@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
 
-from vbgs.render.camera import Camera, look_at, project
 from vbgs.data.scene import (
     Frame,
     Scene,
@@ -13,6 +12,7 @@ from vbgs.data.scene import (
     validate_frame,
     validate_scene,
 )
+from vbgs.render.camera import Camera, look_at, project
 
 
 def _frame(h=6, w=8):

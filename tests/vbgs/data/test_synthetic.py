@@ -1,10 +1,8 @@
-import time
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
-from vbgs.render.camera import project, unproject
 from vbgs.data.raycast import camera_rays, cast, distance_to_surfaces, render
 from vbgs.data.scene import validate_scene
 from vbgs.data.stereo import disparity_to_depth, stereo_motorcycle_frame
@@ -15,6 +13,7 @@ from vbgs.data.synthetic import (
     make_scene,
     scene_primitives,
 )
+from vbgs.render.camera import project, unproject
 
 SMALL = dict(size=40, n_train=6, n_test=3)
 

@@ -7,9 +7,9 @@ import sys
 import jax
 import numpy as np
 
+from vbgs.data.synthetic import object_scene
 from vbgs.inference import model, sharding, stepper
 from vbgs.render.camera import unproject
-from vbgs.data.synthetic import object_scene
 
 
 def main() -> None:

@@ -4,10 +4,10 @@ import jax
 import numpy as np
 import pytest
 
-from vbgs.inference import model
-from vbgs.render.camera import unproject
-from vbgs.inference.candidates import nearest_components
 from vbgs.data.synthetic import object_scene
+from vbgs.inference import model
+from vbgs.inference.candidates import nearest_components
+from vbgs.render.camera import unproject
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,8 @@ import jax
 import numpy as np
 import pytest
 
-from vbgs.inference import model
 from vbgs.data.images import image_to_points, load_image
+from vbgs.inference import model
 from vbgs.inference.fit import fit, fit_steps
 
 

@@ -5,11 +5,11 @@ import jax
 import numpy as np
 import pytest
 
-from vbgs.inference import grow, model
 from vbgs.data.images import load_image, patch_stream
-from vbgs.render.metrics import psnr
+from vbgs.inference import grow, model
 from vbgs.inference.reassign import MIN_COUNT
 from vbgs.render.image import render_image
+from vbgs.render.metrics import psnr
 
 
 def lattice(n: int, offset=(0.0, 0.0)) -> np.ndarray:
@@ -150,12 +150,12 @@ def test_cell_ids_label_equal_cells_alike_packed_or_not():
     got = grow.cell_ids(cells)
     want = np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
     # a bijection between the labels: same cell <=> same label
-    assert len(set(zip(got, want))) == len(set(got)) == len(set(want))
+    assert len(set(zip(got, want, strict=False))) == len(set(got)) == len(set(want))
     wide = cells.copy()
     wide[:, 0] *= 2**40  # a box too wide to pack into one int64: unique over rows
     wide[:, 1] *= 2**30
     again = grow.cell_ids(wide)
-    assert len(set(zip(again, want))) == len(set(again)) == len(set(want))
+    assert len(set(zip(again, want, strict=False))) == len(set(again)) == len(set(want))
 
 
 @pytest.mark.parametrize("order,seed", [("reversed", 0), ("sequential", 1)])
@@ -270,8 +270,8 @@ def test_two_d_models_ignore_the_surface_thickness():
 def _surface_stream(scale: float = 1.0, offset: float = 0.0):
     """A few depth frames of a small object scene, in other units or moved, streamed from
     empty slots under the scene prior (flattened along surfaces)."""
-    from vbgs.render.camera import unproject
     from vbgs.data.synthetic import object_scene
+    from vbgs.render.camera import unproject
 
     scene = object_scene(size=24, n_train=4, n_test=1, seed=3)
     batches = [((xyz.astype(np.float64) * scale + offset).astype(np.float32), rgb)

@@ -4,11 +4,11 @@ import jax
 import numpy as np
 import pytest
 
-from vbgs.inference import model
 from vbgs.data.images import image_to_points, load_image, patch_stream
+from vbgs.inference import model
 from vbgs.inference.fit import fit, stream
-from vbgs.render.metrics import psnr
 from vbgs.render.image import render_image
+from vbgs.render.metrics import psnr
 
 
 @pytest.fixture(scope="module")

@@ -15,16 +15,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vbgs.inference import model, precision
 from vbgs.baseline import TrainConfig, Trainer, camera_extent, params_from_prior, to_splats
-from vbgs.render.camera import unproject
 from vbgs.data.images import image_to_points, load_image
 from vbgs.data.synthetic import object_scene
+from vbgs.inference import model, precision
 from vbgs.inference.fit import fit
-from vbgs.render.metrics import psnr
 from vbgs.inference.model import used_components
-from vbgs.render.raster import rasterize
+from vbgs.render.camera import unproject
 from vbgs.render.image import render_image
+from vbgs.render.metrics import psnr
+from vbgs.render.raster import rasterize
 
 _spec = importlib.util.spec_from_file_location("tf32", Path(__file__).with_name("tf32.py"))
 tf32 = importlib.util.module_from_spec(_spec)

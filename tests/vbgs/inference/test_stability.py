@@ -5,11 +5,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vbgs.inference import model
 from vbgs.data.images import image_to_points, load_image
+from vbgs.inference import model
 from vbgs.inference.fit import fit
-from vbgs.render.metrics import psnr
 from vbgs.render.image import expected_colour, render_image
+from vbgs.render.metrics import psnr
 
 
 def _fit(img, k, *, offset=0.0, dtype=np.float32, iters=5, scheme="data"):

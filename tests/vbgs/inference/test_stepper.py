@@ -5,10 +5,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from vbgs.inference import grid, model, stepper
-from vbgs.render.camera import unproject
-from vbgs.inference.candidates import nearest_components
 from vbgs.data.synthetic import object_scene
+from vbgs.inference import grid, model, stepper
+from vbgs.inference.candidates import nearest_components
+from vbgs.render.camera import unproject
 
 
 @pytest.fixture(scope="module")

@@ -1,13 +1,13 @@
-"""A stepper whose reference grows (vbgs.inference.grow fills slots) is updated in place, equals a
+"""A stepper whose reference grows (vbgs.inference.grow fills slots) is grown into a new one, equals a
 freshly built one, and never recompiles its step."""
 
 import jax
 import numpy as np
 import pytest
 
+from vbgs.data.synthetic import object_scene
 from vbgs.inference import grow, model, stepper
 from vbgs.render.camera import unproject
-from vbgs.data.synthetic import object_scene
 from vbgs.render.splats import mixture_geometry
 
 
@@ -45,7 +45,7 @@ def test_a_grown_stepper_equals_a_fresh_one(frames, assign, estep, config, monke
             kept = stepper.Stepper(state.prior, assign=assign, estep=estep, grows=True,
                                    max_points=size, config=config)
         else:
-            kept.grow(state.prior, info.slots)
+            kept = kept.grow(state.prior, info.slots)
         fresh = stepper.Stepper(state.prior, assign=assign, estep=estep, grows=True,
                                 max_points=size, config=config)
         a, ainfo = kept(state, xyz, rgb)
@@ -84,7 +84,7 @@ def test_growth_does_not_recompile_the_step(frames):
     sizes = set()
     for i, (xyz, rgb) in enumerate(frames[1:], 1):
         state, info = grow.grow(state, xyz, rgb, rule, key=jax.random.key(i))
-        step.grow(state.prior, info.slots)
+        step = step.grow(state.prior, info.slots)
         sizes.add(info.n_new)
         state, _ = step(state, xyz, rgb)
     assert len(sizes) > 1  # the frames grow different numbers of components...
@@ -132,17 +132,17 @@ def test_reach_keeps_a_spent_budget_off_a_depth_edge(reach):
     step = stepper.Stepper(prior, estep="sparse", search="kdtree", reach=reach)
     state = model.start(prior)
     a2_xyz, a2_rgb = _plane(rng, 3000, 0.0, 0.0, [0.8, 0.2, 0.2])
-    state, _ = step(state, a2_xyz, a2_rgb)
-    state, _ = step(state, np.concatenate([a_xyz, b_xyz]), np.concatenate([a_rgb, b_rgb]))
+    state, first = step(state, a2_xyz, a2_rgb)
+    state, last = step(state, np.concatenate([a_xyz, b_xyz]), np.concatenate([a_rgb, b_rgb]))
     means, covs = mixture_geometry(state.posterior)
     extent = np.sqrt(np.linalg.eigvalsh(np.asarray(covs, np.float64))[:, -1])  # [K]
     depth = np.sqrt(np.asarray(covs)[:, 2, 2])  # [K] spread along the gap
     if reach is None:
-        assert step.unreached == 0
+        assert first.learned is None and last.learned is None  # no reach: every point
         assert depth.max() > 0.25  # some component spans a quarter of the gap or more
     else:
-        assert step.unreached == len(b_xyz)  # every point of B, and no point of A
-        np.testing.assert_array_equal(step.learned, np.arange(6000) < 3000)  # the last batch
+        assert first.learned.all()  # A within reach
+        np.testing.assert_array_equal(last.learned, np.arange(6000) < 3000)  # B left out
         assert depth.max() < 0.05 and extent.max() < 0.3  # flat on A (prior floor ~0.01)
         assert np.abs(np.asarray(means)[:, 2]).max() < 0.01
         np.testing.assert_allclose(float(state.stats.count.sum()), 2 * 3000, rtol=1e-4)  # A, twice

@@ -5,9 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from vbgs.data.scene import Frame
 from vbgs.render import colour_fit
 from vbgs.render.camera import from_fov
-from vbgs.data.scene import Frame
 from vbgs.render.raster import rasterize
 from vbgs.render.splats import Splats
 

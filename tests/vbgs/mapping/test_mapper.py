@@ -1,0 +1,134 @@
+"""vbgs.mapping: the scene learner as pure functions over a MapState, one nested Config."""
+
+import dataclasses
+
+import jax
+import numpy as np
+import pytest
+
+from vbgs import mapping
+from vbgs.data.formats import load_scene
+from vbgs.inference import model
+from vbgs.render.camera import unproject
+
+K = 400
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("object", size=32, n_train=8, n_test=2, seed=0)
+
+
+def stream(config, frames, prior=None, key=0):
+    state = mapping.init(config, key=jax.random.key(key), prior=prior)
+    for frame in frames:
+        state, _ = mapping.update(state, frame, config)
+    return state
+
+
+def data_prior(scene, config):
+    xyz, rgb = (np.concatenate(a) for a in zip(
+        *(unproject(f.camera, f.rgb, f.depth) for f in scene.train), strict=True))
+    return model.init(xyz, rgb, config.components, key=jax.random.key(0), scheme="data",
+                      config=config.prior, bounds=scene.bounds)
+
+
+def test_config_reaches_every_constant_by_dotted_name():
+    config = mapping.Config()
+    names = mapping.dotted_names(config)
+    assert {"growth.reach_cells", "evidence.pass_sigmas", "prior.cov_scale",
+            "render.splat_blur", "components"} <= set(names)
+    changed = mapping.with_dotted(config, "growth.reach_cells", 3.0)
+    assert changed.growth.reach_cells == 3.0 and config.growth.reach_cells == 2.0
+    assert mapping.get_dotted(changed, "growth.reach_cells") == 3.0
+    with pytest.raises(ValueError, match="not a setting"):
+        mapping.with_dotted(config, "growth.reach", 3.0)
+    with pytest.raises(ValueError, match="growth.reach_cells must be a positive"):
+        mapping.with_dotted(config, "growth.reach_cells", -1.0)
+    with pytest.raises(ValueError, match="assign must be one of prior, posterior"):
+        mapping.Config(assign="later")
+    with pytest.raises(ValueError, match="render.opacity_rule"):
+        mapping.RenderConfig(opacity_rule="alpha")
+
+
+def test_a_fixed_reference_learns_the_same_in_any_order(scene):
+    """Prior assignment with a fixed reference (an oracle start): the posterior is a sum
+    of per-frame statistics, so the order of the frames does not matter; the opacity
+    evidence is read against the same reference, so it does not either."""
+    config = mapping.Config(components=K)
+    prior = data_prior(scene, config)
+    forward = stream(config, scene.train, prior)
+    backward = stream(config, scene.train[::-1], prior)
+    for a, b in zip(jax.tree.leaves(forward.mixture.stats),
+                    jax.tree.leaves(backward.mixture.stats), strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=2e-4, atol=2e-3)
+    np.testing.assert_allclose(forward.evidence.hits, backward.evidence.hits, rtol=1e-5,
+                               atol=1e-3)
+    assert forward.n_unlearned == 0  # a fixed reference reaches every point
+
+
+def test_a_growing_map_depends_on_the_order(scene):
+    """Stream init grows its reference from what has arrived, so the order changes it
+    (the README says so); the statistics still count every learned point."""
+    config = mapping.Config(components=K)
+    forward = stream(config, scene.train)
+    backward = stream(config, scene.train[::-1])
+    assert forward.growing and forward.rule is not None
+    assert not np.allclose(forward.mixture.prior.space.mean, backward.mixture.prior.space.mean)
+    for state in (forward, backward):
+        learned = state.n_points - state.n_unlearned
+        np.testing.assert_allclose(float(state.mixture.stats.count.sum()), learned, rtol=1e-4)
+
+
+def test_update_leaves_its_input_state_as_it_was(scene):
+    """Pure: the same state updated twice with the same frame gives the same map, and the
+    state before is untouched (growth makes a new stepper; it does not change the old)."""
+    config = mapping.Config(components=K)
+    state, _ = mapping.update(mapping.init(config, key=jax.random.key(1)), scene.train[0],
+                              config)
+    stepper, prior = state.stepper, state.mixture.prior
+    a, info_a = mapping.update(state, scene.train[3], config)
+    b, info_b = mapping.update(state, scene.train[3], config)
+    assert info_a.n_new > 0  # the second frame grew components...
+    assert state.stepper is stepper and state.mixture.prior is prior  # ...not in place
+    assert a.stepper.prior is a.mixture.prior and stepper.prior is prior
+    np.testing.assert_array_equal(a.mixture.posterior.space.mean, b.mixture.posterior.space.mean)
+    assert info_a.n_points == info_b.n_points and len(info_a.xyz) == info_a.n_learned <= info_a.n_points
+
+
+def test_mapper_binds_the_config(scene):
+    config = mapping.Config(components=K, render=mapping.RenderConfig(splat_scale=1.0))
+    bound = mapping.mapper(config)
+    state = bound.init(key=jax.random.key(0))
+    state, _ = bound.update(state, scene.train[0])
+    direct, _ = mapping.update(mapping.init(config, key=jax.random.key(0)), scene.train[0],
+                               config)
+    np.testing.assert_array_equal(bound.splats(state).covs, mapping.splats(direct, config).covs)
+    wider = dataclasses.replace(config, render=mapping.RenderConfig(splat_scale=2.0))
+    np.testing.assert_allclose(mapping.splats(state, wider).covs,
+                               4.0 * bound.splats(state).covs, rtol=1e-5)
+
+
+def test_bad_frames_and_states_are_refused(scene):
+    config = mapping.Config(components=K)
+    state = mapping.init(config, key=jax.random.key(0))
+    with pytest.raises(ValueError, match="no frame yet"):
+        mapping.splats(state, config)
+    blind = scene.train[0]._replace(depth=np.zeros_like(scene.train[0].depth))
+    with pytest.raises(ValueError, match="no pixel with valid depth"):
+        mapping.update(state, blind, config)
+    prior = data_prior(scene, config)
+    with pytest.raises(ValueError, match="config asks for 500"):
+        mapping.init(dataclasses.replace(config, components=500), key=jax.random.key(0),
+                     prior=prior)
+
+
+def test_points_beyond_reach_are_counted_not_learned(scene):
+    """A budget spent on the first frame: later frames' new ground is left out and counted
+    in points_unlearned, and the statistics hold only what was learned."""
+    config = mapping.Config(components=40, growth=mapping.GrowthConfig(
+        first_frame_share=1.0, reach_cells=0.5))
+    state = stream(config, scene.train)
+    assert 0 < state.points_unlearned < 1
+    learned = state.n_points - state.n_unlearned
+    np.testing.assert_allclose(float(state.mixture.stats.count.sum()), learned, rtol=1e-4)

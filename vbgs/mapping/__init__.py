@@ -1,0 +1,28 @@
+"""The scene learner as library functions: ``init``, ``update``, ``splats`` over a
+:class:`MapState`, with every hyperparameter in one nested :class:`Config`; ``mapper``
+binds them (see :mod:`vbgs.mapping.mapper`)."""
+
+from vbgs.mapping.config import (
+    Config,
+    EvidenceConfig,
+    GrowthConfig,
+    RenderConfig,
+    dotted_names,
+    get_dotted,
+    with_dotted,
+)
+from vbgs.mapping.mapper import (
+    MapInfo,
+    Mapper,
+    MapState,
+    bound,
+    grow_components,
+    init,
+    mapper,
+    splats,
+    update,
+)
+
+__all__ = ["Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState", "Mapper",
+           "RenderConfig", "bound", "dotted_names", "get_dotted", "grow_components", "init", "mapper", "splats",
+           "update", "with_dotted"]

@@ -1,0 +1,184 @@
+"""The scene learner's hyperparameters: one frozen, nested :class:`Config`.
+
+Every method constant of :mod:`vbgs.mapping` is a field here (or of the
+:class:`vbgs.inference.model.PriorConfig` it holds), so a tuning command reaches any of
+them by its dotted name (``growth.reach_cells``, ``evidence.pass_sigmas``,
+``prior.cov_scale``; :func:`with_dotted`). The defaults are the named constants of the
+modules that use them, each explained there; the values are said where they were chosen.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from vbgs.inference import grow
+from vbgs.inference.candidates import DEFAULT_CANDIDATES
+from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
+from vbgs.render import colour_fit, opacity
+from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
+
+ASSIGN = ("prior", "posterior")
+ESTEP = ("dense", "sparse")
+OPACITY_RULES = ("evidence", "constant")
+COLOUR_RULES = ("posterior", "fit")
+
+# The share of the capacity K a growing map's first frame gets: it fixes the cell side of
+# vbgs.inference.grow (the area the frame covers over this many cells). A tenth leaves
+# nine tenths for the ground later frames show.
+FIRST_FRAME_SHARE = 0.1
+# The share of the empty slots a frame may spend refining ground already covered (finer
+# cells, vbgs.inference.grow.select); what is left stays for new ground in later frames.
+REFINE_SHARE = 0.05
+
+
+def _positive(owner: str, name: str, value, *, upper: float | None = None) -> None:
+    ok = isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+    if not ok or (upper is not None and value > upper):
+        bound = f" and at most {upper}" if upper is not None else ""
+        raise ValueError(f"{owner}.{name} must be a positive number{bound}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class GrowthConfig:
+    """How a map that starts empty allocates components (:mod:`vbgs.inference.grow`).
+
+    first_frame_share: share of K the first frame gets (fixes the cell side);
+    refine_share: share of the empty slots a frame may spend on finer cells;
+    levels: cell levels refinement may use (each half the side of the one before);
+    max_new_share: the most components one frame may add, as a share of K;
+    reach_cells: points farther than this many cells from every component are left
+        out of the update (:func:`vbgs.inference.grow.reach_of`).
+    """
+
+    first_frame_share: float = FIRST_FRAME_SHARE
+    refine_share: float = REFINE_SHARE
+    levels: int = grow.LEVELS
+    max_new_share: float = grow.MAX_NEW_SHARE
+    reach_cells: float = grow.REACH_CELLS
+
+    def __post_init__(self):
+        _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
+        _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
+        _positive("growth", "reach_cells", self.reach_cells)
+        if not (isinstance(self.refine_share, (int, float)) and 0 <= self.refine_share <= 1):
+            raise ValueError(f"growth.refine_share must be in [0, 1], got {self.refine_share!r}")
+        if not isinstance(self.levels, int) or self.levels < 1:
+            raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
+
+
+@dataclass(frozen=True)
+class EvidenceConfig:
+    """Opacity from the rays that hit or pass each component (:mod:`vbgs.render.opacity`).
+
+    pass_sigmas: an observed depth within this many sigma (camera z) is a hit;
+    prior_hits, prior_passes: the Beta prior's pseudo-counts of rays.
+    """
+
+    pass_sigmas: float = opacity.PASS_SIGMAS
+    prior_hits: float = opacity.PRIOR_HITS
+    prior_passes: float = opacity.PRIOR_PASSES
+
+    def __post_init__(self):
+        for name in ("pass_sigmas", "prior_hits", "prior_passes"):
+            _positive("evidence", name, getattr(self, name))
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """How the posterior becomes splats (:func:`vbgs.render.splats.from_posterior`).
+
+    splat_scale: sigma multiplier of the expected covariance;
+    splat_blur: pixel filter variance (px²) the splats are drawn with;
+    opacity_rule: ``evidence`` (per component, :mod:`vbgs.render.opacity`) or ``constant``;
+    opacity: the constant of ``opacity_rule="constant"``;
+    colour_rule: ``posterior`` (colour means) or ``fit`` (least squares to the pixels,
+        :mod:`vbgs.render.colour_fit`); colour_ridge: its pixels' worth of weight on
+        the posterior colour.
+    """
+
+    splat_scale: float = VBGS_COV_SCALE
+    splat_blur: float = VBGS_BLUR
+    opacity_rule: str = "evidence"
+    opacity: float = VBGS_OPACITY
+    colour_rule: str = "posterior"
+    colour_ridge: float = colour_fit.RIDGE
+
+    def __post_init__(self):
+        _choice("render.opacity_rule", self.opacity_rule, OPACITY_RULES)
+        _choice("render.colour_rule", self.colour_rule, COLOUR_RULES)
+        _positive("render", "splat_scale", self.splat_scale)
+        _positive("render", "opacity", self.opacity, upper=1.0)
+        _positive("render", "colour_ridge", self.colour_ridge)
+        if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):
+            raise ValueError(f"render.splat_blur must be a pixel filter variance in [0, 10) "
+                             f"px², got {self.splat_blur!r}")
+
+
+def _choice(name: str, value, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything the scene learner needs besides the data and the key.
+
+    components: the capacity K (static shapes: a fixed number of slots);
+    assign: responsibilities under the fixed ``prior`` (a stream equals one batch when
+        the reference does not grow) or the current ``posterior``;
+    estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
+    prior, growth, evidence, render: the nested groups above.
+    """
+
+    components: int = 20000
+    assign: str = "prior"
+    estep: str = "sparse"
+    candidates: int = DEFAULT_CANDIDATES
+    prior: PriorConfig = SURFACE_PRIOR
+    growth: GrowthConfig = field(default_factory=GrowthConfig)
+    evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+
+    def __post_init__(self):
+        for name in ("components", "candidates"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        _choice("assign", self.assign, ASSIGN)
+        _choice("estep", self.estep, ESTEP)
+
+
+def dotted_names(config: Any = None, prefix: str = "") -> list[str]:
+    """Every leaf field of a nested frozen config, by dotted name (``growth.levels``)."""
+    config = Config() if config is None else config
+    names = []
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if dataclasses.is_dataclass(value):
+            names += dotted_names(value, f"{prefix}{f.name}.")
+        else:
+            names.append(prefix + f.name)
+    return names
+
+
+def get_dotted(config: Any, name: str):
+    """The value of the field ``name`` (dotted) of a nested config."""
+    for part in name.split("."):
+        if not dataclasses.is_dataclass(config) or part not in {
+                f.name for f in dataclasses.fields(config)}:
+            raise ValueError(f"{name!r} is not a setting; known: {', '.join(dotted_names())}")
+        config = getattr(config, part)
+    return config
+
+
+def with_dotted(config: Any, name: str, value) -> Any:
+    """``config`` with the field ``name`` (dotted: ``growth.reach_cells``) set to
+    ``value``; the nested configs check the new value as they are rebuilt."""
+    head, _, rest = name.partition(".")
+    get_dotted(config, head)  # a known field, or a clear error
+    if not rest:
+        return dataclasses.replace(config, **{head: value})
+    return dataclasses.replace(config, **{head: with_dotted(getattr(config, head), rest, value)})

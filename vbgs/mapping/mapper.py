@@ -1,0 +1,226 @@
+"""The scene learner: a continual map of Gaussian splats from posed RGB-D frames.
+
+In the shape of blackjax's algorithms: a :class:`MapState` carried from frame to frame,
+a :class:`MapInfo` of per-frame diagnostics, pure functions that take the
+hyperparameters as an argument, and :func:`mapper`, which binds them once::
+
+    learner = mapper(Config(components=20000))
+    state = learner.init(key=jax.random.key(0))
+    for frame in frames:                      # each frame seen once, in arrival order
+        state, info = learner.update(state, frame)
+    splats = learner.splats(state)            # render with vbgs.render.raster.rasterize
+
+What one :func:`update` does with a frame (a :class:`vbgs.data.scene.Frame`: camera,
+RGB, z-depth):
+
+1. its valid depth pixels become coloured world points (:func:`vbgs.render.camera.unproject`);
+2. a map started empty (``init`` without a ``prior``) grows components where the frame
+   shows ground the map has none for (:func:`vbgs.inference.grow.grow`); the first
+   frame fixes the cell side with ``growth.first_frame_share`` of the capacity;
+3. the opacity evidence of the frame's depth map is added (``render.opacity_rule ==
+   "evidence"``; :mod:`vbgs.render.opacity`), read against the assigning model;
+4. one compiled conjugate update learns the points (:class:`vbgs.inference.stepper.Stepper`;
+   growth hands it the new rows without recompiling); points farther than
+   ``growth.reach_cells`` cells from every component are left out and counted
+   (``MapState.n_unlearned``);
+5. under ``render.colour_rule == "fit"`` the frame's colour least-squares terms are
+   added against the splats of the posterior that has just learned it
+   (:mod:`vbgs.render.colour_fit`).
+
+The state is a NamedTuple and is never changed in place; it holds, beside arrays, the
+host-side objects a stream needs (the growth rule, and the stepper: the compiled update
+with the reference's terms, replaced when the reference grows). Under prior assignment
+with a fixed reference (``init(prior=...)``) the posterior is the same whatever the
+order of the frames; a map that grows changes its reference as frames arrive, so it is
+not (see :mod:`vbgs.inference.grow`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from vbgs.data.scene import Frame
+from vbgs.inference import grow, model
+from vbgs.inference.bound import BatchBound, batch_bound
+from vbgs.inference.stepper import Stepper
+from vbgs.mapping.config import Config
+from vbgs.render import colour_fit, opacity
+from vbgs.render.camera import unproject
+from vbgs.render.splats import Splats, from_posterior, mixture_geometry
+
+
+class MapState(NamedTuple):
+    """What a map carries from frame to frame."""
+
+    mixture: model.State | None  # prior, posterior, statistics; None before a growing
+    #                              map's first frame
+    key: jax.Array  # split once per frame (growth's random choices)
+    rule: grow.Growth | None  # the growth rule, fixed on the first frame (None: no growth)
+    stepper: Stepper | None  # the compiled update bound to mixture.prior
+    geometry: tuple | None  # means [k, 3], covariances [k, 3, 3] of mixture.prior
+    evidence: opacity.Evidence  # rays that hit / passed each component
+    colour: colour_fit.ColourNormal  # colour normal equations (colour_rule "fit")
+    n_points: int  # points seen (valid depth pixels of every frame)
+    n_unlearned: int  # of which left out, beyond reach of every component
+    growing: bool  # started empty: components are grown as frames arrive
+
+    @property
+    def points_unlearned(self) -> float:
+        """The share of the points seen that no component learned."""
+        return self.n_unlearned / max(self.n_points, 1)
+
+
+class MapInfo(NamedTuple):
+    """One frame's diagnostics."""
+
+    elbo: jax.Array  # the frame's ELBO term (scalar, on the device)
+    n_points: int  # the frame's points
+    n_learned: int  # of which within reach
+    n_new: int  # components grown for the frame
+    before: model.Mixture  # the posterior before the frame (for the streaming bound)
+    xyz: np.ndarray  # [n_learned, 3] the points learned
+    rgb: np.ndarray  # [n_learned, 3]
+
+
+class Mapper(NamedTuple):
+    """:func:`init`, :func:`update` and :func:`splats` bound to one :class:`Config`."""
+
+    init: Callable[..., MapState]
+    update: Callable[..., tuple[MapState, MapInfo]]
+    splats: Callable[..., Splats]
+
+
+def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) -> MapState:
+    """A map before any frame. Without ``prior`` it starts empty and grows (stream
+    init: nothing read ahead); with one (e.g. :func:`vbgs.inference.model.init` on
+    known points: an oracle start when they come from frames not yet arrived) its
+    components are fixed and only learned."""
+    k = config.components
+    mixture = None
+    if prior is not None:
+        if prior.n_components != k or prior.dim != 3:
+            raise ValueError(f"the prior has {prior.n_components} {prior.dim}-D components; "
+                             f"the config asks for {k} 3-D ones")
+        mixture = model.start(prior)
+    return MapState(mixture, key, None, None, None, opacity.no_evidence(k),
+                    colour_fit.no_frames(k), 0, 0, prior is None)
+
+
+def update(state: MapState, frame: Frame, config: Config,
+           background=None) -> tuple[MapState, MapInfo]:
+    """Learn one arriving frame (the steps of the module docstring). ``background``
+    ([3] or None: black) is what the frame's pixels without a splat show; only the
+    colour fit reads it (pixels without depth are not points)."""
+    xyz, rgb = unproject(frame.camera, frame.rgb, frame.depth)
+    if len(xyz) == 0:
+        raise ValueError("the frame has no pixel with valid depth: nothing to learn")
+    state, slots = grow_components(state, xyz, rgb, config)
+    state = _sync_stepper(state, slots, config)
+    evidence = state.evidence
+    if config.render.opacity_rule == "evidence":  # against the model that assigns
+        geometry = (state.geometry if config.assign == "prior"
+                    else mixture_geometry(state.mixture.posterior))
+        evidence = opacity.observe(evidence, *geometry, frame.camera, frame.depth,
+                                   pass_sigmas=config.evidence.pass_sigmas)
+    before = state.mixture.posterior
+    mixture, step = state.stepper(state.mixture, xyz, rgb)
+    if step.learned is not None:  # points beyond reach were left out
+        xyz, rgb = xyz[step.learned], rgb[step.learned]
+    n = len(step.learned) if step.learned is not None else len(xyz)
+    state = state._replace(mixture=mixture, evidence=evidence, n_points=state.n_points + n,
+                           n_unlearned=state.n_unlearned + n - len(xyz))
+    if config.render.colour_rule == "fit":
+        colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
+                                    frame.rgb, 0.0 if background is None else background,
+                                    blur=config.render.splat_blur)
+        state = state._replace(colour=colour)
+    return state, MapInfo(step.elbo, n, len(xyz), len(slots), before, xyz, rgb)
+
+
+def splats(state: MapState, config: Config, drop_unused: bool = False) -> Splats:
+    """The map's splats: posterior means and scaled expected covariances, opacities by
+    ``render.opacity_rule``, colours by ``render.colour_rule``. ``drop_unused`` prunes
+    components that saw no data (else they stay, with opacity 0: a fixed splat count)."""
+    colours = None
+    if config.render.colour_rule == "fit":
+        colours = colour_fit.solve(state.colour, state.mixture.posterior.colour.mean,
+                                   ridge=config.render.colour_ridge)
+    return _splats(state, config, drop_unused, colours)
+
+
+def bound(info: MapInfo, state: MapState, config: Config) -> BatchBound:
+    """The streaming bound ``B_t`` (:mod:`vbgs.inference.bound`) of the frame that
+    ``info`` describes, ``state`` being the map right after it."""
+    return batch_bound(info.before, state.mixture.posterior, info.xyz, info.rgb,
+                       config=config.prior, estep=config.estep,
+                       n_candidates=config.candidates)
+
+
+def mapper(config: Config) -> Mapper:
+    """The three functions with ``config`` bound: ``init(key=..., prior=None)``,
+    ``update(state, frame, background=None)``, ``splats(state, drop_unused=False)``."""
+
+    def bound_init(*, key: jax.Array, prior: model.Mixture | None = None) -> MapState:
+        return init(config, key=key, prior=prior)
+
+    def bound_update(state: MapState, frame: Frame, background=None):
+        return update(state, frame, config, background)
+
+    def bound_splats(state: MapState, drop_unused: bool = False) -> Splats:
+        return splats(state, config, drop_unused)
+
+    return Mapper(bound_init, bound_update, bound_splats)
+
+
+def grow_components(state: MapState, xyz, rgb, config: Config) -> tuple[MapState, np.ndarray]:
+    """Step 2 of :func:`update` alone: a growing map's new components for the points
+    ``xyz [n, 3]``, ``rgb [n, 3]`` (new ground; none for a map with a fixed reference),
+    and the slots they filled. The first call fixes the growth rule."""
+    if not state.growing:
+        return state, np.zeros(0, np.int64)
+    mixture, rule = state.mixture, state.rule
+    k, g = config.components, config.growth
+    if mixture is None:  # the first frame fixes the cell side
+        rule = grow.calibrate(xyz, k, g.first_frame_share * k, refine=g.refine_share,
+                              levels=g.levels, rate=g.max_new_share)
+        mixture = grow.start_empty(xyz, k, rule.cell, config.prior)
+    key, sub = jax.random.split(state.key)
+    mixture, info = grow.grow(mixture, xyz, rgb, rule, key=sub, config=config.prior)
+    return state._replace(mixture=mixture, rule=rule, key=key), info.slots
+
+
+def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapState:
+    """The stepper for the state's reference: built on the first frame, grown (a new
+    stepper sharing the compiled step) after the frame's growth filled ``slots``."""
+    prior = state.mixture.prior
+    if state.stepper is None:
+        reach = None
+        if state.growing and config.estep == "sparse":
+            reach = grow.reach_of(state.rule, config.growth.reach_cells)
+        step = Stepper(prior, assign=config.assign, config=config.prior, estep=config.estep,
+                       n_candidates=config.candidates, grows=state.growing, reach=reach)
+    elif len(slots):
+        step = state.stepper.grow(prior, slots)
+    else:
+        return state
+    return state._replace(stepper=step, geometry=mixture_geometry(prior))
+
+
+def _splats(state: MapState, config: Config, drop_unused: bool = False,
+            colours=None) -> Splats:
+    """The posterior's splats with ``colours [k, 3]`` in place of the colour means when
+    given."""
+    if state.mixture is None:
+        raise ValueError("the map has seen no frame yet: there are no splats to show")
+    r = config.render
+    opacities = None
+    if r.opacity_rule == "evidence":
+        e = config.evidence
+        opacities = opacity.expected_opacity(state.evidence, e.prior_hits, e.prior_passes)
+    return from_posterior(state.mixture.posterior, state.mixture.prior, opacity=r.opacity,
+                          cov_scale=r.splat_scale, drop_unused=drop_unused,
+                          opacities=opacities, colours=colours)
