@@ -47,8 +47,8 @@ from vbgs.baseline.densify import DEAD_OPACITY
 from vbgs.baseline.params import place
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference import grow
-from vbgs.render.raster import ALPHA_MIN, BLUR_VARIANCE
-from vbgs.render.splats import Splats, prune
+from vbgs.render.raster import BLUR_VARIANCE
+from vbgs.render.splats import Splats, drawn
 
 TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
 # The depth L1 term is on for scenes: the baseline sees the depth VBGS sees. Measured on
@@ -174,7 +174,7 @@ class GradientLearner:
         splats = to_splats(self.state.params)
         if not drop_unused:
             return splats
-        return prune(splats, np.asarray(splats.opacities) >= ALPHA_MIN)
+        return drawn(splats)
 
     def live_count(self) -> int:
         """Active splats above the dead-opacity threshold."""

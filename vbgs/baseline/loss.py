@@ -6,7 +6,7 @@ with λ = SSIM_LAMBDA = 0.2 as in 3DGS, SSIM with the 3DGS papers' 11x11 Gaussia
 window (sigma 1.5; the constants of :mod:`vbgs.render.metrics`), and the depth term
 
     L_depth = Σ_p m_p |D_p / α_p - d_p| / max(1, Σ_p m_p),
-    m_p = [d_p valid] · [α_p > DEPTH_MIN_ALPHA],
+    m_p = [d_p valid] · [α_p > SURFACE_ALPHA],
 
 the L1 between the *alpha-normalised* rendered depth (the depth of the visible
 surface, as the evaluation renders it) and the ground truth, over pixels with
@@ -23,9 +23,9 @@ import numpy as np
 
 from vbgs.inference.precision import tensordot
 from vbgs.render.metrics import SSIM_SIGMA, ssim_window
+from vbgs.render.raster import visible_surface
 
 SSIM_LAMBDA = 0.2  # weight of (1 - SSIM); 3DGS's λ_D-SSIM
-DEPTH_MIN_ALPHA = 0.5  # depth is compared where the render covers the pixel this much
 
 
 def gaussian_band(n: int, window: int, sigma: float = SSIM_SIGMA) -> np.ndarray:
@@ -79,9 +79,8 @@ def depth_loss(depth_sum, alpha, target_depth) -> jax.Array:
     ``[h, w]`` with 0 (or non-finite) where invalid.
     """
     valid = jnp.isfinite(target_depth) & (target_depth > 0)
-    covered = jax.lax.stop_gradient(alpha) > DEPTH_MIN_ALPHA
+    surface, covered = visible_surface(depth_sum, alpha)
     mask = valid & covered
-    surface = depth_sum / jnp.where(mask, alpha, 1.0)
     err = jnp.where(mask, jnp.abs(surface - jnp.where(valid, target_depth, 0.0)), 0.0)
     return jnp.sum(err) / jnp.maximum(1.0, jnp.sum(mask))
 

@@ -171,14 +171,6 @@ def image_to_points(image) -> tuple[np.ndarray, np.ndarray]:
     return pixel_centres(h, w), img.reshape(-1, 3)
 
 
-def points_to_image(rgb, height: int, width: int) -> np.ndarray:
-    """Row-major colours ``[h*w, 3]`` back to an image ``[h, w, 3]``."""
-    rgb = np.asarray(rgb)
-    if rgb.shape != (height * width, 3):
-        raise ValueError(f"expected {height * width} colours of 3 channels, got {rgb.shape}")
-    return rgb.reshape(height, width, 3)
-
-
 def patch_stream(
     image, patch: int = 8, order: str = "sequential", *, seed: int = 0
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:

@@ -240,11 +240,6 @@ def dirichlet_expected_log(alpha: jnp.ndarray, total: jnp.ndarray | None = None)
     return digamma(alpha) - digamma(alpha.sum() if total is None else total)
 
 
-def dirichlet_mean(alpha: jnp.ndarray) -> jnp.ndarray:
-    """``E[pi_k] = alpha_k / sum alpha``."""
-    return alpha / alpha.sum()
-
-
 def dirichlet_kl(q: jnp.ndarray, p: jnp.ndarray) -> jnp.ndarray:
     """``KL(Dir(q) || Dir(p)) = lnG(sum q) - sum lnG(q) - lnG(sum p) + sum lnG(p)
     + sum (q - p)(psi(q) - psi(sum q))`` (a scalar)."""

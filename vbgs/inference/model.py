@@ -398,14 +398,6 @@ def feature_logits(phi: jnp.ndarray, weights: jnp.ndarray) -> jnp.ndarray:
     return precision.matmul(phi, weights.T)
 
 
-def pad_points(x: jnp.ndarray, c: jnp.ndarray, size: int):
-    """Pad to ``size`` rows with zero-weight points; returns ``(x, c, w)``."""
-    n = x.shape[0]
-    n_pad = size - n
-    w = jnp.concatenate([jnp.ones((n,), x.dtype), jnp.zeros((n_pad,), x.dtype)])
-    return jnp.pad(x, ((0, n_pad), (0, 0))), jnp.pad(c, ((0, n_pad), (0, 0))), w
-
-
 def moments_to_stats(acc: jnp.ndarray, d: int) -> Stats:
     """Split summed ``r_nk phi_n`` rows ``[k, F]`` (see :func:`features`) into Stats."""
     k = acc.shape[0]

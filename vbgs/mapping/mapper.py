@@ -50,7 +50,7 @@ from vbgs.inference.stepper import Stepper
 from vbgs.mapping.config import Config
 from vbgs.render import colour_fit, opacity
 from vbgs.render.camera import unproject
-from vbgs.render.splats import Splats, from_posterior, mixture_geometry
+from vbgs.render.splats import Splats, drawn, from_posterior, mixture_geometry
 
 
 class MapState(NamedTuple):
@@ -143,13 +143,15 @@ def update(state: MapState, frame: Frame, config: Config,
 
 def splats(state: MapState, config: Config, drop_unused: bool = False) -> Splats:
     """The map's splats: posterior means and scaled expected covariances, opacities by
-    ``render.opacity_rule``, colours by ``render.colour_rule``. ``drop_unused`` prunes
-    components that saw no data (else they stay, with opacity 0: a fixed splat count)."""
+    ``render.opacity_rule``, colours by ``render.colour_rule``. ``drop_unused`` keeps
+    only the splats drawn (:func:`vbgs.render.splats.drawn`; components that saw no data
+    have opacity 0); else every slot stays, a fixed splat count."""
     colours = None
     if config.render.colour_rule == "fit":
         colours = colour_fit.solve(state.colour, state.mixture.posterior.colour.mean,
                                    ridge=config.render.colour_ridge)
-    return _splats(state, config, drop_unused, colours)
+    out = _splats(state, config, drop_unused, colours)
+    return drawn(out) if drop_unused else out
 
 
 def bound(info: MapInfo, state: MapState, config: Config) -> BatchBound:

@@ -336,11 +336,18 @@ def rasterize(
     )
 
 
+def visible_surface(depth_sum, alpha, min_alpha: float = SURFACE_ALPHA):
+    """The one definition of the alpha-normalised depth: ``(depth [h, w], covered [h, w])``,
+    the expected depth over the covered fraction ``D / alpha`` where ``alpha > min_alpha``
+    (``covered``; the test sees no gradient), 0 (no surface) elsewhere. Scoring
+    (:func:`surface_depth`) and the gradient baseline's depth loss both use it."""
+    covered = jax.lax.stop_gradient(alpha) > min_alpha
+    return jnp.where(covered, depth_sum / jnp.where(covered, alpha, 1.0), 0.0), covered
+
+
 def surface_depth(out: RenderOutput, min_alpha: float = SURFACE_ALPHA) -> np.ndarray:
-    """Depth of the visible surface ``[h, w]``: the expected depth over the covered
-    fraction, ``D / alpha``, where ``alpha > min_alpha``; 0 (no surface) elsewhere."""
-    alpha = np.asarray(out.alpha)
-    return np.where(alpha > min_alpha, np.asarray(out.depth) / np.maximum(alpha, 1e-6), 0.0)
+    """Depth of the visible surface ``[h, w]`` of a render (:func:`visible_surface`)."""
+    return np.asarray(visible_surface(out.depth, out.alpha, min_alpha)[0])
 
 
 def check_dropped(out: RenderOutput) -> RenderOutput:

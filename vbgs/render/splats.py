@@ -24,6 +24,7 @@ import numpy as np
 
 from vbgs.inference.precision import matmul
 from vbgs.io_atomic import write_atomic
+from vbgs.render.composite import ALPHA_MIN
 
 # Degree-0 real spherical harmonic, 1 / (2 sqrt(pi)): rgb = 0.5 + SH_C0 * f_dc.
 SH_C0 = 0.28209479177387814
@@ -96,6 +97,13 @@ def prune(splats: Splats, keep_mask: np.ndarray) -> Splats:
         )
     (idx,) = np.nonzero(keep_mask)
     return Splats(*(jnp.asarray(a)[idx] for a in splats))
+
+
+def drawn(splats: Splats) -> Splats:
+    """The splats the rasterizer draws (opacity >= :data:`vbgs.render.composite.ALPHA_MIN`):
+    the one definition of a "component used" for every method (``components_used``, the
+    PLY export)."""
+    return prune(splats, np.asarray(splats.opacities) >= ALPHA_MIN)
 
 
 # --------------------------------------------------------------------------- #
