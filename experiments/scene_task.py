@@ -7,6 +7,7 @@ The protocol (stream or static), evaluation and the run's record are in
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -143,7 +144,23 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
                                  progress=progress, ply=ply)
     else:
         result = stream_protocol(task, scene, learner, progress=progress, ply=ply)
-    return replace(result, depth=depth_report, details=learner.details(result))
+    details = learner.details(result)
+    warn_unlearned(details.get("points_unlearned", 0.0), task)
+    return replace(result, depth=depth_report, details=details)
+
+
+# A share of the training points left unlearned above this is said on stderr.
+UNLEARNED_WARNING = 0.01
+
+
+def warn_unlearned(share: float, task) -> None:
+    """Say on stderr, in words, when a stream left part of its points unlearned (its
+    budget of components spent before new ground arrived): the picture then misses it."""
+    if share > UNLEARNED_WARNING:
+        print(f"warning: {share:.1%} of the training points were not learned: all "
+              f"{task.components} components were spent before the stream reached that "
+              f"ground, so the renders miss it; give more --components (the JSON's "
+              f"points_unlearned says how much)", file=sys.stderr)
 
 
 def save_views(path: str | Path, targets, renders, title: str, n: int = 4) -> None:

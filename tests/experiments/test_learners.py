@@ -111,3 +111,14 @@ def test_each_learner_is_scored_with_its_own_pixel_filter(scene):
 def test_a_bad_pixel_filter_is_refused(bad):
     with pytest.raises(ValueError, match="splat_blur must be a pixel filter variance"):
         tiny(splat_blur=bad)
+
+
+def test_points_left_unlearned_are_said_on_stderr(capsys):
+    """The room's walkthrough spends the 300 components before frame 25 (at 32 px): the
+    share of points no component learned is a field of the record and a warning."""
+    result = run_scene(tiny(scene="room", frames=25))
+    share = result.details["points_unlearned"]
+    assert share > 0.01
+    err = capsys.readouterr().err
+    assert f"warning: {share:.1%} of the training points were not learned" in err
+    assert "--components" in err

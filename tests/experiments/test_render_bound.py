@@ -53,13 +53,18 @@ def test_a_refinement_moves_only_what_it_names_and_fits_the_frames_better(learne
 
 
 def test_render_bound_command_scores_each_refinement(capsys):
-    argv = ["render-bound", "--components", "150", "--frames", "3", "--size", "16",
-            "--test-views", "1", "--steps", "5", "--json"]
+    """Each refinement frees more of the splats, so the held-out PSNR rises along them:
+    measured 18.54 (VBGS), 18.60 (colours), 19.45 (+ opacities), 20.30 dB (everything)."""
+    argv = ["render-bound", "--components", "300", "--frames", "4", "--size", "24",
+            "--test-views", "2", "--steps", "30", "--json"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    for name in ("vbgs", "colours", "colours_opacities", "everything"):
-        assert 5.0 < out[f"{name}_psnr"] < 60.0 and 0.0 < out[f"{name}_ssim"] <= 1.0
-    assert out["steps"] == 5 and out["everything_seconds"] > 0
+    names = ("vbgs", "colours", "colours_opacities", "everything")
+    scores = [out[f"{name}_psnr"] for name in names]
+    assert scores == sorted(scores) and scores[-1] > scores[0] + 1.2
+    assert scores[0] == pytest.approx(18.54, abs=0.5)
+    assert all(0.0 < out[f"{name}_ssim"] <= 1.0 for name in names)
+    assert out["steps"] == 30 and out["everything_seconds"] > 0
 
 
 def test_render_bound_refuses_bad_input_before_any_work(capsys, monkeypatch):
