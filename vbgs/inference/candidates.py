@@ -53,7 +53,7 @@ def query_with_distance(tree: cKDTree, x, n_candidates: int = DEFAULT_CANDIDATES
 
 
 def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
-                     colour_noise: float) -> jnp.ndarray:
+                     colour_noise: float, ray: jnp.ndarray | None = None) -> jnp.ndarray:
     """``l_nc``: log-joint of each point with its candidates, ``[n, C]``, in centred form
     ``const_k - 1/2 (x_n - m_k)^T P_k (x_n - m_k) - |c_n - mc_k|^2 / (2 sigma_c^2)``
     with ``k = cand_nc`` (see :class:`vbgs.inference.model.Terms`); ``x [n, d]``, ``c [n, 3]``.
@@ -63,6 +63,13 @@ def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
     into one ``[rows, k]`` table and gathered once, one contiguous ``[n, C]`` plane per
     row, and the quadratic form is unrolled over the ``d (d + 1) / 2`` distinct entries
     of the symmetric ``P_k`` (fast on CPUs, where small trailing axes vectorise badly).
+
+    ``ray [n, d]``: each point's measurement noise along its ray, ``R_n = u_n u_n^T``
+    (a depth sensor's error moves a point along the ray it was seen on). The point is
+    then scored under the component convolved with its noise, ``N(x | m_k, Sigma_k +
+    R_n)`` with ``P_k`` for ``Sigma_k^-1``: by Sherman-Morrison, with ``q = u^T P_k u``
+    and ``a = u^T P_k (x - m_k)``, the Mahalanobis term loses ``a^2 / (1 + q)`` and the
+    log-determinant gains ``log(1 + q)``.
     """
     d = x.shape[1]
     k = terms.mean.shape[0]
@@ -77,7 +84,14 @@ def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
             maha = maha + (1.0 if i == j else 2.0) * p_ij * diff[i] * diff[j]
     base = d + d * d
     colour = sum((c[:, i, None] - g[base + i]) ** 2 for i in range(3))
-    return g[base + 3] - 0.5 * maha - 0.5 * colour / colour_noise**2
+    logits = g[base + 3] - 0.5 * maha - 0.5 * colour / colour_noise**2
+    if ray is None:
+        return logits
+    u = [ray[:, i, None] for i in range(d)]  # d x [n, 1]
+    pu = [sum(g[d + i * d + j] * u[j] for j in range(d)) for i in range(d)]  # P_k u: d x [n, C]
+    q = sum(u[i] * pu[i] for i in range(d))  # [n, C]
+    a = sum(pu[i] * diff[i] for i in range(d))
+    return logits + 0.5 * a**2 / (1.0 + q) - 0.5 * jnp.log1p(q)
 
 
 def scatter_moments(acc: jnp.ndarray, resp: jnp.ndarray, phi: jnp.ndarray,

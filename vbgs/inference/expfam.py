@@ -49,25 +49,34 @@ class Stats(NamedTuple):
 
     ``count = sum_n r_nk``, ``sum_x = sum_n r_nk x_n``, ``sum_xx = sum_n r_nk x_n x_n^T``
     (x in the centred frame) and ``sum_c = sum_n r_nk c_n``.
+
+    Measured points (``x_n = y_n + e_n``, the true surface point ``y_n`` seen with a
+    sensor's zero-mean noise ``e_n ~ N(0, R_n)``) also carry ``sum_noise = sum_n r_nk
+    R_n``: the scatter of the true points is ``E[sum r y y^T] = sum_xx - sum_noise`` in
+    expectation, which :func:`niw_posterior` uses (moment deconvolution). None for exact
+    data (the default): no term, no extra work.
     """
 
     count: jnp.ndarray  # [k]
     sum_x: jnp.ndarray  # [k, d]
     sum_xx: jnp.ndarray  # [k, d, d]
     sum_c: jnp.ndarray  # [k, 3]
+    sum_noise: jnp.ndarray | None = None  # [k, d, d] or None (exact data)
 
 
-def zero_stats(k: int, d: int, dtype=jnp.float32) -> Stats:
-    """Statistics of no data."""
+def zero_stats(k: int, d: int, dtype=jnp.float32, noisy: bool = False) -> Stats:
+    """Statistics of no data (with a zero ``sum_noise`` when ``noisy``)."""
     return Stats(
         jnp.zeros((k,), dtype), jnp.zeros((k, d), dtype), jnp.zeros((k, d, d), dtype),
-        jnp.zeros((k, 3), dtype),
+        jnp.zeros((k, 3), dtype), jnp.zeros((k, d, d), dtype) if noisy else None,
     )
 
 
 def add_stats(a: Stats, b: Stats) -> Stats:
-    """Statistics of the union of two data sets."""
-    return Stats(*(x + y for x, y in zip(a, b, strict=True)))
+    """Statistics of the union of two data sets (a missing ``sum_noise`` is zero)."""
+    noise = a.sum_noise if b.sum_noise is None else (
+        b.sum_noise if a.sum_noise is None else a.sum_noise + b.sum_noise)
+    return Stats(*(x + y for x, y in zip(a[:4], b[:4], strict=True)), noise)
 
 
 # ----------------------------------------------------------------------------- NIW
@@ -81,6 +90,12 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
     ``Psi' = Psi + S2 + kappa m m^T - kappa' m' m'^T``; the last is evaluated about the
     prior mean as ``Psi + (S2 - S1 m^T - m S1^T + N m m^T) - d1 d1^T / kappa'`` with
     ``d1 = S1 - N m`` to avoid cancelling large terms.
+
+    With measurement noise (``stats.sum_noise``) ``S2`` is the deconvolved scatter
+    ``sum_xx - sum_noise`` (see :class:`Stats`). A handful of points can scatter less
+    than their noise predicts, so the deconvolved ``Psi'`` is floored: its eigenvalues
+    are kept at least the smallest eigenvalue of the prior's ``Psi`` (what exact data
+    always give, since they only add a positive semi-definite scatter).
     """
     n = stats.count
     kappa = prior.kappa + n
@@ -92,9 +107,21 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
         - m0[:, :, None] * stats.sum_x[:, None, :]
         + n[:, None, None] * m0[:, :, None] * m0[:, None, :]
     )  # [k, d, d]  sum_n r (x - m0)(x - m0)^T
+    if stats.sum_noise is not None:
+        s2 = s2 - stats.sum_noise
     scale = prior.scale + s2 - d1[:, :, None] * d1[:, None, :] / kappa[:, None, None]
     scale = 0.5 * (scale + jnp.swapaxes(scale, -1, -2))
+    if stats.sum_noise is not None:
+        scale = eigen_floor(scale, jnp.linalg.eigvalsh(prior.scale)[:, 0])
     return NIW(m0 + d1 / kappa[:, None], kappa, prior.dof + n, scale)
+
+
+def eigen_floor(a: jnp.ndarray, floor: jnp.ndarray) -> jnp.ndarray:
+    """Symmetric ``a [k, d, d]`` with every eigenvalue raised to at least ``floor [k]``
+    (unchanged where it already is)."""
+    values, vectors = jnp.linalg.eigh(a)
+    raised = jnp.maximum(values, floor[:, None])
+    return jnp.einsum("kij,kj,klj->kil", vectors, raised, vectors)
 
 
 def niw_expected_precision(q: NIW) -> jnp.ndarray:

@@ -157,11 +157,15 @@ def _empty_about(xyz, n_components: int, cell: float, config: PriorConfig) -> Mi
 
 
 def local_normals(x: np.ndarray, chosen: np.ndarray,
-                  neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
+                  neighbours: int = NORMAL_NEIGHBOURS, ray: np.ndarray | None = None
+                  ) -> np.ndarray:
     """Unit surface normals ``[m, 3]`` at the points ``x[chosen]`` of a batch ``x [n, 3]``:
     the eigenvector of the smallest eigenvalue of the covariance of each point's
     ``neighbours`` nearest batch points (local PCA; the sign is arbitrary, as a normal's
-    is in a covariance)."""
+    is in a covariance). ``ray [n, 3]``: measured points' noise along their rays; its
+    covariance ``u u^T`` is taken off the patch's (a noisy patch seen head-on is
+    thickest along the ray, which is near its true normal: deconvolved, the plane's
+    own directions stay the largest)."""
     from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
 
     k = min(neighbours, len(x))
@@ -169,6 +173,9 @@ def local_normals(x: np.ndarray, chosen: np.ndarray,
     patch = x[np.asarray(idx).reshape(len(chosen), k)]  # [m, k, 3]
     centred = patch - patch.mean(1, keepdims=True)
     cov = np.einsum("mki,mkj->mij", centred, centred) / k
+    if ray is not None:  # measured points: the patch's spread less its noise u u^T
+        u = np.asarray(ray, np.float64)[np.asarray(idx).reshape(len(chosen), k)]  # [m, k, 3]
+        cov = cov - np.einsum("mki,mkj->mij", u, u) / k
     return np.linalg.eigh(cov)[1][:, :, 0]  # eigenvalues ascending: the smallest's vector
 
 
@@ -294,19 +301,19 @@ def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
-         config: PriorConfig = PriorConfig()) -> tuple[State, GrowInfo]:
+         config: PriorConfig = PriorConfig(), ray=None) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
-    ``key``."""
+    ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
-                               config=config)
+                               config=config, ray=ray)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
-                 key: jax.Array, config: PriorConfig) -> tuple[Mixture, GrowInfo]:
+                 key: jax.Array, config: PriorConfig, ray=None) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     active = is_active(prior)
@@ -322,7 +329,7 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     scales = None
     if prior.dim == 3 and config.surface_thickness != 1.0 and len(x) >= 3:
         s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
-        scales = surface_scales(s, local_normals(x, chosen),
+        scales = surface_scales(s, local_normals(x, chosen, ray=ray),
                                 config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha), scales)

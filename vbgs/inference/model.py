@@ -295,6 +295,19 @@ def padded_batch(xyz, rgb, origin, size: int, dtype) -> tuple[np.ndarray, np.nda
     return x, c, w
 
 
+def padded_rays(ray, n: int, size: int, dtype) -> np.ndarray | None:
+    """Per-point noise along the rays ``ray [n, d]`` padded to ``size`` rows (zeros:
+    padding has weight 0 anyway); None stays None (exact data)."""
+    if ray is None:
+        return None
+    ray = np.asarray(ray)
+    if ray.ndim != 2 or ray.shape[0] != n or not np.isfinite(ray).all():
+        raise ValueError(f"ray must be finite [n={n}, d] noise vectors, got shape {ray.shape}")
+    out = np.zeros((size, ray.shape[1]), dtype)
+    out[:n] = ray
+    return out
+
+
 # --------------------------------------------------------------------------- E-step
 
 # Points per chunk are chosen so a chunk's [chunk, k] log-likelihood block holds about
@@ -399,34 +412,39 @@ def feature_logits(phi: jnp.ndarray, weights: jnp.ndarray) -> jnp.ndarray:
 
 
 def moments_to_stats(acc: jnp.ndarray, d: int) -> Stats:
-    """Split summed ``r_nk phi_n`` rows ``[k, F]`` (see :func:`features`) into Stats."""
+    """Split summed ``r_nk phi_n`` rows ``[k, F]`` (see :func:`features`) into Stats;
+    rows ``[k, F + d*d]`` carry the noise moments ``sum_n r_nk vec(u_n u_n^T)`` last
+    (see :func:`e_step_with`)."""
     k = acc.shape[0]
+    width = d * d + d + 4
     return Stats(
-        count=acc[:, -1],
+        count=acc[:, width - 1],
         sum_x=acc[:, d * d : d * d + d],
         sum_xx=acc[:, : d * d].reshape(k, d, d),
         sum_c=acc[:, d * d + d : d * d + d + 3],
+        sum_noise=acc[:, width:].reshape(k, d, d) if acc.shape[1] > width else None,
     )
 
 
 def e_step(q: Mixture, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray, colour_noise: float,
-           chunk: int, cand: jnp.ndarray | None = None) -> tuple[Stats, jnp.ndarray]:
+           chunk: int, cand: jnp.ndarray | None = None,
+           ray: jnp.ndarray | None = None) -> tuple[Stats, jnp.ndarray]:
     """E-step under ``q`` on centred points ``x [n, d]``, colours ``c [n, 3]`` and
     point weights ``w [n]`` (0 for padding); n must be a multiple of ``chunk``.
 
     ``r_nk = softmax_k l_nk`` in log space, chunk by chunk, over all components
     (dense) or over each point's candidates ``cand [n, C]`` (sparse, see
     :mod:`vbgs.inference.candidates`). Returns the summed statistics and
-    ``log sum_k exp(l_nk)`` per point.
+    ``log sum_k exp(l_nk)`` per point; ``ray`` as in :func:`e_step_with`.
     """
     reference = log_joint_weights(q, colour_noise) if cand is None else component_terms(
         q, colour_noise)
-    return e_step_with(reference, x, c, w, colour_noise, chunk, cand)
+    return e_step_with(reference, x, c, w, colour_noise, chunk, cand, ray)
 
 
 def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
-                colour_noise: float, chunk: int,
-                cand: jnp.ndarray | None = None) -> tuple[Stats, jnp.ndarray]:
+                colour_noise: float, chunk: int, cand: jnp.ndarray | None = None,
+                ray: jnp.ndarray | None = None) -> tuple[Stats, jnp.ndarray]:
     """:func:`e_step` given the assigning model's precomputed terms: feature weights
     ``[k, F]`` (:func:`log_joint_weights`) for the dense E-step, :class:`Terms` with
     ``cand [n, C]`` for the sparse one.
@@ -435,29 +453,41 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
     ``r^T phi``) run at explicit full float32 (:func:`vbgs.inference.precision.matmul`); the sparse
     E-step is in centred form, elementwise only (:func:`vbgs.inference.candidates.candidate_logits`
     and :func:`vbgs.inference.candidates.scatter_moments`).
+
+    ``ray [n, d]``: measured points, each with its noise ``R_n = u_n u_n^T`` along its
+    ray (sparse E-step only): responsibilities under the components convolved with the
+    noise (:func:`vbgs.inference.candidates.candidate_logits`) and the noise moments
+    summed into ``Stats.sum_noise`` for the M-step's deconvolution.
     """
     n, d = x.shape
+    if ray is not None and cand is None:
+        raise ValueError("measurement noise (ray) needs the sparse E-step: use estep='sparse'")
     inv2var = 0.5 / colour_noise**2
     n_rows = reference.shape[0] if cand is None else reference.mean.shape[0]
 
     def one_chunk(acc, batch):
-        xb, cb, wb, candb = batch
+        xb, cb, wb, candb, rayb = batch
         phi = features(xb, cb)  # [chunk, F]
         if candb is None:
             logits = feature_logits(phi, reference) - inv2var * jnp.sum(cb**2, -1, keepdims=True)
         else:
-            logits = candidates.candidate_logits(xb, cb, reference, candb, colour_noise)
+            logits = candidates.candidate_logits(xb, cb, reference, candb, colour_noise, rayb)
         lse = jax.nn.logsumexp(logits, -1)  # [chunk]
         resp = jnp.exp(logits - lse[:, None]) * wb[:, None]  # [chunk, k or C]
         if candb is None:
             return acc + precision.matmul(resp.T, phi), lse
+        if rayb is not None:  # the noise moments ride along: [chunk, F + d*d]
+            phi = jnp.concatenate([phi, (rayb[:, :, None] * rayb[:, None, :]).reshape(
+                rayb.shape[0], -1)], -1)
         return candidates.scatter_moments(acc, resp, phi, candb), lse
 
     def shape(a):
         return None if a is None else a.reshape((n // chunk, chunk) + a.shape[1:])
 
-    acc0 = jnp.zeros((n_rows, d * d + d + 4), x.dtype)
-    acc, lse = jax.lax.scan(one_chunk, acc0, (shape(x), shape(c), shape(w), shape(cand)))
+    width = d * d + d + 4 + (0 if ray is None else d * d)
+    acc0 = jnp.zeros((n_rows, width), x.dtype)
+    acc, lse = jax.lax.scan(one_chunk, acc0, (shape(x), shape(c), shape(w), shape(cand),
+                                              shape(ray)))
     return moments_to_stats(acc, d), lse.reshape(-1)
 
 
@@ -570,13 +600,13 @@ def local_cavi(state: State, x, c, w, cand, colour_noise: float, chunk: int,
 
 @partial(jax.jit, static_argnames=("assign", "colour_noise", "chunk", "local_iters"))
 def _update(state: State, x, c, w, cand, assign: Assign, colour_noise: float, chunk: int,
-            local_iters: int = 1, local_tol=LOCAL_TOL):
+            local_iters: int = 1, local_tol=LOCAL_TOL, ray=None):
     q = state.prior if assign == "prior" else state.posterior
     if assign == "posterior" and local_iters > 1:
         batch, lse, q, _ = local_cavi(state, x, c, w, cand, colour_noise, chunk,
                                       local_iters, local_tol)
     else:  # under the prior the E-step does not depend on q: one step is the solution
-        batch, lse = e_step(q, x, c, w, colour_noise, chunk, cand)
+        batch, lse = e_step(q, x, c, w, colour_noise, chunk, cand, ray)
     stats = expfam.add_stats(state.stats, batch)
     elbo = jnp.sum(lse * w) - kl(q, state.prior, colour_noise)
     # The unchanged prior is not returned from the compiled function: passing an input
@@ -596,6 +626,7 @@ def update(
     n_candidates: int = candidates.DEFAULT_CANDIDATES,
     local_iters: int = 1,
     local_tol: float = LOCAL_TOL,
+    ray=None,
 ) -> tuple[State, Info]:
     """Add one batch ``xyz [n, d]``, ``rgb [n, 3]`` (world units) to the state.
 
@@ -610,6 +641,8 @@ def update(
     components only (:mod:`vbgs.inference.candidates`); ``"dense"`` against all of them.
     ``config``: only needed for an unbound state (see :class:`State` and
     :func:`bound_config`); a bound state's own config is used and a different one refused.
+    ``ray [n, d]``: measured points, each with its noise ``u_n u_n^T`` along its ray
+    (sparse E-step, one E-step per batch; :func:`e_step_with`).
     """
     config = bound_config(state, config)
     if assign not in ("prior", "posterior"):
@@ -631,6 +664,10 @@ def update(
         chunk = chunk_size(size, state.prior.n_components)
     if not isinstance(local_iters, (int, np.integer)) or local_iters < 1:
         raise ValueError(f"local_iters must be a positive integer, got {local_iters!r}")
+    if ray is not None and (estep != "sparse" or local_iters > 1):
+        raise ValueError("measurement noise (ray) needs estep='sparse' and one E-step "
+                         "per batch (local_iters=1)")
     posterior, stats, info = _update(state, x, c, w, cand, assign, float(config.colour_noise),
-                                     chunk, int(local_iters), float(local_tol))
+                                     chunk, int(local_iters), float(local_tol),
+                                     padded_rays(ray, n, size, x.dtype))
     return state._replace(posterior=posterior, stats=stats), Info(info.elbo, info.point_loglik[:n])

@@ -130,7 +130,7 @@ def row_blocks(rows) -> list[np.ndarray]:
 
 
 @partial(jax.jit, static_argnames=("config",))
-def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig):
+def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, ray=None):
     """One batch: candidates (prior, sparse), E-step, statistics, M-step and ELBO.
     x ``[n, d]`` centred, c ``[n, 3]``, w ``[n]`` (0 for padding)."""
     if config.assign == "prior":
@@ -142,7 +142,7 @@ def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig):
         reference = _reference(q, config.estep, config.colour_noise)
         kl = model.kl(q, state.prior, config.colour_noise)
     batch, lse = model.e_step_with(reference, x, c, w, config.colour_noise, config.chunk,
-                                   cand if config.estep == "sparse" else None)
+                                   cand if config.estep == "sparse" else None, ray)
     stats = expfam.add_stats(state.stats, batch)
     elbo = jnp.sum(lse * w) - kl
     # the prior is reattached by the caller (see model._update: passing an input through
@@ -265,7 +265,9 @@ class Stepper:
         d = self.prior.dim
         return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
 
-    def __call__(self, state: State, xyz, rgb) -> tuple[State, StepInfo]:
+    def __call__(self, state: State, xyz, rgb, ray=None) -> tuple[State, StepInfo]:
+        """Learn the batch ``xyz [n, d]``, ``rgb [n, 3]``; ``ray [n, d]``: measured
+        points' noise along their rays (sparse E-step; :func:`vbgs.inference.model.update`)."""
         xyz, rgb = model.check_points_host(xyz, rgb)
         if xyz.shape[1] != self.prior.dim:
             raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
@@ -282,6 +284,9 @@ class Stepper:
                 w[:n][~learned] = 0.0
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)
-        posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config)
+        if ray is not None and self.estep != "sparse":
+            raise ValueError("measurement noise (ray) needs the sparse E-step: estep='sparse'")
+        rays = model.padded_rays(ray, xyz.shape[0], size, x.dtype)
+        posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config, rays)
         return state._replace(posterior=posterior, stats=stats), StepInfo(*info, learned)
 

@@ -9,8 +9,9 @@ along u and v, ``N_SAMPLES`` = 5). With z the component's camera depth and
 a sample pixel whose observed depth D
 
 * is within ``PASS_SIGMAS`` σ_z of z: the ray **hit** the component;
-* is farther than ``z + PASS_SIGMAS σ_z``, or missing (no depth: sky, empty space):
-  the ray **passed through** it;
+* is farther than ``z + PASS_SIGMAS σ_z``, or missing where the pixel shows nothing
+  (sky, empty space; with exact depth every missing pixel does): the ray **passed
+  through** it; a pixel missing elsewhere (a sensor's hole) is no evidence;
 * is nearer than ``z - PASS_SIGMAS σ_z``: the component was occluded, no evidence.
 
 Each sample stands for ``A / N_SAMPLES`` rays, ``A = 2π sqrt(det Σ')`` being the
@@ -31,8 +32,9 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from vbgs.render.camera import Camera
+from vbgs.render.camera import Camera, valid_depth
 from vbgs.render.raster import BLUR_VARIANCE, NEAR, project
 from vbgs.render.splats import Splats
 
@@ -62,12 +64,23 @@ def expected_opacity(evidence: Evidence, prior_hits: float = PRIOR_HITS,
 
 
 def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
-            pass_sigmas: float = PASS_SIGMAS) -> Evidence:
+            pass_sigmas: float = PASS_SIGMAS, sensor_var=None, empty=None) -> Evidence:
     """Add one frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
-    (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z)."""
+    (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
+
+    Measured depth: ``sensor_var [k]`` is the sensor's variance of a depth reading at
+    each component's camera depth, added to the component's own along camera z (the
+    hit band widens with the noise, so noise does not turn hits into passes);
+    ``empty [h, w]`` bool marks the pixels known to show nothing (sky, background):
+    a pixel without depth counts as a pass there only. Elsewhere it is a hole in the
+    measurement, which proves nothing (it must not lower opacity). Without ``empty``
+    every pixel without depth is empty (exact depth: nothing else is missing)."""
+    k = np.shape(means)[0]
+    sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
+    empty = ~valid_depth(np.asarray(depth)) if empty is None else empty
     hits, passes = _frame_counts(
-        jnp.float32(pass_sigmas),
+        jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32), jnp.asarray(empty),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
@@ -76,7 +89,7 @@ def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
 
 
 @jax.jit
-def _frame_counts(pass_sigmas, means, covs, fx, fy, cx, cy, pose, depth):
+def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring)."""
     height, width = depth.shape
     k = means.shape[0]
@@ -94,13 +107,16 @@ def _frame_counts(pass_sigmas, means, covs, fx, fy, cx, cy, pose, depth):
     uv = proj.uv[None] + offsets
     col, row = jnp.floor(uv[..., 0]).astype(jnp.int32), jnp.floor(uv[..., 1]).astype(jnp.int32)
     inside = (col >= 0) & (col < width) & (row >= 0) & (row < height) & proj.visible[None]
-    observed = depth[jnp.clip(row, 0, height - 1), jnp.clip(col, 0, width - 1)]  # [s, k]
+    row, col = jnp.clip(row, 0, height - 1), jnp.clip(col, 0, width - 1)
+    observed = depth[row, col]  # [s, k]
     has_depth = jnp.isfinite(observed) & (observed > 0)
+    shows_nothing = empty[row, col]
     axis_z = pose[:3, 2]  # camera z axis in world coordinates
-    sigma_z = jnp.sqrt(jnp.maximum(jnp.einsum("i,kij,j->k", axis_z, covs, axis_z), 0.0))
+    sigma_z = jnp.sqrt(jnp.maximum(jnp.einsum("i,kij,j->k", axis_z, covs, axis_z), 0.0)
+                       + sensor_var)
     near_side = proj.depth - pass_sigmas * sigma_z
     far_side = proj.depth + pass_sigmas * sigma_z
     hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
-    passed = inside & (~has_depth | (observed > far_side))
+    passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > far_side)))
     per_sample = area / N_SAMPLES
     return hit.sum(0) * per_sample, passed.sum(0) * per_sample
