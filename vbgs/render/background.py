@@ -13,6 +13,13 @@ that minimises the expected squared error of a hole is the mean colour of all th
 pixels seen so far, which is then used instead. Both sums are additive over frames,
 so the estimate after a stream does not depend on the frames' order and never reads
 a frame that has not arrived.
+
+A real sensor also returns no depth where a surface is: at depth edges, grazing
+angles, on dark or shiny materials, at random. Such holes are not background. With
+``holes=True`` only the pixels of :func:`empty_pixels` count: the depth-less region
+connected to the image border (background and sky reach the border; a hole inside a
+surface does not), eroded by :data:`EDGE_HOLES_PX` so the holes that line a
+silhouette stay out.
 """
 
 from __future__ import annotations
@@ -26,6 +33,9 @@ from vbgs.render.camera import valid_depth
 # Fewer depth-less pixels than this fraction of all pixels seen are treated as
 # noise (a few dropped depth readings), not as a view of the background.
 MIN_EMPTY_FRACTION = 1e-3
+# Width (px) of the band of edge holes a depth sensor leaves along a silhouette: taken
+# off the border-connected depth-less region (a Kinect drops 1-2 px at depth edges).
+EDGE_HOLES_PX = 2
 
 
 class BackgroundEstimate(NamedTuple):
@@ -42,12 +52,30 @@ def empty() -> BackgroundEstimate:
     return BackgroundEstimate(np.zeros(3), 0, np.zeros(3), 0)
 
 
+def empty_pixels(depth: np.ndarray, holes: bool = False, max_depth: float = np.inf
+                 ) -> np.ndarray:
+    """``[h, w]`` bool: the pixels that show nothing (background, sky). Exact depth
+    (``holes=False``): every pixel without depth. A sensor with holes: the depth-less
+    region connected to the image border, less a band of :data:`EDGE_HOLES_PX` along
+    the surfaces it meets (module docstring)."""
+    no_depth = ~valid_depth(depth, max_depth)
+    if not holes:
+        return no_depth
+    from scipy import ndimage  # imported when used
+
+    inner = ndimage.binary_erosion(no_depth, iterations=EDGE_HOLES_PX, border_value=1)
+    seeds = np.zeros_like(inner)
+    seeds[[0, -1], :], seeds[:, [0, -1]] = inner[[0, -1], :], inner[:, [0, -1]]
+    return ndimage.binary_propagation(seeds, mask=inner)
+
+
 def observe(estimate: BackgroundEstimate, rgb: np.ndarray, depth: np.ndarray,
-            max_depth: float = np.inf) -> BackgroundEstimate:
+            max_depth: float = np.inf, holes: bool = False) -> BackgroundEstimate:
     """Add one frame: ``rgb [h, w, 3]`` in [0, 1] and ``depth [h, w]`` (0/NaN/inf or
-    beyond ``max_depth`` mark pixels without depth)."""
+    beyond ``max_depth`` mark pixels without depth); ``holes``: the depth may miss
+    surfaces (a sensor's), so only :func:`empty_pixels` count as background."""
     rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
-    no_depth = ~valid_depth(depth, max_depth).reshape(-1)
+    no_depth = empty_pixels(depth, holes, max_depth).reshape(-1)
     return BackgroundEstimate(
         estimate.empty_sum + rgb[no_depth].sum(0), estimate.empty_count + int(no_depth.sum()),
         estimate.all_sum + rgb.sum(0), estimate.all_count + rgb.shape[0],

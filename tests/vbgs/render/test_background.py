@@ -49,3 +49,22 @@ def test_parse_background():
     for bad in ("1,1", "red", "2,0,0"):
         with pytest.raises(ValueError, match="R,G,B"):
             bg.parse_background(bad)
+
+
+def test_holes_inside_surfaces_are_not_background():
+    """Sky on the top rows (white), a grey surface with a sensor's holes (random and
+    along the sky line): with holes=True only the sky counts, the estimate stays
+    white; read as exact depth the holes' grey pulls it down."""
+    rng = np.random.default_rng(0)
+    rgb = np.full((40, 40, 3), 0.3)
+    depth = np.full((40, 40), 2.0)
+    rgb[:10], depth[:10] = 1.0, 0.0  # sky
+    depth[10:12] = 0.0  # edge holes along the sky line: they show the surface's grey
+    depth[rng.random((40, 40)) < 0.05] = 0.0
+    depth[:10] = 0.0
+    naive = bg.colour(bg.observe(bg.empty(), rgb, depth))
+    aware = bg.colour(bg.observe(bg.empty(), rgb, depth, holes=True))
+    np.testing.assert_allclose(aware, 1.0, atol=3e-3)  # a few holes touch the sky line
+    assert naive.max() < 0.9
+    mask = bg.empty_pixels(depth, holes=True)
+    assert mask[:8].all() and mask[10:].mean() < 0.01  # the surface's holes stay out

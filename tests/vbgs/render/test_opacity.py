@@ -65,3 +65,34 @@ def test_components_behind_the_camera_or_the_near_plane_get_nothing():
     ev = opacity.observe(opacity.no_evidence(2), means, jnp.tile(0.01 * jnp.eye(3), (2, 1, 1)),
                          cam, depth)
     assert float(jnp.max(ev.hits)) == 0.0 and float(jnp.max(ev.passes)) == 0.0
+
+
+def test_holes_in_a_surface_do_not_lower_opacity():
+    """A sensor's hole in the wall (no depth where the wall is) proves nothing: with the
+    empty pixels given (the sky only), the wall's component keeps every hit it had and
+    gains no pass; read as exact depth (every missing pixel empty) the hole would count
+    as rays through the wall."""
+    cam, depth, means, covs = toy()
+    holed = depth.copy()
+    holed[12:20, 12:20] = 0.0  # a hole over the optical axis, where components 0-2 project
+    empty = np.zeros_like(depth, bool)
+    empty[:, 24:] = True  # what shows nothing: the sky
+    exact = opacity.observe(opacity.no_evidence(4), means, covs, cam, depth)
+    naive = opacity.observe(opacity.no_evidence(4), means, covs, cam, holed)
+    aware = opacity.observe(opacity.no_evidence(4), means, covs, cam, holed, empty=empty)
+    o = [np.asarray(opacity.expected_opacity(e)) for e in (exact, naive, aware)]
+    assert o[1][0] < 0.3 < 0.7 < o[0][0]  # read as empty space, the hole clears the wall
+    assert np.asarray(aware.passes)[0] == 0 and o[2][0] >= 0.5  # no evidence: the prior
+    np.testing.assert_allclose(aware.passes[3], exact.passes[3])  # the sky still passes
+
+
+def test_the_sensor_noise_widens_the_hit_band():
+    """A wall measured 6 cm behind a 2 cm thin component: a pass under exact depth
+    (beyond 2 sigma); a hit when the sensor's own sigma is 5 cm."""
+    cam, depth, means, covs = toy()
+    far = np.full_like(depth, 2.06)
+    exact = opacity.observe(opacity.no_evidence(4), means, covs, cam, far)
+    noisy = opacity.observe(opacity.no_evidence(4), means, covs, cam, far,
+                            sensor_var=np.full(4, 0.05**2))
+    assert np.asarray(exact.hits)[0] == 0 and np.asarray(exact.passes)[0] > 0
+    assert np.asarray(noisy.hits)[0] > 0 and np.asarray(noisy.passes)[0] == 0
