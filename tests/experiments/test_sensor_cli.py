@@ -1,6 +1,7 @@
 """``fit-scene --simulate-sensor``: only the training frames' depth is corrupted (test
 and validation views bit-identical to an exact run), seeded per frame, the sensor
-reported in the JSON; bad values refused in one line."""
+reported in the JSON; bad values refused in one line; a sweep varies the sensor for
+both methods."""
 
 import json
 
@@ -10,6 +11,9 @@ import pytest
 import experiments.scene_task as scene_task
 from experiments.run import main
 from experiments.scene_task import SceneTask, prepare_scene
+from experiments.sweep.cells import expand
+from experiments.sweep.config import ConfigError, parse_config
+from experiments.sweep.tasks import build_task
 
 TINY = ["--scene", "object", "--components", "600", "--frames", "6", "--test-views", "2",
         "--size", "32", "--json"]
@@ -98,3 +102,36 @@ def test_bad_values_are_refused_in_one_line(argv, message, monkeypatch, capsys):
     assert main(["fit-scene", *TINY, *argv]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1 and message in err
+
+
+# ------------------------------------------------------------------------- sweep
+
+
+def _plan(grid, **fixed):
+    return expand(parse_config({"name": "t", "fixed": {"size": 16, "frames": 3, **fixed},
+                                "grid": [{"task": "scene", "dataset": "object", **grid}]}))
+
+
+def test_a_sweep_varies_the_sensor_for_both_methods():
+    plan = _plan({"method": ["vbgs", "gradient"], "simulate_sensor": ["exact", "kinect"],
+                  "sensor_level": [1.0, 2]})
+    cells = [c.as_dict() for c in plan.cells]
+    # exact has no level to vary: 2 methods x (exact + kinect at 2 levels)
+    assert len(cells) == 6 and not [s for s in plan.skipped if "skip" in s.reason]
+    gradient = [c for c in cells if c["method"] == "gradient"]
+    assert {c["simulate_sensor"] for c in gradient} == {"exact", "kinect"}
+    assert all("sensor_level" not in c for c in cells if c["simulate_sensor"] == "exact")
+    task = build_task(next(c for c in gradient if c.get("sensor_level") == 2))
+    assert (task.method, task.simulate_sensor, task.sensor_level) == ("gradient", "kinect", 2)
+
+
+def test_a_sweep_refuses_bad_sensor_values(tmp_path):
+    with pytest.raises(ConfigError, match="simulate_sensor: must be one of exact, kinect"):
+        _plan({"simulate_sensor": ["sonar"]})
+    with pytest.raises(ConfigError, match="sensor_level: must be a finite number >= 0"):
+        _plan({"sensor_level": [-1.0]})
+    model = tmp_path / "m.onnx"
+    model.write_bytes(b"")
+    plan = _plan({"simulate_sensor": ["exact", "mono"], "depth_model": ["sensor", str(model)]})
+    assert len(plan.cells) == 3 and len(plan.skipped) == 1
+    assert "the simulated sensor corrupts" in plan.skipped[0].reason
