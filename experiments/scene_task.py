@@ -16,6 +16,7 @@ import numpy as np
 from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
+from experiments.sensor_swap import simulate_training_depth
 from experiments.settings import (
     ASSIGN,
     COLOUR_RULE,
@@ -28,6 +29,7 @@ from experiments.settings import (
     ORDER,
     PROTOCOL,
     REPLAY_DEFAULT,
+    SENSOR,
 )
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
@@ -37,6 +39,7 @@ from vbgs.mapping import EvidenceConfig, GrowthConfig
 from vbgs.render.background import parse_background
 from vbgs.render.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
+from vbgs.sensors import check_level
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,10 @@ class SceneTask:
     depth_kind: str = DEPTH_KIND.default
     depth_preset: str | None = None
     depth_align: str = "auto"
+    # a depth sensor simulated on the training frames only (vbgs.sensors; test and
+    # validation views keep their exact depth) and its noise multiplier (0: exact values)
+    simulate_sensor: str = SENSOR.default
+    sensor_level: float = 1.0
     background: str = "auto"  # auto (from pixels without depth, as frames arrive) | R,G,B
     # gradient baseline only (see experiments.learners.gradient_learner)
     replay: str = REPLAY_DEFAULT
@@ -91,8 +98,17 @@ class SceneTask:
         for name, choice in (("method", METHOD), ("protocol", PROTOCOL), ("order", ORDER),
                              ("assign", ASSIGN), ("estep", ESTEP), ("format", FORMAT),
                              ("depth_kind", DEPTH_KIND), ("opacity_rule", OPACITY_RULE),
-                             ("colour_rule", COLOUR_RULE)):
+                             ("colour_rule", COLOUR_RULE), ("simulate_sensor", SENSOR)):
             choice.check(name, getattr(self, name))
+        try:
+            check_level(self.sensor_level)
+        except ValueError:
+            raise ValueError(f"sensor_level must be a finite number >= 0 (0: exact depth "
+                             f"values, 1: the published sensor model, 2: twice its noise), "
+                             f"got {self.sensor_level!r}") from None
+        if self.simulate_sensor != "exact" and self.depth_model:
+            raise ValueError(f"simulate_sensor {self.simulate_sensor!r} and depth_model both "
+                             f"replace the training depth; give one of them")
         oracle_start(self.init)  # a known scheme
         parse_background(self.background)  # fails on a malformed R,G,B
         if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):
@@ -117,10 +133,13 @@ def load_task_scene(task: SceneTask) -> Scene:
 
 def prepare_scene(task) -> tuple[Scene, dict]:
     """The task's scene, with estimated depth on its training frames if the task names
-    a depth model (the report of the estimation is returned alongside)."""
+    a depth model, else with the depth of its simulated sensor there (exact: the
+    scene's own); the report of either is returned alongside. Test and validation
+    views keep their depth."""
     scene = load_task_scene(task)
     if not task.depth_model:
-        return scene, {"depth_source": "sensor"}
+        return simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,
+                                       task.seed)
     from experiments.depth_swap import estimate_scene_depth
 
     return estimate_scene_depth(scene, task.depth_model, kind=task.depth_kind,

@@ -7,8 +7,9 @@ start schemes live in :mod:`experiments.init_schemes` and are wrapped here.
 
 Kept light to import (no JAX): the CLI builds its parsers from it before any task
 module is loaded. Choices that a library module also lists (stream orders, depth
-kinds) are taken from that module; the learners' and dataset formats' tables are
-heavier to import, and a test holds :data:`METHOD` and :data:`FORMAT` equal to them.
+kinds, depth sensors: :mod:`vbgs.sensors` is NumPy only) are taken from that module;
+the learners' and dataset formats' tables are heavier to import, and a test holds
+:data:`METHOD` and :data:`FORMAT` equal to them.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 from depth.presets import KINDS as DEPTH_KINDS
 from experiments.init_schemes import INIT_HELP, INITS
 from vbgs.data.streams import ORDERS
+from vbgs.sensors import SENSOR_NAMES
 
 
 @dataclass(frozen=True)
@@ -61,6 +63,10 @@ COLOUR_RULE = Choice(("posterior", "fit"), "posterior",
                      "training pixels (fit: +0.12 dB on validation views, about twice the "
                      "time per frame)")
 DEPTH_KIND = Choice(DEPTH_KINDS, "inverse", "what the depth model outputs")
+SENSOR = Choice(SENSOR_NAMES, "exact",
+                "depth sensor simulated on the training frames (vbgs.sensors): exact, a "
+                "kinect v1, a realsense active stereo or a mono depth network; test and "
+                "validation views keep their exact depth")
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 
 

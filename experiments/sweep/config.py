@@ -21,6 +21,7 @@ Errors are :class:`ConfigError` naming the file and the key, e.g.
 from __future__ import annotations
 
 import difflib
+import math
 import tomllib
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass
@@ -38,6 +39,7 @@ from experiments.settings import (
     OPACITY_RULE,
     ORDER,
     PROTOCOL,
+    SENSOR,
     STREAM,
 )
 from experiments.sweep.tasks import TASKS, TaskUnavailable
@@ -68,6 +70,12 @@ def _depth_model(value: str) -> str | None:
         return "must be \"sensor\" or the path of an .onnx depth model"
     if not path.is_file():
         return f"depth model file {value!r} does not exist"
+    return None
+
+
+def _sensor_level(value) -> str | None:
+    if not (math.isfinite(value) and value >= 0):
+        return "must be a finite number >= 0 (0: exact depth values, 1: the published model)"
     return None
 
 
@@ -111,6 +119,9 @@ SETTINGS: dict[str, Spec] = {
     "steps": Spec(_INT, "optimisation steps", minimum=1),
     "depth_model": Spec(_STR, "\"sensor\" depth, or an .onnx model estimating it",
                         check=_depth_model),
+    "simulate_sensor": Spec(_STR, SENSOR.help, SENSOR.values),
+    "sensor_level": Spec((float,), "noise multiplier of the simulated sensor",
+                         check=_sensor_level),
 }
 TOP_LEVEL = ("name", "description", "fixed", "grid")
 

@@ -70,6 +70,12 @@ RULES: tuple[Rule, ...] = (
     Rule("steps_per_frame", lambda s: s["task"] == "image", DROP,
          "an image has no frames"),
     Rule("protocol", lambda s: s["task"] == "image", DROP, "an image has no frame stream"),
+    # both methods learn from the same corrupted training frames: no method rule
+    Rule("simulate_sensor", lambda s: s.get("simulate_sensor", "exact") != "exact"
+         and s.get("depth_model", "sensor") not in ("sensor", "none", "", None), SKIP,
+         "a depth model replaces the training depth that the simulated sensor corrupts"),
+    Rule("sensor_level", lambda s: s.get("simulate_sensor", "exact") == "exact", DROP,
+         "the exact sensor adds no noise for a level to scale"),
 )
 
 
