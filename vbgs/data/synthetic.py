@@ -37,9 +37,9 @@ ORBIT_TARGET = (0.0, 0.0, 0.3)
 ORBIT_ELEVATION = (np.deg2rad(10.0), np.deg2rad(55.0))  # range of view elevations
 ROOM_FOV_X = np.deg2rad(75.0)
 ROOM_CENTRE, ROOM_HALF = (0.0, 0.0, 1.3), (3.0, 2.5, 1.3)  # floor at z = 0, ceiling at 2.6
-WALK_RADII = (2.2, 1.7)  # walkthrough ellipse in the room (x, y), well clear of the objects
-WALK_HEIGHT = 1.45  # eye height of the walkthrough
-LOOK_TARGET = np.array([0.0, 0.0, 0.8])  # the walkthrough looks about this point
+ROOM_WALK_RADII = (2.2, 1.7)  # walkthrough ellipse in the room (x, y), well clear of the objects
+ROOM_WALK_HEIGHT = 1.45  # eye height of the walkthrough
+ROOM_LOOK_TARGET = np.array([0.0, 0.0, 0.8])  # the walkthrough looks about this point
 VAL_STREAM = 3  # third entry of the validation views' rng seed (train/test use [seed, tag])
 N_VAL = 4  # validation views per synthetic scene by default
 # Rays per pixel side: a pixel's colour is the mean of SAMPLES x SAMPLES rays spread
@@ -191,16 +191,16 @@ def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
     )
 
 
-def _walk_pose(phi: float, radius_scale: float, height: float, yaw: float) -> np.ndarray:
-    """Camera on the walk ellipse at angle ``phi``; gaze at LOOK_TARGET turned by ``yaw``."""
+def _room_walk_pose(phi: float, radius_scale: float, height: float, yaw: float) -> np.ndarray:
+    """Camera on the walk ellipse at angle ``phi``; gaze at ROOM_LOOK_TARGET turned by ``yaw``."""
     eye = np.array(
         [
-            radius_scale * WALK_RADII[0] * np.cos(phi),
-            radius_scale * WALK_RADII[1] * np.sin(phi),
+            radius_scale * ROOM_WALK_RADII[0] * np.cos(phi),
+            radius_scale * ROOM_WALK_RADII[1] * np.sin(phi),
             height,
         ]
     )
-    to_target = LOOK_TARGET - eye
+    to_target = ROOM_LOOK_TARGET - eye
     c, s = np.cos(yaw), np.sin(yaw)
     turned = np.array(
         [c * to_target[0] - s * to_target[1], s * to_target[0] + c * to_target[1], to_target[2]]
@@ -214,15 +214,16 @@ def room_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
     phase = rng.uniform(0.0, 2 * np.pi)
     phis = phase + 2 * np.pi * np.arange(n_train) / max(n_train, 1)  # [n_train]
     train = [
-        _walk_pose(p, 1.0, WALK_HEIGHT + 0.12 * np.sin(3 * p), 0.6 * np.sin(2 * p)) for p in phis
+        _room_walk_pose(p, 1.0, ROOM_WALK_HEIGHT + 0.12 * np.sin(3 * p), 0.6 * np.sin(2 * p))
+        for p in phis
     ]
-    return train, _walk_views(rng, n_test)
+    return train, _room_walk_views(rng, n_test)
 
 
-def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+def _room_walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     """``n`` poses off the walk: 0.85x its radius, eye height 1.2 or 1.7, random gaze."""
     return [
-        _walk_pose(p, 0.85, h, y)
+        _room_walk_pose(p, 0.85, h, y)
         for p, h, y in zip(
             rng.uniform(0, 2 * np.pi, n),
             rng.choice([1.2, 1.7], n),
@@ -235,15 +236,15 @@ def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
 def room_val_poses(n_val: int = N_VAL, seed: int = 0) -> list[np.ndarray]:
     """Validation poses of the ``"room"`` scene: drawn as its test views are, from the
     rng stream ``[seed, 2, VAL_STREAM]`` (the test views use ``[seed, 2]``)."""
-    return _walk_views(np.random.default_rng([seed, 2, VAL_STREAM]), n_val)
+    return _room_walk_views(np.random.default_rng([seed, 2, VAL_STREAM]), n_val)
 
 
 def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
                n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
     """Room walkthrough (see module docstring); every pixel has valid depth.
 
-    Training views walk once around the ellipse ``WALK_RADII`` at about
-    ``WALK_HEIGHT``, gaze swinging up to +-34 degrees left and right of the room
+    Training views walk once around the ellipse ``ROOM_WALK_RADII`` at about
+    ``ROOM_WALK_HEIGHT``, gaze swinging up to +-34 degrees left and right of the room
     centre; test views are at 0.85x the radius, eye heights 1.2 or 1.7 and
     random gaze offsets up to +-45 degrees; the ``n_val`` validation views are drawn
     the same way from another random stream.
