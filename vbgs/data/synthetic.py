@@ -378,12 +378,15 @@ def walk_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
 def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     """``n`` poses off the path: one in each of ``n`` equal stretches of it (so they
     cover the whole path), 0.2-0.6 units to its left or right, eye height 1.5 +- 0.3,
-    gaze within +-0.5 rad of the path's heading."""
+    gaze within +-0.5 rad of the path's heading. They come in the order of stretches
+    0, 2, 4, ..., then 1, 3, 5, ...: the first half of them spans the whole path too
+    (``fit-scene --save`` draws the first four)."""
     s = (np.arange(n) + rng.uniform(0.0, 1.0, n)) / max(n, 1)
     lateral = rng.choice([-1.0, 1.0], n) * rng.uniform(0.2, 0.6, n)
     height = WALK_EYE + rng.uniform(-0.3, 0.3, n)
     yaw = rng.uniform(-0.5, 0.5, n)
-    return [_walk_pose(*v) for v in zip(s, lateral, height, yaw, strict=True)]
+    poses = [_walk_pose(*v) for v in zip(s, lateral, height, yaw, strict=True)]
+    return [poses[i] for i in np.r_[0:n:2, 1:n:2]]
 
 
 def walk_val_poses(n_val: int = N_VAL, seed: int = 0) -> list[np.ndarray]:
