@@ -89,7 +89,7 @@ def _fit_image(args) -> dict:
 
 def _add_fit_scene(sub):
     p = sub.add_parser("fit-scene", help="learn a 3-D splat from a stream of RGB-D frames")
-    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    p.add_argument("--scene", default="object", help="object | room | walk | a dataset folder")
     add_choice(p, "--format", FORMAT)
     add_choice(p, "--method", METHOD)
     p.add_argument("--components", type=int, default=20000, help="components / splat capacity")
@@ -171,7 +171,7 @@ def _add_tune(sub):
     p = sub.add_parser("tune", help="learn one stream, then score a grid of render settings "
                                     "on validation views; writes OUT/SCENE.csv and .md")
     p.add_argument("--scene", nargs="+", default=["object"],
-                   help="object | room | a dataset folder; several: each gets its table and "
+                   help="object | room | walk | a dataset folder; several: each gets its table and "
                         "OUT/mean.csv ranks the settings by their mean over the scenes")
     add_choice(p, "--format", FORMAT)
     add_choice(p, "--method", METHOD)
@@ -289,7 +289,7 @@ def _add_oracle(sub):
     p = sub.add_parser("oracle", help="splats from a view's ground truth, rendered back (the "
                                       "renderer's check, apart from any learner)")
     p.add_argument("--scene", default="object",
-                   help="object | room | motorcycle (one real RGB-D view) | a dataset folder")
+                   help="object | room | walk | motorcycle (one real RGB-D view) | a dataset folder")
     add_choice(p, "--format", FORMAT)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--size", type=int, default=128, help="image size (longer side)")
@@ -312,7 +312,7 @@ def _oracle(args) -> dict:
 def _add_diagnostic_scene(p) -> None:
     """The scene arguments of a diagnostic command (colour-gap, render-bound): one VBGS
     stream, scored on held-out test views."""
-    p.add_argument("--scene", default="object", help="object | room | a dataset folder")
+    p.add_argument("--scene", default="object", help="object | room | walk | a dataset folder")
     add_choice(p, "--format", FORMAT)
     p.add_argument("--components", type=int, default=20000)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")

@@ -33,6 +33,7 @@ from experiments.settings import (
 )
 from vbgs.data.formats import load_scene
 from vbgs.data.scene import Scene
+from vbgs.data.synthetic import SCENES
 from vbgs.inference import model
 from vbgs.io_atomic import write_atomic
 from vbgs.mapping import EvidenceConfig, GrowthConfig
@@ -123,7 +124,7 @@ def load_task_scene(task: SceneTask) -> Scene:
     """The scene of a task at the task's size and frame counts, with at most
     ``task.n_val`` validation views (synthetic: extra views drawn like the test views;
     datasets: their validation split, see :mod:`vbgs.data.formats`)."""
-    if task.scene in ("object", "room") and not Path(task.scene).is_dir():
+    if task.scene in SCENES and not Path(task.scene).is_dir():
         return load_scene(task.scene, size=task.size, n_train=task.frames, n_test=task.n_test,
                           seed=task.seed, n_val=task.n_val)
     scene = load_scene(task.scene, format=task.format, size=task.size)

@@ -93,7 +93,7 @@ class Spec:
 _INT, _STR = (int,), (str,)
 SETTINGS: dict[str, Spec] = {
     "task": Spec(_STR, "which task runs the cell", tuple(TASKS)),
-    "dataset": Spec(_STR, "photo name, synthetic scene (object, room) or a dataset path"),
+    "dataset": Spec(_STR, "photo name, synthetic scene (object, room, walk) or a dataset path"),
     "method": Spec(_STR, METHOD.help, METHOD.values),
     "size": Spec(_INT, "image side / frame width in pixels", minimum=1),
     "components": Spec(_INT, "mixture components (capacity)", minimum=1),

@@ -299,7 +299,7 @@ def detect_format(folder) -> str:
 
 
 def load_scene(path_or_name, format: str | None = None, **kw) -> Scene:
-    """A synthetic scene by name ("object", "room"), a real one-frame scene by name
+    """A synthetic scene by name ("object", "room", "walk"), a real one-frame scene by name
     ("motorcycle", :mod:`vbgs.data.stereo`; only ``size`` applies) or a dataset folder
     (format detected or given).
 

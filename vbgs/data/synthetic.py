@@ -1,6 +1,6 @@
 """Synthetic RGB-D scenes with exact ground truth, for any camera.
 
-Two scenes are ray cast analytically (:mod:`vbgs.data.raycast`) from textured
+Three scenes are ray cast analytically (:mod:`vbgs.data.raycast`) from textured
 primitives, so colour and z-depth are exact up to float32 rounding:
 
 * ``"object"``: object-centric, like NeRF-synthetic. A textured platform
@@ -11,13 +11,23 @@ primitives, so colour and z-depth are exact up to float32 rounding:
 * ``"room"``: a closed 6 x 5 x 2.6 room (floor at z = 0) with a photo on each
   wall, tiled floor and ceiling, a table with a ball on it, a ball on the floor
   and a stool, seen along a walkthrough inside it. Every pixel has valid depth.
+* ``"walk"``: an open street. A gravel road along +x between grass verges (ground
+  at z = 0, 70 x 52 units), five houses (walls with a photo on the side facing the
+  street), five trees, four rocks and two lamp posts on both sides of the first
+  40 units, and three tall buildings 45-60 units out, so depth reaches 60. The
+  camera walks ``WALK_LENGTH`` = 32 units forward along the road at eye height
+  ``WALK_EYE`` = 1.5 and never comes back: later frames see ground the first ones
+  saw far away or not at all. Pixels that hit nothing (the sky, a fifth to
+  two fifths of each frame) have depth 0 (invalid) and rgb ``WALK_SKY`` (light blue).
 
 World axes: z up, units are metres-like scene units. Training views follow a
-continuous closed path (frame i and i + 1 are neighbouring views, so streaming
-order matters); test views are drawn off that path under the same ``seed``;
-validation views (:func:`object_val_poses`, :func:`room_val_poses`) are drawn the way
-test views are, from a separate random stream (``[seed, scene tag, VAL_STREAM]``),
-so adding them leaves the training and test views bit-identical.
+continuous path (frame i and i + 1 are neighbouring views, so streaming order
+matters): closed for the object and the room (the last view is beside the first),
+open for the walk; test views are drawn off that path under the same ``seed``
+(along the whole of the walk's); validation views (:func:`object_val_poses`,
+:func:`room_val_poses`, :func:`walk_val_poses`) are drawn the way test views are,
+from a separate random stream (``[seed, scene tag, VAL_STREAM]``), so adding them
+leaves the training and test views bit-identical.
 ``seed`` also jitters object placement, so different seeds give different scenes
 and the same seed gives bit-identical frames.
 """
@@ -26,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbgs.data.raycast import Cylinder, Disc, Sphere, Surface, bounds_of, box, render
+from vbgs.data.raycast import Cylinder, Disc, Quad, Sphere, Surface, bounds_of, box, render
 from vbgs.data.scene import Frame, Scene
 from vbgs.render.camera import from_fov, look_at
 
@@ -37,9 +47,16 @@ ORBIT_TARGET = (0.0, 0.0, 0.3)
 ORBIT_ELEVATION = (np.deg2rad(10.0), np.deg2rad(55.0))  # range of view elevations
 ROOM_FOV_X = np.deg2rad(75.0)
 ROOM_CENTRE, ROOM_HALF = (0.0, 0.0, 1.3), (3.0, 2.5, 1.3)  # floor at z = 0, ceiling at 2.6
-WALK_RADII = (2.2, 1.7)  # walkthrough ellipse in the room (x, y), well clear of the objects
-WALK_HEIGHT = 1.45  # eye height of the walkthrough
-LOOK_TARGET = np.array([0.0, 0.0, 0.8])  # the walkthrough looks about this point
+ROOM_WALK_RADII = (2.2, 1.7)  # walkthrough ellipse in the room (x, y), well clear of the objects
+ROOM_WALK_HEIGHT = 1.45  # eye height of the walkthrough
+ROOM_LOOK_TARGET = np.array([0.0, 0.0, 0.8])  # the walkthrough looks about this point
+WALK_FOV_X = np.deg2rad(75.0)
+WALK_SKY = (0.62, 0.78, 0.95)  # light blue: the colour of every ray that hits nothing
+WALK_LENGTH = 32.0  # the path runs from x = 0 to x = WALK_LENGTH and never comes back
+WALK_WEAVE, WALK_WEAVE_PERIODS = 0.6, 1.25  # the path swings this far left/right (y), so often
+WALK_EYE = 1.5  # eye height of the walk
+WALK_WANDER, WALK_WANDER_PERIODS = 0.35, 2.0  # gaze yaw about the path's heading (rad), so often
+WALK_PITCH = np.deg2rad(4.0)  # the gaze dips this far below the horizon
 VAL_STREAM = 3  # third entry of the validation views' rng seed (train/test use [seed, tag])
 N_VAL = 4  # validation views per synthetic scene by default
 # Rays per pixel side: a pixel's colour is the mean of SAMPLES x SAMPLES rays spread
@@ -191,16 +208,16 @@ def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
     )
 
 
-def _walk_pose(phi: float, radius_scale: float, height: float, yaw: float) -> np.ndarray:
-    """Camera on the walk ellipse at angle ``phi``; gaze at LOOK_TARGET turned by ``yaw``."""
+def _room_walk_pose(phi: float, radius_scale: float, height: float, yaw: float) -> np.ndarray:
+    """Camera on the walk ellipse at angle ``phi``; gaze at ROOM_LOOK_TARGET turned by ``yaw``."""
     eye = np.array(
         [
-            radius_scale * WALK_RADII[0] * np.cos(phi),
-            radius_scale * WALK_RADII[1] * np.sin(phi),
+            radius_scale * ROOM_WALK_RADII[0] * np.cos(phi),
+            radius_scale * ROOM_WALK_RADII[1] * np.sin(phi),
             height,
         ]
     )
-    to_target = LOOK_TARGET - eye
+    to_target = ROOM_LOOK_TARGET - eye
     c, s = np.cos(yaw), np.sin(yaw)
     turned = np.array(
         [c * to_target[0] - s * to_target[1], s * to_target[0] + c * to_target[1], to_target[2]]
@@ -214,15 +231,16 @@ def room_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
     phase = rng.uniform(0.0, 2 * np.pi)
     phis = phase + 2 * np.pi * np.arange(n_train) / max(n_train, 1)  # [n_train]
     train = [
-        _walk_pose(p, 1.0, WALK_HEIGHT + 0.12 * np.sin(3 * p), 0.6 * np.sin(2 * p)) for p in phis
+        _room_walk_pose(p, 1.0, ROOM_WALK_HEIGHT + 0.12 * np.sin(3 * p), 0.6 * np.sin(2 * p))
+        for p in phis
     ]
-    return train, _walk_views(rng, n_test)
+    return train, _room_walk_views(rng, n_test)
 
 
-def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+def _room_walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     """``n`` poses off the walk: 0.85x its radius, eye height 1.2 or 1.7, random gaze."""
     return [
-        _walk_pose(p, 0.85, h, y)
+        _room_walk_pose(p, 0.85, h, y)
         for p, h, y in zip(
             rng.uniform(0, 2 * np.pi, n),
             rng.choice([1.2, 1.7], n),
@@ -235,15 +253,15 @@ def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
 def room_val_poses(n_val: int = N_VAL, seed: int = 0) -> list[np.ndarray]:
     """Validation poses of the ``"room"`` scene: drawn as its test views are, from the
     rng stream ``[seed, 2, VAL_STREAM]`` (the test views use ``[seed, 2]``)."""
-    return _walk_views(np.random.default_rng([seed, 2, VAL_STREAM]), n_val)
+    return _room_walk_views(np.random.default_rng([seed, 2, VAL_STREAM]), n_val)
 
 
 def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
                n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
     """Room walkthrough (see module docstring); every pixel has valid depth.
 
-    Training views walk once around the ellipse ``WALK_RADII`` at about
-    ``WALK_HEIGHT``, gaze swinging up to +-34 degrees left and right of the room
+    Training views walk once around the ellipse ``ROOM_WALK_RADII`` at about
+    ``ROOM_WALK_HEIGHT``, gaze swinging up to +-34 degrees left and right of the room
     centre; test views are at 0.85x the radius, eye heights 1.2 or 1.7 and
     random gaze offsets up to +-45 degrees; the ``n_val`` validation views are drawn
     the same way from another random stream.
@@ -261,21 +279,161 @@ def room_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
     )
 
 
+# (x along the path, side: +1 left (y > 0) / -1 right, half extents (x, y, z), the photo
+# on the wall facing the street, the brick tint of the other walls). Walls only: the
+# roofs are above every camera and the floors below the ground, so never seen.
+WALK_HOUSES = (
+    (5.0, 1, (2.0, 1.6, 1.8), "chelsea", (1.0, 0.75, 0.6)),
+    (12.0, -1, (2.6, 1.8, 2.2), "astronaut", (0.8, 0.8, 0.95)),
+    (20.0, 1, (2.4, 2.0, 2.8), "coffee", (0.95, 0.9, 0.7)),
+    (27.0, -1, (2.2, 1.6, 1.9), "rocket", (0.9, 0.6, 0.6)),
+    (34.0, 1, (2.8, 1.8, 2.4), "colorwheel", (0.7, 0.9, 0.8)),
+)
+WALK_TREES = ((8.0, -1), (15.0, 1), (23.0, -1), (30.0, 1), (38.0, -1))  # (x, side)
+WALK_ROCKS = ((3.0, -1, 0.5), (17.0, -1, 0.7), (25.0, 1, 0.45), (31.5, -1, 0.6))  # (x, side, r)
+WALK_LAMPS = ((9.5, 1), (21.0, -1))  # (x, side): a post with a lamp ball on top
+# Far buildings, (centre x, centre y, half extents): beyond the end of the path, so
+# they are seen from the first frame on at 40-55 units and come closer (depth > 30).
+WALK_FAR = (
+    (50.0, -13.0, (3.0, 3.0, 6.0), "immunohistochemistry"),
+    (56.0, 7.0, (4.0, 3.0, 8.0), "camera"),
+    (47.0, 19.0, (3.0, 4.0, 5.0), "astronaut"),
+)
+WALK_GROUND = ((-4.0, 66.0), 26.0, 1.8)  # ground x range, half width, half width of the road
+
+
+def walk_primitives(seed: int = 0) -> list:
+    """Primitives of the ``"walk"`` scene; ``seed`` jitters every object's place (and a
+    house's yaw) along the street."""
+    rng = np.random.default_rng(seed)
+    (x0, x1), half_width, road = WALK_GROUND
+    length = x1 - x0
+    grass = Surface("grass", (0.75, 1.0, 0.6), (length / 5.0, (half_width - road) / 5.0))
+    prims = [  # the ground: a gravel road along x between two grass verges, all at z = 0
+        Quad((x0, road, 0.0), (length, 0.0, 0.0), (0.0, -2 * road, 0.0),
+             Surface("gravel", (0.6, 0.6, 0.65), (length / (2 * road), 1.0))),
+        Quad((x0, half_width, 0.0), (length, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
+        Quad((x0, -road, 0.0), (length, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
+    ]
+    for x, side, (hx, hy, hz), photo, tint in WALK_HOUSES:
+        dx, dy = rng.uniform(-0.6, 0.6), rng.uniform(0.0, 0.8)
+        yaw = rng.uniform(-0.15, 0.15)
+        brick = Surface("brick", tint, (2.0, 1.0))
+        street = Surface(photo, repeat=(1.0, 1.0))
+        walls = [brick, street if side < 0 else brick, brick, street if side > 0 else brick]
+        prims += box((x + dx, side * (5.5 + hy + dy), hz), (hx, hy, hz), yaw, walls, brick)[:4]
+    for x, side in WALK_TREES:
+        dx, dy = rng.uniform(-0.6, 0.6, 2)
+        tx, ty = x + dx, side * (3.3 + 0.3 * dy)
+        prims += [
+            Cylinder((tx, ty), 0.18, 0.0, 2.2, Surface("camera", (0.65, 0.45, 0.3), (2.0, 1.0))),
+            Sphere((tx, ty, 2.9), 1.0, Surface("grass", (0.5, 0.9, 0.4), (3.0, 2.0))),
+        ]
+    for x, side, r in WALK_ROCKS:
+        dx, dy = rng.uniform(-0.6, 0.6, 2)
+        prims.append(Sphere((x + dx, side * (3.0 + 0.4 * dy), 0.5 * r), r,
+                            Surface("gravel", (0.8, 0.78, 0.75), (2.0, 1.0))))
+    for x, side in WALK_LAMPS:
+        dx = rng.uniform(-0.6, 0.6)
+        prims += [
+            Cylinder((x + dx, side * 2.4), 0.08, 0.0, 2.8, Surface("rocket", (0.5, 0.5, 0.55))),
+            Sphere((x + dx, side * 2.4, 2.95), 0.2, Surface("colorwheel")),
+        ]
+    for x, y, (hx, hy, hz), photo in WALK_FAR:
+        dx, dy = rng.uniform(-1.0, 1.0, 2)
+        facade = Surface(photo, (0.85, 0.85, 0.95), (1.0, 2.0))
+        prims += box((x + dx, y + dy, hz), (hx, hy, hz), 0.0, facade, facade)[:4]
+    return prims
+
+
+def _walk_path(s):
+    """Point ``(x, y)`` and heading (radians from +x) of the path at fraction ``s``."""
+    phase = 2 * np.pi * WALK_WEAVE_PERIODS * s
+    x, y = WALK_LENGTH * s, WALK_WEAVE * np.sin(phase)
+    slope = WALK_WEAVE * 2 * np.pi * WALK_WEAVE_PERIODS / WALK_LENGTH * np.cos(phase)  # dy/dx
+    return x, y, np.arctan(slope)
+
+
+def _walk_pose(s: float, lateral: float, height: float, yaw: float) -> np.ndarray:
+    """Camera at fraction ``s`` of the path, ``lateral`` units to its left, at ``height``;
+    gaze along the path turned ``yaw`` radians to the left, dipped ``WALK_PITCH``."""
+    x, y, heading = _walk_path(s)
+    eye = np.array([x - lateral * np.sin(heading), y + lateral * np.cos(heading), height])
+    a = heading + yaw
+    gaze = np.array([np.cos(a) * np.cos(WALK_PITCH), np.sin(a) * np.cos(WALK_PITCH),
+                     -np.sin(WALK_PITCH)])
+    return look_at(eye, eye + gaze)
+
+
+def walk_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
+    """Camera-to-world poses ``(train, test)`` of the ``"walk"`` scene (see :func:`walk_scene`)."""
+    rng = np.random.default_rng([seed, 3])
+    phase = rng.uniform(0.0, 2 * np.pi)
+    s = np.arange(n_train) / max(n_train - 1, 1)  # [n_train] from the start to the end
+    yaw = WALK_WANDER * np.sin(2 * np.pi * WALK_WANDER_PERIODS * s + phase)
+    train = [_walk_pose(f, 0.0, WALK_EYE, w) for f, w in zip(s, yaw, strict=True)]
+    return train, _walk_views(rng, n_test)
+
+
+def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """``n`` poses off the path: one in each of ``n`` equal stretches of it (so they
+    cover the whole path), 0.2-0.6 units to its left or right, eye height 1.5 +- 0.3,
+    gaze within +-0.5 rad of the path's heading. They come in the order of stretches
+    0, 2, 4, ..., then 1, 3, 5, ...: the first half of them spans the whole path too
+    (``fit-scene --save`` draws the first four)."""
+    s = (np.arange(n) + rng.uniform(0.0, 1.0, n)) / max(n, 1)
+    lateral = rng.choice([-1.0, 1.0], n) * rng.uniform(0.2, 0.6, n)
+    height = WALK_EYE + rng.uniform(-0.3, 0.3, n)
+    yaw = rng.uniform(-0.5, 0.5, n)
+    poses = [_walk_pose(*v) for v in zip(s, lateral, height, yaw, strict=True)]
+    return [poses[i] for i in np.r_[0:n:2, 1:n:2]]
+
+
+def walk_val_poses(n_val: int = N_VAL, seed: int = 0) -> list[np.ndarray]:
+    """Validation poses of the ``"walk"`` scene: drawn as its test views are, from the
+    rng stream ``[seed, 3, VAL_STREAM]`` (the test views use ``[seed, 3]``)."""
+    return _walk_views(np.random.default_rng([seed, 3, VAL_STREAM]), n_val)
+
+
+def walk_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
+               n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
+    """Open walk down a street (see module docstring); the sky has no depth.
+
+    Training views walk once forward along the path, ``WALK_LENGTH`` units from x = 0,
+    never coming back, at eye height ``WALK_EYE``, gaze wandering up to
+    ``WALK_WANDER`` rad left and right of the path's heading; test views are spread
+    along the whole path, off it by 0.2-0.6 units, eye heights 1.2-1.8 and gaze up to
+    +-0.5 rad from the heading; the ``n_val`` validation views are drawn the same way
+    from another random stream.
+    """
+    train, test = walk_poses(n_train, n_test, seed)
+    prims = walk_primitives(seed)
+    return Scene(
+        name="walk",
+        train=_frames(prims, train, size, WALK_FOV_X, WALK_SKY, samples),
+        test=_frames(prims, test, size, WALK_FOV_X, WALK_SKY, samples),
+        bounds=bounds_of(prims),
+        background=WALK_SKY,
+        val=_frames(prims, walk_val_poses(n_val, seed), size, WALK_FOV_X, WALK_SKY, samples),
+    )
+
+
 def render_views(name: str, poses, size=128, seed: int = 0, samples: int = SAMPLES
                  ) -> list[Frame]:
     """Frames of synthetic scene ``name`` seen from the given camera-to-world ``poses``
     (``samples`` rays per pixel side, see :data:`SAMPLES`)."""
     fov, background = {"object": (OBJECT_FOV_X, OBJECT_BACKGROUND),
-                       "room": (ROOM_FOV_X, (0.0, 0.0, 0.0))}[name]
+                       "room": (ROOM_FOV_X, (0.0, 0.0, 0.0)),
+                       "walk": (WALK_FOV_X, WALK_SKY)}[name]
     return _frames(scene_primitives(name, seed), poses, size, fov, background, samples)
 
 
-SCENES = {"object": object_scene, "room": room_scene}
-PRIMITIVES = {"object": object_primitives, "room": room_primitives}
+SCENES = {"object": object_scene, "room": room_scene, "walk": walk_scene}
+PRIMITIVES = {"object": object_primitives, "room": room_primitives, "walk": walk_primitives}
 
 
 def make_scene(name: str, **kw) -> Scene:
-    """Build the synthetic scene ``name`` ("object" or "room") with keyword arguments ``kw``."""
+    """Build the synthetic scene ``name`` ("object", "room" or "walk") with keyword arguments ``kw``."""
     if name not in SCENES:
         raise ValueError(f"unknown synthetic scene {name!r}; known scenes: {', '.join(SCENES)}")
     return SCENES[name](**kw)

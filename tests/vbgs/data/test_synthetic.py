@@ -11,14 +11,16 @@ from vbgs.data.synthetic import (
     ORBIT_RADIUS,
     ORBIT_TARGET,
     make_scene,
+    render_views,
     scene_primitives,
+    walk_poses,
 )
 from vbgs.render.camera import project, unproject
 
 SMALL = dict(size=40, n_train=6, n_test=3)
 
 
-@pytest.fixture(scope="module", params=["object", "room"])
+@pytest.fixture(scope="module", params=["object", "room", "walk"])
 def scene(request):
     return make_scene(request.param, **SMALL)
 
@@ -86,18 +88,27 @@ def test_background_and_validity():
         assert np.all(f.depth > 0.1)
 
 
+def _neighbours(name):
+    """Two neighbouring training views of scene ``name``, one ray per pixel. The walk's 6
+    frames would be 6.4 units apart: two of its 60 (0.54 apart), at 96 px, as its ground's
+    depth changes fast from row to row near the horizon."""
+    if name == "walk":
+        return render_views("walk", walk_poses(60, 0)[0][:2], size=96, samples=1)
+    return make_scene(name, **SMALL, samples=1).train[:2]
+
+
 def test_views_agree_on_geometry_and_colour(scene):
     """Points seen from view A, where view B sees them too, have B's depth and colour
     (one ray per pixel, so a pixel's colour is the albedo at its centre's point)."""
-    scene = make_scene(scene.name, **SMALL, samples=1)
     prims = scene_primitives(scene.name)
-    a, b = scene.train[0], scene.train[1]
+    a, b = _neighbours(scene.name)
+    w, h = b.camera.width, b.camera.height
     xyz, rgb = unproject(a.camera, a.rgb, a.depth)  # [n, 3] each
     centre = b.camera.position
     t, albedo = cast(prims, centre, xyz.astype(np.float64) - centre)  # t = 1 at the point
     visible = np.abs(t - 1.0) < 1e-4
     uv, z = project(b.camera, xyz)
-    inside = (uv[:, 0] >= 0) & (uv[:, 0] < 40) & (uv[:, 1] >= 0) & (uv[:, 1] < 40) & (z > 0)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h) & (z > 0)
     both = visible & inside
     assert both.mean() > 0.3
     np.testing.assert_allclose(albedo[both], rgb[both], atol=2e-3)
@@ -153,7 +164,7 @@ def test_disparity_to_depth_marks_bad_disparity_missing():
     assert disparity_to_depth(disp, 100.0, 0.5, doffs=10.0)[0, 1] == pytest.approx(5.0)
 
 
-@pytest.mark.parametrize("name", ["object", "room"])
+@pytest.mark.parametrize("name", ["object", "room", "walk"])
 def test_culled_cast_equals_every_primitive_on_every_ray(name):
     """cast tests each primitive only on the rays near its bounding sphere: the hits and
     colours equal those of testing every ray against every primitive."""
