@@ -126,6 +126,12 @@ def scene_background(task, estimate: bg.BackgroundEstimate) -> np.ndarray:
     return fixed if fixed is not None else bg.colour(estimate)
 
 
+def measured(task) -> bool:
+    """The task's training depth comes from a sensor that leaves holes in surfaces (its
+    ``sensor``): only :func:`vbgs.render.background.empty_pixels` are background."""
+    return getattr(task, "sensor", "exact") != "exact" and getattr(task, "sensor_level", 1) > 0
+
+
 def frame_points(frame: Frame) -> tuple[np.ndarray, np.ndarray]:
     """Coloured world points ``xyz [n, 3]``, ``rgb [n, 3]`` of a frame's valid depth."""
     return unproject(frame.camera, frame.rgb, frame.depth)
@@ -164,7 +170,7 @@ def stream_frames(task, scene: Scene, order: np.ndarray, *, progress: bool = Fal
     estimate = bg.empty()
     for step, i in enumerate(tqdm(order, desc="frames", disable=not progress, leave=False), 1):
         frame = scene.train[i]
-        estimate = bg.observe(estimate, frame.rgb, frame.depth)
+        estimate = bg.observe(estimate, frame.rgb, frame.depth, holes=measured(task))
         yield step, frame, scene_background(task, estimate)
 
 
@@ -220,7 +226,7 @@ def static_protocol(task, scene: Scene, learner, frames: list, *, progress: bool
     training time over the number of training frames."""
     estimate = bg.empty()
     for frame in scene.train:
-        estimate = bg.observe(estimate, frame.rgb, frame.depth)
+        estimate = bg.observe(estimate, frame.rgb, frame.depth, holes=measured(task))
     background = scene_background(task, estimate)
     bar = tqdm(total=task.steps, desc="steps", disable=not progress, leave=False)
     start = time.perf_counter()

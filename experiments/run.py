@@ -33,6 +33,7 @@ from experiments.settings import (
     ESTEP,
     FORMAT,
     INIT,
+    MEASURED_BY,
     METHOD,
     OPACITY_RULE,
     ORDER,
@@ -119,9 +120,12 @@ def _add_fit_scene(sub):
     # checked by SceneTask, not argparse: a bad name is refused in one line
     p.add_argument("--simulate-sensor", default=SENSOR.default,
                    metavar="{" + ",".join(SENSOR.values) + "}", help=SENSOR.help)
+    p.add_argument("--sensor", default=MEASURED_BY.default,
+                   metavar="{" + ",".join(MEASURED_BY.values) + "}", help=MEASURED_BY.help)
     p.add_argument("--sensor-level", type=float, default=1.0, metavar="X",
-                   help="noise multiplier of --simulate-sensor (0: exact depth values, "
-                        "1: the published model, 2: twice its noise)")
+                   help="noise multiplier of the sensor, simulated (--simulate-sensor) and "
+                        "as the learner takes it (--sensor): 0: exact depth values, "
+                        "1: the published model, 2: twice its noise")
     add_choice(p, "--opacity-rule", OPACITY_RULE)
     add_choice(p, "--colour-rule", COLOUR_RULE)
     p.add_argument("--background", default="auto",
@@ -147,6 +151,7 @@ def _fit_scene(args) -> dict:
                      depth_align=args.depth_align, background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
+                     sensor=args.sensor,
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "

@@ -24,6 +24,7 @@ from experiments.settings import (
     ESTEP,
     FORMAT,
     INIT,
+    MEASURED_BY,
     METHOD,
     OPACITY_RULE,
     ORDER,
@@ -77,6 +78,9 @@ class SceneTask:
     # validation views keep their exact depth) and its noise multiplier (0: exact values)
     simulate_sensor: str = SENSOR.default
     sensor_level: float = 1.0
+    # how the training depth was measured, as the learner models it (VBGS:
+    # vbgs.mapping.SensorConfig; the gradient baseline weights its depth loss by it)
+    sensor: str = MEASURED_BY.default
     background: str = "auto"  # auto (from pixels without depth, as frames arrive) | R,G,B
     # gradient baseline only (see experiments.learners.gradient_learner)
     replay: str = REPLAY_DEFAULT
@@ -99,7 +103,8 @@ class SceneTask:
         for name, choice in (("method", METHOD), ("protocol", PROTOCOL), ("order", ORDER),
                              ("assign", ASSIGN), ("estep", ESTEP), ("format", FORMAT),
                              ("depth_kind", DEPTH_KIND), ("opacity_rule", OPACITY_RULE),
-                             ("colour_rule", COLOUR_RULE), ("simulate_sensor", SENSOR)):
+                             ("colour_rule", COLOUR_RULE), ("simulate_sensor", SENSOR),
+                             ("sensor", MEASURED_BY)):
             choice.check(name, getattr(self, name))
         try:
             check_level(self.sensor_level)

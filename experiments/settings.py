@@ -67,6 +67,10 @@ SENSOR = Choice(SENSOR_NAMES, "exact",
                 "depth sensor simulated on the training frames (vbgs.sensors): exact, a "
                 "kinect v1, a realsense active stereo or a mono depth network; test and "
                 "validation views keep their exact depth")
+MEASURED_BY = Choice(SENSOR_NAMES, "exact",
+                     "how the training depth was measured, as the learner takes it into "
+                     "account (vbgs.mapping.measurement: the noise along each ray, holes "
+                     "that are not background); exact: the depth is the surface's")
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 
 

@@ -26,7 +26,8 @@ def task_config(task) -> mapping.Config:
         colour_rule=task.colour_rule, colour_ridge=task.colour_ridge)
     return mapping.Config(components=task.components, assign=task.assign, estep=task.estep,
                           candidates=task.candidates, prior=task.prior, growth=task.growth,
-                          evidence=task.evidence, render=render)
+                          evidence=task.evidence, render=render,
+                          sensor=mapping.SensorConfig(task.sensor, task.sensor_level))
 
 
 class VbgsLearner:

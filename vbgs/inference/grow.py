@@ -69,6 +69,9 @@ NORMAL_NEIGHBOURS = 12
 # model's reach (see reach_of): more than the cell diagonal sqrt(3), so ground the rule
 # has covered (a component in the point's own cell) is always within reach.
 REACH_CELLS = 2.0
+# Measured points: the cells a point is looked up in reach this many sigma of its noise
+# along its ray, before and behind it (see _pick).
+NOISE_SIGMAS = 2.0
 
 class GrowInfo(NamedTuple):
     n_new: int  # components allocated by this call
@@ -264,22 +267,33 @@ def cell_ids(cells: np.ndarray) -> np.ndarray:
 
 
 def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
-          quota: int) -> np.ndarray:
+          quota: int, ray: np.ndarray | None = None) -> np.ndarray:
     """Up to ``quota`` points of ``x [n, d]`` (indices), one per cell of side ``cell``
-    that holds none of ``taken [m, d]``, cells taken in the random ``order [n]``."""
+    that holds none of ``taken [m, d]``, cells taken in the random ``order [n]``.
+
+    ``ray [n, d]``: measured points' noise along their rays. A point counts as new
+    ground only if its cell is empty at ``x - NOISE_SIGMAS u`` and ``x + NOISE_SIGMAS u``
+    too: noise scatters a surface's points into the cells before and behind it along
+    the rays, and a component there already explains them (the budget is not spent on
+    the noise)."""
     if quota <= 0:
         return np.zeros(0, np.int64)
-    ids = cell_ids(cell_index(np.concatenate([taken, x]), cell))
+    n = len(x)
+    shifted = [x] if ray is None else [x, x - NOISE_SIGMAS * ray, x + NOISE_SIGMAS * ray]
+    ids = cell_ids(cell_index(np.concatenate([taken, *shifted]), cell))
     occupied = np.zeros(ids.max() + 1, bool)
     occupied[ids[: len(taken)]] = True
-    point_ids = ids[len(taken):]
-    poor = order[~occupied[point_ids[order]]]  # points in empty cells, in random order
+    point_ids = ids[len(taken):len(taken) + n]
+    empty = np.ones(n, bool)
+    for j in range(len(shifted)):
+        empty &= ~occupied[ids[len(taken) + j * n:len(taken) + (j + 1) * n]]
+    poor = order[empty[order]]  # points in empty cells, in random order
     _, first = np.unique(point_ids[poor], return_index=True)  # one point per cell
     return poor[np.sort(first)][:quota]
 
 
 def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-           key: jax.Array) -> tuple[np.ndarray, int]:
+           key: jax.Array, ray: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """Where a batch adds components: indices into ``x [n, d]`` (positions about the
     grid's origin) given the means ``taken [m, d]`` of the components in use and
     ``n_empty`` free slots. First one per level-0 cell holding no component (new ground),
@@ -287,14 +301,14 @@ def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
     ``rule.max_new`` in all; random choices under ``key``. Returns ``(indices, n_ground)``."""
     order = host_rng(key).permutation(len(x))  # random order of the points
     budget = int(min(rule.max_new, n_empty))
-    chosen = _pick(x, taken, rule.cell, order, budget)  # new ground
+    chosen = _pick(x, taken, rule.cell, order, budget, ray)  # new ground
     n_ground = len(chosen)
     refine = int(min(budget - n_ground, np.floor(rule.refine * (n_empty - n_ground))))
     for level in range(1, rule.levels):
         if refine <= 0:
             break
         more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level, order,
-                     refine)
+                     refine, ray)
         chosen = np.concatenate([chosen, more])
         refine -= len(more)
     return chosen, n_ground
@@ -320,7 +334,8 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     empty = np.flatnonzero(~active)
     x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)  # [n, d]
     taken = np.asarray(posterior.space.mean, np.float64)[active]  # [m, d]
-    chosen, n_ground = select(x, taken, len(empty), rule, key=key)
+    ray = None if ray is None else np.asarray(ray, np.float64)
+    chosen, n_ground = select(x, taken, len(empty), rule, key=key, ray=ray)
     n_new = len(chosen)
     if n_new == 0:
         return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])

@@ -7,6 +7,7 @@ from vbgs.mapping.config import (
     EvidenceConfig,
     GrowthConfig,
     RenderConfig,
+    SensorConfig,
     dotted_names,
     get_dotted,
     with_dotted,
@@ -24,5 +25,5 @@ from vbgs.mapping.mapper import (
 )
 
 __all__ = ["Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState", "Mapper",
-           "RenderConfig", "bound", "dotted_names", "get_dotted", "grow_components", "init", "mapper", "splats",
+           "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted", "grow_components", "init", "mapper", "splats",
            "update", "with_dotted"]

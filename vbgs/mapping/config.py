@@ -19,6 +19,7 @@ from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
+from vbgs.sensors import SENSOR_NAMES
 
 ASSIGN = ("prior", "posterior")
 ESTEP = ("dense", "sparse")
@@ -87,6 +88,30 @@ class EvidenceConfig:
 
 
 @dataclass(frozen=True)
+class SensorConfig:
+    """How the depth was measured (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.sensors`).
+
+    model: a sensor of :data:`vbgs.sensors.SENSOR_NAMES` (``exact``: the depth is the
+        surface's, a missing pixel shows nothing);
+    level: its noise multiplier (1: the published model).
+    """
+
+    model: str = "exact"
+    level: float = 1.0
+
+    def __post_init__(self):
+        _choice("sensor.model", self.model, SENSOR_NAMES)
+        if not (isinstance(self.level, (int, float)) and math.isfinite(self.level)
+                and self.level >= 0):
+            raise ValueError(f"sensor.level must be a finite number >= 0, got {self.level!r}")
+
+    @property
+    def exact(self) -> bool:
+        """The depth is taken as it is: no noise, and no holes in surfaces."""
+        return self.model == "exact" or self.level == 0
+
+
+@dataclass(frozen=True)
 class RenderConfig:
     """How the posterior becomes splats (:func:`vbgs.render.splats.from_posterior`).
 
@@ -130,7 +155,7 @@ class Config:
     assign: responsibilities under the fixed ``prior`` (a stream equals one batch when
         the reference does not grow) or the current ``posterior``;
     estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
-    prior, growth, evidence, render: the nested groups above.
+    prior, growth, evidence, render, sensor: the nested groups above.
     """
 
     components: int = 20000
@@ -141,6 +166,7 @@ class Config:
     growth: GrowthConfig = field(default_factory=GrowthConfig)
     evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
 
     def __post_init__(self):
         for name in ("components", "candidates"):
@@ -149,6 +175,9 @@ class Config:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
+        if not self.sensor.exact and self.estep != "sparse":
+            raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
+                             f"estep='sparse': its noise is modelled in the sparse E-step")
 
 
 def dotted_names(config: Any = None, prefix: str = "") -> list[str]:

@@ -18,8 +18,13 @@ RGB, z-depth):
    shows ground the map has none for (:func:`vbgs.inference.grow.grow`); the first
    frame fixes the cell side with ``growth.first_frame_share`` of the capacity;
 3. the opacity evidence of the frame's depth map is added (``render.opacity_rule ==
-   "evidence"``; :mod:`vbgs.render.opacity`), read against the assigning model;
-4. one compiled conjugate update learns the points (:class:`vbgs.inference.stepper.Stepper`;
+   "evidence"``; :mod:`vbgs.render.opacity`), read against the assigning model; with
+   a measured depth (``Config.sensor``) the hit band widens by the sensor's noise and a
+   missing pixel is a pass only where it shows nothing
+   (:func:`vbgs.render.background.empty_pixels`), never in a hole of a surface;
+4. one compiled conjugate update learns the points, with their noise along the rays
+   when the depth is measured (:mod:`vbgs.mapping.measurement`;
+   :class:`vbgs.inference.stepper.Stepper`;
    growth hands it the new rows without recompiling); points farther than
    ``growth.reach_cells`` cells from every component are left out and counted
    (``MapState.n_unlearned``);
@@ -44,11 +49,13 @@ import jax
 import numpy as np
 
 from vbgs.data.scene import Frame
-from vbgs.inference import grow, model
+from vbgs.inference import expfam, grow, model
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.stepper import Stepper
 from vbgs.mapping.config import Config
+from vbgs.mapping.measurement import depth_variance, point_rays
 from vbgs.render import colour_fit, opacity
+from vbgs.render.background import empty_pixels
 from vbgs.render.camera import unproject
 from vbgs.render.splats import Splats, drawn, from_posterior, mixture_geometry
 
@@ -105,7 +112,7 @@ def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) 
         if prior.n_components != k or prior.dim != 3:
             raise ValueError(f"the prior has {prior.n_components} {prior.dim}-D components; "
                              f"the config asks for {k} 3-D ones")
-        mixture = model.start(prior)
+        mixture = _measured(model.start(prior), config)
     return MapState(mixture, key, None, None, None, opacity.no_evidence(k),
                     colour_fit.no_frames(k), 0, 0, prior is None)
 
@@ -118,16 +125,23 @@ def update(state: MapState, frame: Frame, config: Config,
     xyz, rgb = unproject(frame.camera, frame.rgb, frame.depth)
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
-    state, slots = grow_components(state, xyz, rgb, config)
+    sensor = config.sensor
+    ray = None if sensor.exact else point_rays(frame.camera, frame.depth, sensor.model,
+                                                sensor.level)
+    state, slots = grow_components(state, xyz, rgb, config, ray)
     state = _sync_stepper(state, slots, config)
     evidence = state.evidence
     if config.render.opacity_rule == "evidence":  # against the model that assigns
         geometry = (state.geometry if config.assign == "prior"
                     else mixture_geometry(state.mixture.posterior))
+        variance = None if sensor.exact else depth_variance(geometry[0], frame.camera,
+                                                            sensor.model, sensor.level)
         evidence = opacity.observe(evidence, *geometry, frame.camera, frame.depth,
-                                   pass_sigmas=config.evidence.pass_sigmas)
+                                   pass_sigmas=config.evidence.pass_sigmas,
+                                   sensor_var=variance,
+                                   empty=empty_pixels(frame.depth, holes=not sensor.exact))
     before = state.mixture.posterior
-    mixture, step = state.stepper(state.mixture, xyz, rgb)
+    mixture, step = state.stepper(state.mixture, xyz, rgb, ray)
     if step.learned is not None:  # points beyond reach were left out
         xyz, rgb = xyz[step.learned], rgb[step.learned]
     n = len(step.learned) if step.learned is not None else len(xyz)
@@ -178,10 +192,12 @@ def mapper(config: Config) -> Mapper:
     return Mapper(bound_init, bound_update, bound_splats)
 
 
-def grow_components(state: MapState, xyz, rgb, config: Config) -> tuple[MapState, np.ndarray]:
+def grow_components(state: MapState, xyz, rgb, config: Config, ray=None
+                    ) -> tuple[MapState, np.ndarray]:
     """Step 2 of :func:`update` alone: a growing map's new components for the points
     ``xyz [n, 3]``, ``rgb [n, 3]`` (new ground; none for a map with a fixed reference),
-    and the slots they filled. The first call fixes the growth rule."""
+    and the slots they filled. The first call fixes the growth rule; ``ray [n, 3]``:
+    the points' noise along their rays (:mod:`vbgs.mapping.measurement`)."""
     if not state.growing:
         return state, np.zeros(0, np.int64)
     mixture, rule = state.mixture, state.rule
@@ -189,10 +205,20 @@ def grow_components(state: MapState, xyz, rgb, config: Config) -> tuple[MapState
     if mixture is None:  # the first frame fixes the cell side
         rule = grow.calibrate(xyz, k, g.first_frame_share * k, refine=g.refine_share,
                               levels=g.levels, rate=g.max_new_share)
-        mixture = grow.start_empty(xyz, k, rule.cell, config.prior)
+        mixture = _measured(grow.start_empty(xyz, k, rule.cell, config.prior), config)
     key, sub = jax.random.split(state.key)
-    mixture, info = grow.grow(mixture, xyz, rgb, rule, key=sub, config=config.prior)
+    mixture, info = grow.grow(mixture, xyz, rgb, rule, key=sub, config=config.prior, ray=ray)
     return state._replace(mixture=mixture, rule=rule, key=key), info.slots
+
+
+def _measured(mixture: model.State, config: Config) -> model.State:
+    """A fresh mixture state whose statistics carry the noise moments when the depth is
+    measured (the same structure from the first frame on: no second compilation)."""
+    if config.sensor.exact:
+        return mixture
+    prior = mixture.prior
+    return mixture._replace(stats=expfam.zero_stats(prior.n_components, prior.dim,
+                                                    prior.alpha.dtype, noisy=True))
 
 
 def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapState:

@@ -132,3 +132,51 @@ def test_points_beyond_reach_are_counted_not_learned(scene):
     assert 0 < state.points_unlearned < 1
     learned = state.n_points - state.n_unlearned
     np.testing.assert_allclose(float(state.mixture.stats.count.sum()), learned, rtol=1e-4)
+
+
+def test_a_measured_depth_is_a_sensor_the_config_knows():
+    with pytest.raises(ValueError, match="sensor.model must be one of exact, kinect"):
+        mapping.SensorConfig("lidar")
+    with pytest.raises(ValueError, match="needs estep='sparse'"):
+        mapping.Config(estep="dense", sensor=mapping.SensorConfig("kinect"))
+    assert mapping.SensorConfig("kinect", level=0).exact and mapping.SensorConfig().exact
+
+
+def test_point_rays_lie_along_the_rays_with_the_sensor_sigma(scene):
+    from vbgs.mapping.measurement import point_rays
+    from vbgs.sensors import sensor
+
+    frame = scene.train[0]
+    xyz, _ = unproject(frame.camera, frame.rgb, frame.depth)
+    rays = point_rays(frame.camera, frame.depth, "kinect")
+    assert rays.shape == xyz.shape
+    sight = xyz - frame.camera.pose[:3, 3]
+    cos = np.sum(rays * sight, 1) / np.linalg.norm(rays, axis=1) / np.linalg.norm(sight, axis=1)
+    assert cos.min() > 0.9999  # each along its own ray, in unproject's order
+    z = (sight @ frame.camera.pose[:3, 2])  # camera depth
+    along_z = rays @ frame.camera.pose[:3, 2]  # the z part is sigma_z itself
+    np.testing.assert_allclose(along_z, sensor("kinect").sigma_z(z, frame.camera), rtol=1e-4)
+
+
+def test_growth_spends_no_components_on_the_noise():
+    """Noise scatters a surface into the cells before and behind it. Twelve object frames
+    at 64 px with Kinect noise (no holes), K = 4000: learned as exact depth they grow
+    15% more components than the exact frames (measured 3514 against 3066); with the
+    noise along the rays, no more (2967)."""
+    from vbgs import sensors
+
+    scene = load_scene("object", size=64, n_train=12, n_test=1, seed=0)
+    noisy = []
+    for i, f in enumerate(scene.train):
+        measured = sensors.simulate("kinect", f.depth, f.camera, seed=[0, i])
+        noisy.append(f._replace(depth=np.where(measured > 0, measured, f.depth)))
+    grown = {}
+    for name, frames, sensor in (("exact", scene.train, "exact"), ("naive", noisy, "exact"),
+                                 ("measured", noisy, "kinect")):
+        config = mapping.Config(components=4000, sensor=mapping.SensorConfig(sensor))
+        state, grown[name] = mapping.init(config, key=jax.random.key(0)), 0
+        for frame in frames:
+            state, info = mapping.update(state, frame, config)
+            grown[name] += info.n_new
+    assert grown["naive"] > 1.1 * grown["exact"]
+    assert grown["measured"] < 1.02 * grown["exact"]

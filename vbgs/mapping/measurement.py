@@ -1,0 +1,48 @@
+"""How a frame's depth was measured, as the learner uses it.
+
+A depth sensor's error lies along the ray a pixel is seen on: a reading z with axial
+standard deviation ``sigma_z(z)`` places the point at ``o + z d`` with ``d`` the ray
+direction scaled to unit camera depth, so the point's noise is ``R = u u^T`` with
+``u = sigma_z(z) d`` (a rank-1 covariance, mostly along the ray). The learner takes
+the noise into its conjugate update (:func:`vbgs.inference.model.e_step_with`:
+convolved in the responsibilities, deconvolved from the moments), so the posterior
+describes the surface, not the surface blurred by the sensor. Why this and not a
+latent depth per ray: the deconvolution keeps every statistic a sum over points, so
+under prior assignment a stream still equals one batch, and it costs one rank-1
+correction per point and candidate; a latent depth would need the current component
+in the statistics, which only the reference (never the data) may provide here.
+
+The sensors and their ``sigma_z`` are :mod:`vbgs.sensors`; a map's sensor is
+``Config.sensor`` (``exact``: nothing to take into account, no extra work).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vbgs.render.camera import Camera, pixel_grid, valid_depth
+from vbgs.sensors import sensor
+
+
+def point_rays(camera: Camera, depth: np.ndarray, model: str, level: float = 1.0
+               ) -> np.ndarray:
+    """``u [n, 3]``: each valid depth pixel's noise along its ray, in world units, in
+    the order :func:`vbgs.render.camera.unproject` returns the points
+    (``R_n = u_n u_n^T``; module docstring)."""
+    depth = np.asarray(depth)
+    mask = valid_depth(depth)
+    u, v = pixel_grid(camera)
+    z = depth[mask].astype(np.float64)
+    sigma = np.asarray(sensor(model).sigma_z(z, camera, level), np.float64)  # [n]
+    rays = np.stack([(u[mask] - camera.cx) / camera.fx, (v[mask] - camera.cy) / camera.fy,
+                     np.ones_like(z)], -1)  # [n, 3] camera frame, unit z
+    return ((sigma[:, None] * rays) @ np.asarray(camera.pose)[:3, :3].T).astype(np.float32)
+
+
+def depth_variance(means, camera: Camera, model: str, level: float = 1.0) -> np.ndarray:
+    """``[k]``: the sensor's variance of a depth reading at the camera depth of each
+    world point ``means [k, 3]`` (0 behind the camera)."""
+    pose = np.asarray(camera.pose, np.float64)
+    z = (np.asarray(means, np.float64) - pose[:3, 3]) @ pose[:3, 2]  # camera z
+    sigma = np.asarray(sensor(model).sigma_z(np.maximum(z, 0.0), camera, level), np.float64)
+    return np.where(z > 0, sigma**2, 0.0).astype(np.float32)
