@@ -91,11 +91,13 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
     prior mean as ``Psi + (S2 - S1 m^T - m S1^T + N m m^T) - d1 d1^T / kappa'`` with
     ``d1 = S1 - N m`` to avoid cancelling large terms.
 
-    With measurement noise (``stats.sum_noise``) ``S2`` is the deconvolved scatter
-    ``sum_xx - sum_noise`` (see :class:`Stats`). A handful of points can scatter less
-    than their noise predicts, so the deconvolved ``Psi'`` is floored: its eigenvalues
-    are kept at least the smallest eigenvalue of the prior's ``Psi`` (what exact data
-    always give, since they only add a positive semi-definite scatter).
+    With measurement noise (``stats.sum_noise = N``) the scatter is deconvolved:
+    ``Psi'' = Psi' - lambda N`` (see :class:`Stats`). A handful of points can scatter
+    less than their noise predicts, which would leave ``Psi''`` indefinite, so the
+    share of the noise taken off is ``lambda = min(1, NOISE_SHARE_MAX / tr(Psi'^-1 N))``:
+    the eigenvalues of ``Psi'^-1 N`` are non-negative and at most its trace, so
+    ``Psi'' >= (1 - NOISE_SHARE_MAX) Psi'`` stays positive definite. Elementwise only
+    (:func:`trace_solve`): no batched LAPACK call in the compiled update.
     """
     n = stats.count
     kappa = prior.kappa + n
@@ -107,21 +109,39 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
         - m0[:, :, None] * stats.sum_x[:, None, :]
         + n[:, None, None] * m0[:, :, None] * m0[:, None, :]
     )  # [k, d, d]  sum_n r (x - m0)(x - m0)^T
-    if stats.sum_noise is not None:
-        s2 = s2 - stats.sum_noise
     scale = prior.scale + s2 - d1[:, :, None] * d1[:, None, :] / kappa[:, None, None]
-    scale = 0.5 * (scale + jnp.swapaxes(scale, -1, -2))
     if stats.sum_noise is not None:
-        scale = eigen_floor(scale, jnp.linalg.eigvalsh(prior.scale)[:, 0])
+        noise = 0.5 * (stats.sum_noise + jnp.swapaxes(stats.sum_noise, -1, -2))
+        share = jnp.minimum(1.0, NOISE_SHARE_MAX / jnp.maximum(trace_solve(scale, noise),
+                                                               1e-30))
+        scale = scale - share[:, None, None] * noise
+    scale = 0.5 * (scale + jnp.swapaxes(scale, -1, -2))
     return NIW(m0 + d1 / kappa[:, None], kappa, prior.dof + n, scale)
 
 
-def eigen_floor(a: jnp.ndarray, floor: jnp.ndarray) -> jnp.ndarray:
-    """Symmetric ``a [k, d, d]`` with every eigenvalue raised to at least ``floor [k]``
-    (unchanged where it already is)."""
-    values, vectors = jnp.linalg.eigh(a)
-    raised = jnp.maximum(values, floor[:, None])
-    return jnp.einsum("kij,kj,klj->kil", vectors, raised, vectors)
+# The most of the deconvolution's noise share: the posterior scale keeps at least
+# 1 - NOISE_SHARE_MAX of what it had before the noise was taken off (niw_posterior).
+NOISE_SHARE_MAX = 0.95
+
+
+def trace_solve(a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
+    """``tr(a^-1 b)`` ``[k]`` for symmetric ``a, b [k, d, d]`` (d = 2 or 3), through the
+    adjugate: ``tr(adj(a) b) / det(a)``, elementwise (no LAPACK call)."""
+    d = a.shape[-1]
+    if d == 2:
+        adj = jnp.stack([jnp.stack([a[:, 1, 1], -a[:, 0, 1]], -1),
+                         jnp.stack([-a[:, 1, 0], a[:, 0, 0]], -1)], -2)
+    elif d == 3:
+        def cof(i, j):
+            r = [x for x in range(3) if x != i]
+            c = [x for x in range(3) if x != j]
+            minor = a[:, r[0], c[0]] * a[:, r[1], c[1]] - a[:, r[0], c[1]] * a[:, r[1], c[0]]
+            return (-1) ** (i + j) * minor
+        adj = jnp.stack([jnp.stack([cof(j, i) for j in range(3)], -1) for i in range(3)], -2)
+    else:
+        raise ValueError(f"trace_solve takes 2x2 or 3x3 matrices, got {d}x{d}")
+    det = jnp.sum(a[:, 0, :] * adj[:, :, 0], -1)  # expansion along the first row
+    return jnp.einsum("kij,kji->k", adj, b) / det
 
 
 def niw_expected_precision(q: NIW) -> jnp.ndarray:
