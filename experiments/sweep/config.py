@@ -35,6 +35,7 @@ from experiments.settings import (
     ESTEP,
     FORMAT,
     INIT,
+    MEASURED_BY,
     METHOD,
     OPACITY_RULE,
     ORDER,
@@ -122,6 +123,7 @@ SETTINGS: dict[str, Spec] = {
     "simulate_sensor": Spec(_STR, SENSOR.help, SENSOR.values),
     "sensor_level": Spec((float,), "noise multiplier of the simulated sensor",
                          check=_sensor_level),
+    "sensor": Spec(_STR, MEASURED_BY.help, MEASURED_BY.values),
 }
 TOP_LEVEL = ("name", "description", "fixed", "grid")
 

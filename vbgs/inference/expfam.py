@@ -121,7 +121,7 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
 
 # The most of the deconvolution's noise share: the posterior scale keeps at least
 # 1 - NOISE_SHARE_MAX of what it had before the noise was taken off (niw_posterior).
-NOISE_SHARE_MAX = 0.95
+NOISE_SHARE_MAX = 0.99
 
 
 def trace_solve(a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
