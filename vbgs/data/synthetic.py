@@ -195,17 +195,19 @@ def object_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
     limits; test views sit at random azimuths and elevations on the same sphere, and
     so do the ``n_val`` validation views (another random stream).
     """
-    train, test = object_poses(n_train, n_test, seed)
     prims = object_primitives(seed)
-    return Scene(
-        name="object",
-        train=_frames(prims, train, size, OBJECT_FOV_X, OBJECT_BACKGROUND, samples),
-        test=_frames(prims, test, size, OBJECT_FOV_X, OBJECT_BACKGROUND, samples),
-        bounds=bounds_of(prims),
-        background=OBJECT_BACKGROUND,
-        val=_frames(prims, object_val_poses(n_val, seed), size, OBJECT_FOV_X, OBJECT_BACKGROUND,
-                    samples),
-    )
+    return _open_scene("object", prims, (*object_poses(n_train, n_test, seed),
+                                         object_val_poses(n_val, seed)),
+                       size, OBJECT_FOV_X, OBJECT_BACKGROUND, samples)
+
+
+def _open_scene(name: str, prims, poses, size, fov_x: float, background, samples: int
+                ) -> Scene:
+    """A scene whose rays may hit nothing (they show ``background``, without depth):
+    its train, test and validation ``poses`` rendered, its bounds the primitives'."""
+    train, test, val = (_frames(prims, p, size, fov_x, background, samples) for p in poses)
+    return Scene(name=name, train=train, test=test, bounds=bounds_of(prims),
+                 background=background, val=val)
 
 
 def _room_walk_pose(phi: float, radius_scale: float, height: float, yaw: float) -> np.ndarray:
@@ -406,16 +408,10 @@ def walk_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
     +-0.5 rad from the heading; the ``n_val`` validation views are drawn the same way
     from another random stream.
     """
-    train, test = walk_poses(n_train, n_test, seed)
     prims = walk_primitives(seed)
-    return Scene(
-        name="walk",
-        train=_frames(prims, train, size, WALK_FOV_X, WALK_SKY, samples),
-        test=_frames(prims, test, size, WALK_FOV_X, WALK_SKY, samples),
-        bounds=bounds_of(prims),
-        background=WALK_SKY,
-        val=_frames(prims, walk_val_poses(n_val, seed), size, WALK_FOV_X, WALK_SKY, samples),
-    )
+    return _open_scene("walk", prims, (*walk_poses(n_train, n_test, seed),
+                                       walk_val_poses(n_val, seed)),
+                       size, WALK_FOV_X, WALK_SKY, samples)
 
 
 def render_views(name: str, poses, size=128, seed: int = 0, samples: int = SAMPLES
