@@ -12,9 +12,15 @@ _HEADLINE = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "compon
              "peak_memory_mb")
 
 
-def fail(err: Exception) -> int:
-    """A user-facing error: one line on stderr, exit status 2, no traceback."""
+def fail(err: Exception, as_json: bool = False) -> int:
+    """A user-facing error: one line on stderr, exit status 2, no traceback; with
+    ``as_json`` also one JSON object with an ``error`` field on stdout (a caller that
+    parses the last line of stdout gets the failure, not nothing)."""
     print(f"error: {err}", file=sys.stderr)
+    if as_json:
+        import json
+
+        print(json.dumps({"error": str(err), "error_type": type(err).__name__}))
     return 2
 
 

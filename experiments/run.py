@@ -537,7 +537,7 @@ def main(argv: list[str] | None = None) -> int:
             result = COMMANDS[args.command][1](args)
     except (ValueError, TypeError, OSError, ImportError) as err:  # OSError: a file that cannot
         # be written; ImportError: an optional dependency a command needs is missing
-        return fail(err)
+        return fail(err, as_json="--json" in argv)
     except KeyboardInterrupt as err:  # Ctrl-C: one line, status 130, no traceback
         return interrupted(err)
     if args.command in ("fit-image", "fit-scene"):

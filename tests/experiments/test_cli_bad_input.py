@@ -119,3 +119,17 @@ def test_colour_gap_refuses_bad_input_before_any_work(extra, message, capsys, mo
     err = _refused(["colour-gap", "--components", "100", "--frames", "2", "--size", "16",
                     *extra], capsys)
     assert message in err
+
+
+def test_a_failing_json_run_prints_one_json_object_with_the_error(capsys):
+    """--json: a caller parsing stdout's last line gets the failure as an object."""
+    import json
+
+    from experiments.run import main
+
+    assert main(["fit-scene", "--scene", "/no/such/folder", "--json"]) == 2
+    out, err = capsys.readouterr()
+    record = json.loads(out.strip().splitlines()[-1])
+    assert "/no/such/folder" in record["error"] and record["error"] in err
+    assert main(["fit-scene", "--scene", "/no/such/folder"]) == 2
+    assert capsys.readouterr().out == ""  # without --json, stdout stays empty
