@@ -86,6 +86,16 @@ def read_frame(path: Path) -> np.ndarray:
         raise CliError(str(err)) from err
 
 
+def check_apart(inputs: Path, output: Path) -> None:
+    """Refuse an output folder equal to or inside the input folder: depth PNGs named
+    like the frames would overwrite them (or be read back as frames next time)."""
+    src, dst = Path(inputs).resolve(), Path(output).resolve()
+    if dst == src or src in dst.parents:
+        raise CliError(f"--output {output} is {'the' if dst == src else 'inside the'} "
+                       f"--input folder {inputs}: the depth PNGs would overwrite or mix with "
+                       f"the frames; give a folder outside it")
+
+
 def check_output_folder(folder: Path) -> None:
     """Refuse, before any work, an output path that is a file, lies under a file, or
     cannot be written. The folder itself is created by the first write."""
@@ -205,6 +215,7 @@ def run(args) -> dict:
     if not 0.0 < args.reference_fraction <= 1.0:
         raise CliError(f"--reference-fraction must be in (0, 1], got {args.reference_fraction}")
     check_output_folder(args.output)
+    check_apart(args.input, args.output)
     frames = list_frames(args.input)
     try:
         model = OnnxDepth(args.model, kind=args.kind, preset=args.preset,

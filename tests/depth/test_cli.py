@@ -181,3 +181,17 @@ def test_8bit_reference_depth_is_refused_naming_the_file(scene, capsys):
                  "--kind", "inverse", "--reference", str(ref), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert f"error: reference depth: {ref}: depth PNGs must be 16-bit" in err and "8-bit" in err
+
+
+@pytest.mark.parametrize("inside", [False, True])
+def test_output_in_the_input_folder_is_refused_and_nothing_is_written(scene, capsys, inside):
+    """--output equal to --input would overwrite the RGB frames with depth PNGs of the
+    same names (data loss, exit 0 before); inside it, they would mix with the frames."""
+    tmp, frames, rgb, depth = scene
+    model = _save(depth_lookup_model(rgb, depth, 1.0, 0.0, space="depth"), tmp / "m.onnx")
+    before = {p.name: p.read_bytes() for p in frames.iterdir()}
+    out = frames / "depth" if inside else frames
+    assert main(["--model", model, "--input", str(frames), "--output", str(out),
+                 "--kind", "metric", "--no-progress"]) == 2
+    assert "--input folder" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in frames.iterdir()} == before
