@@ -88,6 +88,33 @@ def _intrinsics(meta: dict, entry: dict) -> dict:
             is not None}
 
 
+def check_intrinsics(intr: dict, what: str) -> dict:
+    """Refuse intrinsics a camera cannot have, naming the key and the likely fix: text
+    instead of numbers, a field of view in degrees, zero or negative focal lengths or
+    sizes; and a file with neither ``camera_angle_x`` nor a positive ``fl_x``."""
+    for key, value in intr.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{what}: {key!r} is {value!r}, not a number; write it without "
+                             f"quotes")
+        if not np.isfinite(value):
+            raise ValueError(f"{what}: {key!r} is {value!r}; give a finite number")
+    for key in ("camera_angle_x", "camera_angle_y"):
+        angle = intr.get(key)
+        if angle is not None and not 0 < angle < np.pi:
+            hint = (f"; in degrees? {angle} degrees is {np.deg2rad(angle):.4f} rad"
+                    if np.pi <= angle < 180 else "")
+            raise ValueError(f"{what}: {key!r} is {angle}: a field of view in radians lies "
+                             f"in (0, pi){hint}")
+    for key in ("w", "h", "fl_y"):
+        if key in intr and intr[key] <= 0:
+            raise ValueError(f"{what}: {key!r} is {intr[key]}; it must be > 0 (pixels)")
+    if not intr.get("fl_x", 0) > 0 and "camera_angle_x" not in intr:
+        given = f"'fl_x' is {intr['fl_x']}" if "fl_x" in intr else "neither is given"
+        raise ValueError(f"{what}: needs 'camera_angle_x' (radians) or a positive 'fl_x' "
+                         f"(pixels); {given}")
+    return intr
+
+
 def _camera(intr: dict, width: int, height: int, ref_size, pose_gl: np.ndarray) -> Camera:
     """Camera for a ``width x height`` image.
 
@@ -164,9 +191,7 @@ def _load_split(path: Path, keep, size, background, depth_scale, require_depth) 
         if not np.isfinite(pose_gl).all():
             raise ValueError(f"{what}: transform_matrix has {int((~np.isfinite(pose_gl)).sum())} "
                              f"NaN/inf entries; fix this frame's pose in {path.name}")
-        intr = _intrinsics(meta, entry)
-        if "camera_angle_x" not in intr and "fl_x" not in intr:
-            raise ValueError(f"{path}: needs 'camera_angle_x' (radians) or 'fl_x' (pixels)")
+        intr = check_intrinsics(_intrinsics(meta, entry), f"{path.name} ({what})")
         height, width = rgb.shape[:2]
         first = _reference_size(intr, width, height, first, f"{what} ({image.name})")
         cam = _camera(intr, width, height, first, pose_gl)

@@ -108,9 +108,35 @@ def validate_frame(frame: Frame, what: str = "frame") -> Frame:
             f"{what}: camera pose has {n_bad} NaN/inf entries; fix the pose (camera-to-world "
             f"4x4) in the dataset"
         )
-    if not (cam.fx > 0 and cam.fy > 0):
+    check_rotation(pose[:3, :3], what)
+    if not (np.isfinite(cam.fx) and np.isfinite(cam.fy) and cam.fx > 0 and cam.fy > 0):
         raise ValueError(f"{what}: focal lengths must be positive, got fx={cam.fx}, fy={cam.fy}")
     return frame
+
+
+# A pose's rotation may differ from an orthonormal matrix by this much (entries of
+# R^T R - I): float32 files and quaternion rounding stay well inside it.
+ROTATION_TOLERANCE = 1e-3
+
+
+def check_rotation(rotation: np.ndarray, what: str = "frame") -> None:
+    """Refuse a camera-to-world rotation ``[3, 3]`` that is not a rotation: scaled,
+    sheared, or a reflection (det -1), naming which (each gave a plausible-looking bad
+    score before it was checked)."""
+    r = np.asarray(rotation, np.float64)
+    gram = r.T @ r
+    if np.abs(gram - np.eye(3)).max() > ROTATION_TOLERANCE:
+        scales = np.sqrt(np.clip(np.diag(gram), 0, None))
+        off = np.abs(gram - np.diag(np.diag(gram))).max()
+        kind = (f"its columns have lengths {np.round(scales, 4).tolist()} (scaled)"
+                if off <= ROTATION_TOLERANCE * max(scales.max()**2, 1.0)
+                else "its columns are not perpendicular (sheared)")
+        raise ValueError(f"{what}: the pose's rotation is not orthonormal: {kind}; a "
+                         f"camera-to-world pose holds a pure rotation and a translation")
+    if np.linalg.det(r) < 0:
+        raise ValueError(f"{what}: the pose's rotation has determinant -1 (a reflection): "
+                         f"one axis is flipped; check the axis convention (OpenGL/NeRF "
+                         f"y up, z back against OpenCV y down, z forward) of the file")
 
 
 def require_some_depth(frame: Frame, what: str = "frame") -> Frame:
