@@ -194,7 +194,8 @@ def _add_tune(sub):
                         "splat_scale=0.5,0.7,1.0 opacity=0.5,0.9; model hyperparameters as "
                         "prior.NAME (e.g. prior.cov_scale=0.2,0.5: one stream per value) "
                         "(default: %(default)s)")
-    p.add_argument("--out", default="results/tuning", help="folder for SCENE.csv and SCENE.md")
+    p.add_argument("--out", default="runs/tune", help="folder for SCENE.csv and SCENE.md "
+                   "(default runs/tune, ignored by git; committed tables name results/...)")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
@@ -270,7 +271,8 @@ def _add_depth_study(sub):
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--methods", nargs="+", choices=METHOD.values, default=list(METHOD.values))
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
-    p.add_argument("--out", default="results/depth_study")
+    p.add_argument("--out", default="runs/depth_study",
+                   help="output folder (default runs/depth_study, ignored by git)")
     p.add_argument("--json", action="store_true")
 
 
@@ -410,7 +412,8 @@ def _add_bench(sub):
     p.add_argument("--impl", choices=["auto", "xla", "pallas"], default="auto",
                    help="raster: compositing code (auto: pallas on a GPU, xla otherwise; "
                         "pallas off a GPU runs in interpret mode, slow)")
-    p.add_argument("--out", default="results/bench", help="folder for the CSV and markdown table")
+    p.add_argument("--out", default="runs/bench", help="folder for the CSV and markdown table "
+                   "(default runs/bench, ignored by git)")
     p.add_argument("--json", action="store_true")
 
 

@@ -49,7 +49,8 @@ def add_sweep(sub) -> None:
                    help="sweep config: a TOML file, or a bundled config's name "
                         f"({', '.join(sorted(c.stem for c in CONFIGS.glob('*.toml')))}); "
                         "default: quick")
-    p.add_argument("--out", help="results folder (default: results/<config name>)")
+    p.add_argument("--out", help="results folder (default: runs/sweep/<config name>, "
+                   "ignored by git; committed snapshots name --out results/<config name>)")
     p.add_argument("--backend", choices=BACKENDS, default="local",
                    help="local: process pool on this machine; serial: in this process; "
                         "dask: an existing Dask cluster (--scheduler)")
@@ -186,7 +187,9 @@ def run_sweep(args) -> dict:
         reasons = sorted({s.reason for s in plan.skipped})
         raise ConfigError(f"{config.source}: the grids make no cells; every combination was "
                           f"skipped: {'; '.join(reasons[:3])}")
-    out = Path(args.out or Path("results") / config.name)
+    # a user's run goes to the ignored runs/ folder, so it never dirties the checkout; the
+    # committed snapshots are written with an explicit --out results/NAME
+    out = Path(args.out or Path("runs") / "sweep" / config.name)
     orphans = check_out(out, config, plan, args.force)
     workers = args.workers or os.cpu_count() or 1
     done = [] if args.force else [c for c in plan.cells if is_done(out, c.key)]

@@ -90,3 +90,17 @@ def test_dask_task_error_keeps_message_and_traceback(monkeypatch):
     assert record["error"] == "KeyError: 'worker-lost-123'"
     assert record["traceback"].startswith("Traceback (most recent call last)")
     assert "_raise_on_worker" in record["traceback"]
+
+
+def test_a_users_sweep_writes_to_the_ignored_runs_folder(tmp_path):
+    """Without --out a sweep writes runs/sweep/<name> under the working directory (git
+    ignores /runs/), never the committed results/ snapshot."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-m", "experiments.run", "sweep", "--config",
+                          "quick", "--max-cells", "1"], cwd=tmp_path, capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert (tmp_path / "runs" / "sweep" / "quick").is_dir()
+    assert not (tmp_path / "results").exists()
