@@ -163,6 +163,9 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
         raise ValueError(f"scene {task.scene!r} has no held-out test views to score a learner "
                          f"on ({len(scene.train)} training view(s)); use it with the oracle "
                          f"command, or pick a scene with more views")
+    if len(scene.train) == 1:
+        print(f"warning: scene {task.scene!r} has one training frame: a map from one view "
+              f"scores poorly on held-out views seen from elsewhere", file=sys.stderr)
     learner = learner_cls(task, scene)
     if task.protocol == "static" and "static" in learner_cls.PROTOCOLS:
         result = static_protocol(task, scene, learner, learner.static_frames(scene),
@@ -171,7 +174,17 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
         result = stream_protocol(task, scene, learner, progress=progress, ply=ply)
     details = learner.details(result)
     warn_unlearned(details.get("points_unlearned", 0.0), task)
-    return replace(result, depth=depth_report, details=details)
+    return replace(result, depth=depth_report, details=details,
+                   settings={**result.settings, **what_ran(task, scene)})
+
+
+def what_ran(task: SceneTask, scene: Scene) -> dict:
+    """The frame and view counts that ran (a dataset may hold fewer than were asked
+    for): ``frames``, ``n_test``, ``n_val``, and what was asked where it differs."""
+    ran = {"frames": len(scene.train), "n_test": len(scene.test), "n_val": len(scene.val)}
+    asked = {f"{name}_asked": getattr(task, name) for name, n in ran.items()
+             if getattr(task, name) != n}
+    return {**ran, **asked}
 
 
 # A share of the training points left unlearned above this is said on stderr.

@@ -97,3 +97,14 @@ def test_the_clean_folder_runs(folder, capsys):
     assert main(["fit-scene", "--scene", str(folder), "--components", "50", "--size", "24",
                  "--json"]) == 0
     assert np.isfinite(json.loads(capsys.readouterr().out.strip().splitlines()[-1])["psnr"])
+
+
+def test_the_record_says_what_ran_not_what_was_asked(folder, capsys):
+    """The folder holds 4 training, 2 test and 4 validation views: asked for 60 and 8
+    (and 4), the JSON reports 4 and 2 (and 4), and what was asked beside those that
+    differ."""
+    assert main(["fit-scene", "--scene", str(folder), "--components", "50", "--size", "24",
+                 "--frames", "60", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert (r["frames"], r["n_test"], r["n_val"]) == (4, 2, 4)
+    assert (r["frames_asked"], r["n_test_asked"]) == (60, 8) and "n_val_asked" not in r
