@@ -78,8 +78,8 @@ class SceneTask:
     # validation views keep their exact depth) and its noise multiplier (0: exact values)
     simulate_sensor: str = SENSOR.default
     sensor_level: float = 1.0
-    # how the training depth was measured, as the learner models it (VBGS:
-    # vbgs.mapping.SensorConfig; the gradient baseline weights its depth loss by it)
+    # how the training depth was measured, as the learners model it (VBGS:
+    # vbgs.mapping.SensorConfig; the gradient baseline weights its depth L1 by 1/sigma)
     sensor: str = MEASURED_BY.default
     background: str = "auto"  # auto (from pixels without depth, as frames arrive) | R,G,B
     # gradient baseline only (see experiments.learners.gradient_learner)

@@ -68,9 +68,10 @@ SENSOR = Choice(SENSOR_NAMES, "exact",
                 "kinect v1, a realsense active stereo or a mono depth network; test and "
                 "validation views keep their exact depth")
 MEASURED_BY = Choice(SENSOR_NAMES, "exact",
-                     "how the training depth was measured, as the learner takes it into "
-                     "account (vbgs.mapping.measurement: the noise along each ray, holes "
-                     "that are not background); exact: the depth is the surface's")
+                     "how the training depth was measured, as the learners take it into "
+                     "account (VBGS: the noise along each ray, holes that are not "
+                     "background; the gradient baseline: its depth L1 weighted by 1/sigma); "
+                     "exact: the depth is the surface's")
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 
 

@@ -48,6 +48,7 @@ from vbgs.baseline.params import place
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference import grow
 from vbgs.render.raster import BLUR_VARIANCE
+from vbgs.mapping.measurement import depth_weights
 from vbgs.render.splats import Splats, drawn
 
 TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
@@ -144,7 +145,7 @@ class GradientLearner:
         if self.task.init == "stream":
             for frame in scene.train:
                 self._grow(frame)
-        return [frame_arrays(f) for f in scene.train]
+        return [self._arrays(f) for f in scene.train]
 
     @property
     def replay_bytes(self) -> int:
@@ -158,12 +159,21 @@ class GradientLearner:
                                                 jnp.asarray(background, jnp.float32))
         self.losses.append(losses)
 
+    def _arrays(self, frame: Frame):
+        """The frame as the step takes it; under a measured depth (``task.sensor``) its
+        depth term weighted by the sensor's noise (:mod:`vbgs.baseline.loss`)."""
+        t = self.task
+        if t.sensor == "exact" or t.sensor_level == 0:
+            return frame_arrays(frame)
+        return frame_arrays(frame, depth_weights(frame.depth, frame.camera, t.sensor,
+                                                 t.sensor_level))
+
     def learn(self, frame: Frame, background) -> None:
         """Train on the arriving frame and the replay buffer, then buffer the frame
         (under ``init="stream"`` first grow on the frame's new ground)."""
         if self.task.init == "stream":
             self._grow(frame)
-        arrays = frame_arrays(frame)
+        arrays = self._arrays(frame)
         self.train([arrays, *self.replay.items], self.task.steps_per_frame, background)
         self.replay = self.replay.add(arrays)
 

@@ -74,8 +74,6 @@ RULES: tuple[Rule, ...] = (
     Rule("simulate_sensor", lambda s: s.get("simulate_sensor", "exact") != "exact"
          and s.get("depth_model", "sensor") not in ("sensor", "none", "", None), SKIP,
          "a depth model replaces the training depth that the simulated sensor corrupts"),
-    Rule("sensor", _gradient, DROP,
-         "the measurement model is VBGS's (the gradient baseline's depth loss ignores it)"),
     Rule("sensor_level", lambda s: s.get("simulate_sensor", "exact") == "exact"
          and s.get("sensor", "exact") == "exact", DROP,
          "the exact sensor adds no noise for a level to scale"),

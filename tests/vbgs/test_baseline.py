@@ -294,3 +294,27 @@ def test_image_fit_reduces_the_loss():
     _, losses = fit_image(_image_params(), image.astype(np.float32), steps=30,
                           key=jax.random.key(0))
     assert losses.shape == (30,) and losses[-5:].mean() < 0.8 * losses[:5].mean()
+
+
+def test_measured_depth_weighs_far_noisy_pixels_less():
+    """Kinect depth: the depth L1's pixel weights fall as sigma_z grows with the depth,
+    average about 1 over the pixels with depth, and change the loss only through them."""
+    import jax.numpy as jnp
+
+    from vbgs.baseline.loss import depth_loss
+    from vbgs.mapping.measurement import depth_weights
+    from vbgs.render.camera import from_fov
+
+    cam = from_fov(16, 16, np.deg2rad(60), np.eye(4))
+    depth = np.tile(np.linspace(1.0, 4.0, 16, dtype=np.float32), (16, 1))
+    depth[:2] = 0.0  # holes
+    w = depth_weights(depth, cam, "kinect")
+    assert (np.diff(w[5]) < 0).all()  # farther, noisier: less weight
+    assert np.median(w[depth > 0]) == pytest.approx(1.0, rel=0.02)
+    assert (w[:2] == 1).all() and (depth_weights(depth, cam, "exact") == 1).all()
+    alpha = jnp.ones((16, 16))
+    rendered = jnp.asarray(depth) + 0.1  # 10 cm off everywhere
+    plain = float(depth_loss(rendered, alpha, depth))
+    weighted = float(depth_loss(rendered, alpha, depth, jnp.asarray(w)))
+    assert plain == pytest.approx(0.1, rel=1e-4)
+    assert weighted == pytest.approx(0.1 * w[depth > 0].mean(), rel=1e-4)

@@ -12,6 +12,12 @@ the L1 between the *alpha-normalised* rendered depth (the depth of the visible
 surface, as the evaluation renders it) and the ground truth, over pixels with
 valid ground-truth depth that the splats cover. Pixels the splats do not cover
 yet are left to the photometric term (dividing by a tiny α would blow up).
+
+Measured depth (a sensor's) weights each pixel's term by ``s_ref / sigma_z(d_p)``, the
+inverse of its noise relative to the frame's median noise ``s_ref`` (an L1 term is the
+log-likelihood of a Laplace error, whose scale grows with sigma_z), so far and noisy
+readings pull less; a sensor's holes are invalid pixels and take no part
+(:func:`vbgs.mapping.measurement.depth_weights` computes the weights).
 """
 
 from __future__ import annotations
@@ -72,24 +78,28 @@ def image_loss(render, target, ssim_weight: float = SSIM_LAMBDA) -> jax.Array:
     return (1.0 - ssim_weight) * l1 + ssim_weight * (1.0 - ssim_of(render, target))
 
 
-def depth_loss(depth_sum, alpha, target_depth) -> jax.Array:
+def depth_loss(depth_sum, alpha, target_depth, pixel_weight=None) -> jax.Array:
     """Masked L1 of the alpha-normalised depth (see the module docstring).
 
     depth_sum: ``[h, w]`` un-normalised Σ z α T; alpha: ``[h, w]``; target_depth:
-    ``[h, w]`` with 0 (or non-finite) where invalid.
+    ``[h, w]`` with 0 (or non-finite) where invalid; pixel_weight: ``[h, w]`` or None
+    (exact depth: every pixel 1).
     """
     valid = jnp.isfinite(target_depth) & (target_depth > 0)
     surface, covered = visible_surface(depth_sum, alpha)
     mask = valid & covered
     err = jnp.where(mask, jnp.abs(surface - jnp.where(valid, target_depth, 0.0)), 0.0)
+    if pixel_weight is not None:
+        err = err * pixel_weight
     return jnp.sum(err) / jnp.maximum(1.0, jnp.sum(mask))
 
 
 def frame_loss(out, rgb, depth, *, ssim_weight: float = SSIM_LAMBDA,
-               depth_weight: float = 0.0) -> jax.Array:
+               depth_weight: float = 0.0, pixel_weight=None) -> jax.Array:
     """The full loss of one rendered view ``out`` (a :class:`vbgs.render.raster.RenderOutput`)
-    against the frame's ``rgb [h, w, 3]`` and ``depth [h, w]``."""
+    against the frame's ``rgb [h, w, 3]`` and ``depth [h, w]`` (its pixels weighted by
+    ``pixel_weight [h, w]`` when the depth was measured)."""
     loss = image_loss(out.rgb, rgb, ssim_weight)
     if depth_weight:
-        loss = loss + depth_weight * depth_loss(out.depth, out.alpha, depth)
+        loss = loss + depth_weight * depth_loss(out.depth, out.alpha, depth, pixel_weight)
     return loss

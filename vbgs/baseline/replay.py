@@ -28,10 +28,12 @@ SPEC_HELP = "use 'none', 'full', 'fifo:K' or 'reservoir:K' with K a positive int
 
 
 def item_bytes(item) -> int:
-    """Bytes of an item's ``rgb`` and ``depth`` arrays (numpy or JAX; a plain array
-    counts itself)."""
+    """Bytes of an item's ``rgb`` and ``depth`` arrays and its depth weights when it has
+    them (numpy or JAX; a plain array counts itself)."""
     if hasattr(item, "rgb"):
-        return int(item.rgb.nbytes + item.depth.nbytes)
+        weight = getattr(item, "pixel_weight", None)
+        return int(item.rgb.nbytes + item.depth.nbytes
+                   + (0 if weight is None else weight.nbytes))
     return int(np.asarray(item).nbytes)
 
 

@@ -139,42 +139,48 @@ class FrameArrays(NamedTuple):
     rgb: jax.Array  # [h, w, 3]
     depth: jax.Array  # [h, w] 0 = invalid
     camera: Camera  # intrinsics [] each and pose [4, 4] as float32 arrays
+    pixel_weight: jax.Array | None = None  # [h, w] the depth term's weights (measured
+    #                                        depth, vbgs.baseline.loss); None: exact
 
 
-def frame_arrays(frame) -> FrameArrays:
-    """A :class:`vbgs.data.scene.Frame` (rgb, depth, camera) as :class:`FrameArrays`."""
+def frame_arrays(frame, pixel_weight=None) -> FrameArrays:
+    """A :class:`vbgs.data.scene.Frame` (rgb, depth, camera) as :class:`FrameArrays`, with
+    the depth term's ``pixel_weight [h, w]`` when its depth was measured."""
     if isinstance(frame, FrameArrays):
         return frame
     cam = frame.camera
     f32 = jnp.float32
     camera = cam._replace(**{k: jnp.asarray(getattr(cam, k), f32)
                              for k in ("fx", "fy", "cx", "cy", "pose")})
-    return FrameArrays(jnp.asarray(frame.rgb, f32), jnp.asarray(frame.depth, f32), camera)
+    weight = None if pixel_weight is None else jnp.asarray(pixel_weight, f32)
+    return FrameArrays(jnp.asarray(frame.rgb, f32), jnp.asarray(frame.depth, f32), camera,
+                       weight)
 
 
 def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, on_trace=None,
               frozen: tuple[str, ...] = ()):
-    """The jitted ``step(params, opt_state, rgb, depth, camera, background) ->
-    (params, opt_state, loss)`` (``*frame_arrays(frame)`` gives rgb, depth, camera):
+    """The jitted ``step(params, opt_state, rgb, depth, camera, pixel_weight, background)
+    -> (params, opt_state, loss)`` (``*frame_arrays(frame)`` gives rgb, depth, camera and
+    the depth term's pixel weights, None for exact depth):
     render over ``background [3]`` (an argument, so a background that is re-estimated
     as frames arrive costs no recompile), :func:`vbgs.baseline.loss.frame_loss`, one
     optimiser update; one compile per image size (the camera's static width and
     height). ``on_trace()`` (optional) is called each time it is traced. ``frozen``
     names Params fields whose gradients are zeroed, so Adam leaves them where they are."""
 
-    def loss_fn(theta: Params, active, rgb, depth, camera: Camera, background):
+    def loss_fn(theta: Params, active, rgb, depth, camera: Camera, pixel_weight, background):
         out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
                         tile=config.tile, capacity=config.raster_capacity, blur=config.blur)
         return frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
-                          depth_weight=config.depth_weight)
+                          depth_weight=config.depth_weight, pixel_weight=pixel_weight)
 
     @jax.jit
-    def step(params: Params, opt_state, rgb, depth, camera: Camera, background):
+    def step(params: Params, opt_state, rgb, depth, camera: Camera, pixel_weight, background):
         if on_trace is not None:
             on_trace()
         theta = trainable(params)
         loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
-                                                  background)
+                                                  pixel_weight, background)
         grads = grads._replace(**{f: jnp.zeros_like(getattr(grads, f)) for f in frozen})
         updates, opt_state = optimizer.update(grads, opt_state, theta)
         theta = optax.apply_updates(theta, updates)

@@ -46,3 +46,22 @@ def depth_variance(means, camera: Camera, model: str, level: float = 1.0) -> np.
     z = (np.asarray(means, np.float64) - pose[:3, 3]) @ pose[:3, 2]  # camera z
     sigma = np.asarray(sensor(model).sigma_z(np.maximum(z, 0.0), camera, level), np.float64)
     return np.where(z > 0, sigma**2, 0.0).astype(np.float32)
+
+
+def depth_weights(depth: np.ndarray, camera: Camera, model: str, level: float = 1.0
+                  ) -> np.ndarray:
+    """``[h, w]`` weights of a depth L1 term (the gradient baseline's,
+    :mod:`vbgs.baseline.loss`): ``s_ref / sigma_z(d)`` at pixels with depth, ``s_ref``
+    the median of ``sigma_z`` over them (so the weights average about 1 and the term
+    keeps its scale); 1 elsewhere (those pixels take no part anyway)."""
+    depth = np.asarray(depth)
+    mask = valid_depth(depth)
+    out = np.ones(depth.shape, np.float32)
+    if not mask.any():
+        return out
+    sigma = np.asarray(sensor(model).sigma_z(depth[mask].astype(np.float64), camera, level),
+                       np.float64)
+    if not (sigma > 0).all():
+        return out  # an exact sensor (or level 0): every reading counts the same
+    out[mask] = np.median(sigma) / sigma
+    return out
