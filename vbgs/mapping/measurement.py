@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbgs.render.camera import Camera, pixel_grid, valid_depth
+from vbgs.render.camera import Camera, camera_rays, valid_depth
 from vbgs.sensors import sensor
 
 
@@ -31,11 +31,9 @@ def point_rays(camera: Camera, depth: np.ndarray, model: str, level: float = 1.0
     (``R_n = u_n u_n^T``; module docstring)."""
     depth = np.asarray(depth)
     mask = valid_depth(depth)
-    u, v = pixel_grid(camera)
     z = depth[mask].astype(np.float64)
     sigma = np.asarray(sensor(model).sigma_z(z, camera, level), np.float64)  # [n]
-    rays = np.stack([(u[mask] - camera.cx) / camera.fx, (v[mask] - camera.cy) / camera.fy,
-                     np.ones_like(z)], -1)  # [n, 3] camera frame, unit z
+    rays = camera_rays(camera)[mask]  # [n, 3] camera frame, unit z
     return ((sigma[:, None] * rays) @ np.asarray(camera.pose)[:3, :3].T).astype(np.float32)
 
 

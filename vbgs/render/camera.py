@@ -20,7 +20,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from vbgs.render.pixels import pixel_centres
+from vbgs.render.pixels import pixel_centres, pixel_rays
 
 # Flip of the y and z camera axes: OpenGL/Blender camera frame <-> OpenCV frame.
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -115,6 +115,12 @@ def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     return uv[..., 0], uv[..., 1]
 
 
+def camera_rays(camera: Camera) -> np.ndarray:
+    """``[height, width, 3]``: each pixel's ray in the camera frame at unit camera depth
+    (:func:`vbgs.render.pixels.pixel_rays`)."""
+    return pixel_rays(camera.height, camera.width, camera.fx, camera.fy, camera.cx, camera.cy)
+
+
 def valid_depth(depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:
     """Mask of usable depth: finite, strictly positive and not beyond ``max_depth``."""
     depth = np.asarray(depth)
@@ -140,11 +146,8 @@ def unproject(
             f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
         )
     mask = valid_depth(depth, max_depth)
-    u, v = pixel_grid(camera)
     z = depth[mask].astype(np.float64)
-    x_cam = np.stack(
-        [(u[mask] - camera.cx) / camera.fx * z, (v[mask] - camera.cy) / camera.fy * z, z], -1
-    )
+    x_cam = camera_rays(camera)[mask] * z[:, None]  # [n, 3]
     xyz = x_cam @ camera.pose[:3, :3].T + camera.pose[:3, 3]
     return xyz.astype(np.float32), rgb[mask].astype(np.float32)
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbgs.render.pixels import pixel_centre
+from vbgs.render.pixels import pixel_rays
 
 EDGE_THRESHOLD = 0.05  # scene units (5 cm): a larger jump between 4-neighbours is an edge
 GRAZING_DEGREES = 75.0  # ray-to-normal angle beyond which a surface returns no depth
@@ -80,11 +80,7 @@ def _steep(p: np.ndarray, q: np.ndarray, grazing_degrees: float) -> np.ndarray:
 def camera_points(depth: np.ndarray, camera) -> np.ndarray:
     """Camera-frame points ``[h, w, 3]`` (float64) of every pixel at its depth."""
     h, w = np.shape(depth)
-    u = pixel_centre(np.arange(w, dtype=np.float64))  # [w]
-    v = pixel_centre(np.arange(h, dtype=np.float64))  # [h]
-    x = ((u - camera.cx) / camera.fx)[None, :] * np.ones((h, 1))
-    y = ((v - camera.cy) / camera.fy)[:, None] * np.ones((1, w))
-    rays = np.stack([x, y, np.ones((h, w))], -1)  # [h, w, 3], z = 1
+    rays = pixel_rays(h, w, camera.fx, camera.fy, camera.cx, camera.cy)  # [h, w, 3], z = 1
     return rays * np.asarray(depth, np.float64)[..., None]
 
 
