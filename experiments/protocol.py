@@ -41,6 +41,7 @@ from tqdm.auto import tqdm
 from experiments.init_schemes import oracle_start
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
+from vbgs.mapping.config import SensorConfig
 from vbgs.render import background as bg
 from vbgs.render.camera import unproject
 from vbgs.render.raster import BLUR_VARIANCE
@@ -126,10 +127,16 @@ def scene_background(task, estimate: bg.BackgroundEstimate) -> np.ndarray:
     return fixed if fixed is not None else bg.colour(estimate)
 
 
+def task_sensor(task) -> SensorConfig:
+    """How the task's training depth was measured (its ``sensor`` and ``sensor_level``),
+    as every learner and the background estimate take it."""
+    return SensorConfig(task.sensor, task.sensor_level)
+
+
 def measured(task) -> bool:
-    """The task's training depth comes from a sensor that leaves holes in surfaces (its
-    ``sensor``): only :func:`vbgs.render.background.empty_pixels` are background."""
-    return getattr(task, "sensor", "exact") != "exact" and getattr(task, "sensor_level", 1) > 0
+    """The task's training depth comes from a sensor that leaves holes in surfaces: only
+    :func:`vbgs.render.background.empty_pixels` are background."""
+    return not task_sensor(task).exact
 
 
 def frame_points(frame: Frame) -> tuple[np.ndarray, np.ndarray]:

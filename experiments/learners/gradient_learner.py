@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
-from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points
+from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points, task_sensor
 from vbgs.baseline import (
     TrainConfig,
     Trainer,
@@ -162,11 +162,11 @@ class GradientLearner:
     def _arrays(self, frame: Frame):
         """The frame as the step takes it; under a measured depth (``task.sensor``) its
         depth term weighted by the sensor's noise (:mod:`vbgs.baseline.loss`)."""
-        t = self.task
-        if t.sensor == "exact" or t.sensor_level == 0:
+        sensor = task_sensor(self.task)
+        if sensor.exact:
             return frame_arrays(frame)
-        return frame_arrays(frame, depth_weights(frame.depth, frame.camera, t.sensor,
-                                                 t.sensor_level))
+        return frame_arrays(frame, depth_weights(frame.depth, frame.camera, sensor.model,
+                                                 sensor.level))
 
     def learn(self, frame: Frame, background) -> None:
         """Train on the arriving frame and the replay buffer, then buffer the frame

@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax
 
 from experiments.learners.start import init_key, scene_prior
-from experiments.protocol import SceneResult
+from experiments.protocol import SceneResult, task_sensor
 from vbgs import mapping
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference.bound import StreamBound
@@ -27,7 +27,7 @@ def task_config(task) -> mapping.Config:
     return mapping.Config(components=task.components, assign=task.assign, estep=task.estep,
                           candidates=task.candidates, prior=task.prior, growth=task.growth,
                           evidence=task.evidence, render=render,
-                          sensor=mapping.SensorConfig(task.sensor, task.sensor_level))
+                          sensor=task_sensor(task))
 
 
 class VbgsLearner:

@@ -142,9 +142,9 @@ def update(state: MapState, frame: Frame, config: Config,
                                    empty=empty_pixels(frame.depth, holes=not sensor.exact))
     before = state.mixture.posterior
     mixture, step = state.stepper(state.mixture, xyz, rgb, ray)
+    n = len(xyz)
     if step.learned is not None:  # points beyond reach were left out
         xyz, rgb = xyz[step.learned], rgb[step.learned]
-    n = len(step.learned) if step.learned is not None else len(xyz)
     state = state._replace(mixture=mixture, evidence=evidence, n_points=state.n_points + n,
                            n_unlearned=state.n_unlearned + n - len(xyz))
     if config.render.colour_rule == "fit":

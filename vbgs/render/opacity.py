@@ -34,7 +34,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.render.camera import Camera, valid_depth
+from vbgs.render.background import empty_pixels
+from vbgs.render.camera import Camera
 from vbgs.render.raster import BLUR_VARIANCE, NEAR, project
 from vbgs.render.splats import Splats
 
@@ -78,7 +79,7 @@ def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
     every pixel without depth is empty (exact depth: nothing else is missing)."""
     k = np.shape(means)[0]
     sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
-    empty = ~valid_depth(np.asarray(depth)) if empty is None else empty
+    empty = empty_pixels(depth) if empty is None else empty
     hits, passes = _frame_counts(
         jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32), jnp.asarray(empty),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
