@@ -94,6 +94,7 @@ class SceneResult:
     forgetting_curve: list[list[float]] | None  # [[frames seen, early-view PSNR], ...]
     dropped: int
     background_rgb: list[float]  # the RGB the views were rendered and scored over
+    uncovered: float  # share of test pixels with a surface that the splats leave uncovered
     images: Mapping[str, list] = field(repr=False)  # "target" and "render" per test view
     depth: Mapping[str, Any] = field(default_factory=lambda: {"depth_source": "sensor"})
     details: Mapping[str, Any] = field(default_factory=dict)  # learner-specific numbers
@@ -101,7 +102,8 @@ class SceneResult:
 
     METRICS = ("oracle_start", "psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame",
                "peak_memory_mb", "components_used", "replay_bytes", "early_views", "early_psnr_when_seen",
-               "early_psnr_at_end", "forgetting_curve", "dropped", "background_rgb", "images")
+               "early_psnr_at_end", "forgetting_curve", "dropped", "background_rgb", "uncovered",
+               "images")
 
     def to_dict(self, images: bool = True) -> dict:
         """Flat dict: settings, depth report, metrics (images under ``"images"``
@@ -218,7 +220,7 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         components_used=used, replay_bytes=int(learner.replay_bytes), early_views=early_idx,
         early_psnr_when_seen=curve[0][1], early_psnr_at_end=curve[-1][1],
         forgetting_curve=curve, dropped=final.dropped, background_rgb=background.tolist(),
-        images={"target": [f.rgb for f in scene.test], "render": final.renders},
+        uncovered=final.uncovered, images={"target": [f.rgb for f in scene.test], "render": final.renders},
         oracle_start=oracle_start(task.init))
 
 
@@ -250,5 +252,5 @@ def static_protocol(task, scene: Scene, learner, frames: list, *, progress: bool
         peak_memory_mb=peak_memory_mb(), components_used=used,
         replay_bytes=int(learner.replay_bytes), early_views=None, early_psnr_when_seen=None,
         early_psnr_at_end=None, forgetting_curve=None, dropped=final.dropped,
-        background_rgb=background.tolist(),
+        background_rgb=background.tolist(), uncovered=final.uncovered,
         images={"target": [f.rgb for f in scene.test], "render": final.renders})

@@ -174,6 +174,7 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
         result = stream_protocol(task, scene, learner, progress=progress, ply=ply)
     details = learner.details(result)
     warn_unlearned(details.get("points_unlearned", 0.0), task)
+    warn_uncovered(result.uncovered)
     return replace(result, depth=depth_report, details=details,
                    settings={**result.settings, **what_ran(task, scene)})
 
@@ -199,6 +200,19 @@ def warn_unlearned(share: float, task) -> None:
               f"{task.components} components were spent before the stream reached that "
               f"ground, so the renders miss it; give more --components (the JSON's "
               f"points_unlearned says how much)", file=sys.stderr)
+
+
+# A share of the test views' surface pixels drawn as background above this is said.
+UNCOVERED_WARNING = 0.02
+
+
+def warn_uncovered(share: float) -> None:
+    """Say on stderr when the test views show background where their ground truth has a
+    surface: ground the map missed, or that no training frame saw (JSON ``uncovered``)."""
+    if share > UNCOVERED_WARNING:
+        print(f"warning: {share:.1%} of the test views' pixels with a surface are drawn as "
+              f"background (no splat covers them): ground the map missed or no training "
+              f"frame saw (the JSON's uncovered says how much)", file=sys.stderr)
 
 
 def save_views(path: str | Path, targets, renders, title: str, n: int = 4) -> None:

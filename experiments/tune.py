@@ -86,6 +86,20 @@ def with_setting(task, setting: dict):
     return task
 
 
+BOOLS = {"true": True, "on": True, "1": True, "false": False, "off": False, "0": False}
+
+
+def typed(kind: type, text: str):
+    """``text`` read as a ``kind`` value; a bool only from true/false, on/off or 1/0
+    (``bool("false")`` would be True)."""
+    text = text.strip()
+    if kind is bool:
+        if text.lower() not in BOOLS:
+            raise ValueError(text)
+        return BOOLS[text.lower()]
+    return kind(text)
+
+
 def parse_grid(specs: list[str], task) -> dict[str, list]:
     """``["name=v1,v2", ...]`` -> ``{name: [v1, v2]}``, each value converted to the type
     of the task's current value of ``name`` (float when that is None)."""
@@ -112,7 +126,7 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
         if is_nested_setting(name):
             kind = type(get_dotted(task, name))
             try:
-                grid[name] = [kind(v.strip()) for v in values.split(",")]
+                grid[name] = [typed(kind, v) for v in values.split(",")]
             except ValueError:
                 raise ValueError(f"--grid {name}: cannot read {values!r} as {kind.__name__} "
                                  f"values") from None
@@ -122,7 +136,7 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
         current = getattr(task, name)
         kind = float if current is None or isinstance(current, float) else type(current)
         try:
-            grid[name] = [kind(v.strip()) for v in values.split(",")]
+            grid[name] = [typed(kind, v) for v in values.split(",")]
         except ValueError:
             raise ValueError(f"--grid {name}: cannot read {values!r} as {kind.__name__} "
                              f"values") from None

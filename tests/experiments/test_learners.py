@@ -101,7 +101,7 @@ def test_each_learner_is_scored_with_its_own_pixel_filter(scene):
         assert learner.blur == blur
         result = stream_protocol(task, scene, learner)
         background = np.asarray(result.background_rgb)
-        rgb, _, _ = render_view(learner.splats(), scene.test[0], background, blur)
+        rgb = render_view(learner.splats(), scene.test[0], background, blur).rgb
         np.testing.assert_allclose(result.images["render"][0], rgb, atol=1e-6)
         psnrs[blur] = result.psnr
     assert abs(psnrs[0.02] - psnrs[0.3]) > 0.05

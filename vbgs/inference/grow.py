@@ -69,6 +69,10 @@ NORMAL_NEIGHBOURS = 12
 # model's reach (see reach_of): more than the cell diagonal sqrt(3), so ground the rule
 # has covered (a component in the point's own cell) is always within reach.
 REACH_CELLS = 2.0
+# Coarse levels far ground may use (point_levels): cells up to 2^5 = 32 times the
+# level-0 side, for ground seen 32 times more coarsely than the first frame's median
+# (a street's end 30 units away against 1 unit in front of the camera).
+COARSE_LEVELS = 5
 # Measured points: the cells a point is looked up in reach this many sigma of its noise
 # along its ray, before and behind it (see _pick).
 NOISE_SIGMAS = 2.0
@@ -182,10 +186,11 @@ def local_normals(x: np.ndarray, chosen: np.ndarray,
     return np.linalg.eigh(cov)[1][:, :, 0]  # eigenvalues ascending: the smallest's vector
 
 
-def surface_scales(s: float, normals: np.ndarray, thickness: float) -> np.ndarray:
-    """NIW scale matrices ``[m, 3, 3]``: the isotropic ``s I`` flattened along ``normals
-    [m, 3]``, ``s (I - n n^T + thickness^2 n n^T)``."""
+def surface_scales(s, normals: np.ndarray, thickness: float) -> np.ndarray:
+    """NIW scale matrices ``[m, 3, 3]``: the isotropic ``s I`` (``s`` a scalar or ``[m]``)
+    flattened along ``normals [m, 3]``, ``s (I - n n^T + thickness^2 n n^T)``."""
     outer = np.einsum("mi,mj->mij", normals, normals)
+    s = np.asarray(s, np.float64)[..., None, None]  # a scalar, or one per component [m]
     return s * (np.eye(normals.shape[1]) - (1.0 - thickness**2) * outer)
 
 
@@ -214,13 +219,29 @@ class Growth(NamedTuple):
     cell: side of the level-0 cells (new ground);
     levels: cell sides ``cell / 2^l`` for l < levels (finer levels refine);
     refine: share of the empty slots that refinement (levels >= 1) may take per batch;
-    max_new: the most components one batch may add (the bounded rate).
+    max_new: the most components one batch may add (the bounded rate);
+    coarse: see :func:`point_levels` (far ground, seen coarsely, gets coarse cells).
     """
 
     cell: float
     levels: int
     refine: float
     max_new: int
+    coarse: int = 0  # coarse levels far ground may use (cell * 2^j, j <= coarse)
+
+
+def point_levels(rule: Growth, footprint) -> np.ndarray | None:
+    """``[n]`` int: the coarse level of each point, whose pixel footprint (the side of
+    the patch of surface its pixel sees, :func:`vbgs.mapping.measurement.point_footprints`)
+    is ``footprint [n]``. A component need not be finer than the pixel it is seen with:
+    a point is new ground only when no component lies in its cell of side
+    ``cell * 2^j``, the finest at least as wide as its footprint (``j <= rule.coarse``),
+    so far ground (a street's end, a field) takes a few components where near ground
+    takes many. None without footprints or coarse levels."""
+    if footprint is None or rule.coarse <= 0:
+        return None
+    ratio = np.maximum(np.asarray(footprint, np.float64) / rule.cell, 1.0)
+    return np.minimum(np.ceil(np.log2(ratio)), rule.coarse).astype(np.int64)
 
 
 def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
@@ -234,18 +255,51 @@ def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
 
 
 def calibrate(xyz, n_components: int, first_cells: float, *, refine: float = 0.0,
-              levels: int = LEVELS, rate: float = MAX_NEW_SHARE) -> Growth:
+              levels: int = LEVELS, rate: float = MAX_NEW_SHARE, footprint=None,
+              coarse: int = 0, count: bool = False) -> Growth:
     """The rule for a stream whose first batch ``xyz [n, d]`` should get about
     ``first_cells`` level-0 components: the cell side is ``sqrt(A / first_cells)`` for
     the area ``A`` the batch covers (:func:`covered_area`); at most ``ceil(rate * K)``
-    new components per batch."""
+    new components per batch. ``footprint [n]``: the points' pixel footprints, for far
+    ground's coarse cells (:func:`point_levels`, ``coarse`` levels at most); with
+    ``count`` the side is the one that gives the batch ``first_cells`` cells of new
+    ground, counted, not estimated."""
     first_cells = float(min(max(first_cells, 1.0), n_components))
     if not 0 < rate <= 1:
         raise ValueError(f"the growth rate must be in (0, 1] of the capacity, got {rate!r}")
     if not 0 <= refine <= 1:
         raise ValueError(f"the refinement share must be in [0, 1], got {refine!r}")
     cell = float(np.sqrt(covered_area(xyz) / first_cells))
-    return Growth(cell, int(levels), float(refine), int(np.ceil(rate * n_components)))
+    rule = Growth(cell, int(levels), float(refine), int(np.ceil(rate * n_components)),
+                  int(coarse))
+    if not count:
+        return rule
+    # the side that gives the batch first_cells cells of new ground, counted (by
+    # bisection in log(cell): the count falls as the side grows; a dozen halvings of a
+    # factor-of-4 bracket: within 0.1%), not estimated as area / cell^2: on a frame with
+    # far ground, slanted or on coarse cells, the estimate is off by up to a factor of 3
+    x = np.asarray(xyz, np.float64)
+    x = x - 0.5 * (x.min(0) + x.max(0))
+    order, none = np.arange(len(x)), np.zeros((0, x.shape[1]))
+
+    def count(side: float) -> int:
+        trial = rule._replace(cell=side)
+        return len(new_ground(x, none, trial, order, len(x), None,
+                              point_levels(trial, footprint)))  # levels None: level 0
+
+    lo, hi, step = math.log(cell / 4.0), math.log(cell * 4.0), math.log(4.0)
+    for _ in range(8):  # widen the bracket until it holds the side (far ground: wider)
+        if count(math.exp(hi)) < first_cells:
+            break
+        lo, hi = hi, hi + step
+    for _ in range(8):
+        if count(math.exp(lo)) >= first_cells:
+            break
+        lo, hi = lo - step, lo
+    for _ in range(12):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if count(math.exp(mid)) < first_cells else (mid, hi)
+    return rule._replace(cell=math.exp(hi))
 
 
 def host_rng(key: jax.Array) -> np.random.Generator:
@@ -292,16 +346,38 @@ def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
     return poor[np.sort(first)][:quota]
 
 
+def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray,
+               quota: int, ray: np.ndarray | None = None, levels=None) -> np.ndarray:
+    """Up to ``quota`` points of ``x [n, d]`` (indices), one per cell holding none of the
+    means ``taken [m, d]``: level-0 cells, or with ``levels [n]`` (:func:`point_levels`)
+    each point's own coarse cell, finest level first (a component placed on near
+    ground takes the coarse cell it lies in)."""
+    if levels is None:
+        return _pick(x, taken, rule.cell, order, quota, ray)
+    chosen = np.zeros(0, np.int64)
+    for level in np.unique(levels):
+        if quota - len(chosen) <= 0:
+            break
+        here = order[levels[order] == level]  # this level's points, in the random order
+        picked = _pick(x[here], np.concatenate([taken, x[chosen]]), rule.cell * 2.0**level,
+                       np.arange(len(here)), quota - len(chosen),
+                       None if ray is None else ray[here])
+        chosen = np.concatenate([chosen, here[picked]])
+    return chosen
+
+
 def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-           key: jax.Array, ray: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+           key: jax.Array, ray: np.ndarray | None = None, levels=None
+           ) -> tuple[np.ndarray, int]:
     """Where a batch adds components: indices into ``x [n, d]`` (positions about the
     grid's origin) given the means ``taken [m, d]`` of the components in use and
-    ``n_empty`` free slots. First one per level-0 cell holding no component (new ground),
-    then refinement at finer levels within its share of the slots left; at most
-    ``rule.max_new`` in all; random choices under ``key``. Returns ``(indices, n_ground)``."""
+    ``n_empty`` free slots. First one per cell holding no component (new ground,
+    :func:`new_ground`), then refinement at finer levels within its share of the slots
+    left; at most ``rule.max_new`` in all; random choices under ``key``. Returns
+    ``(indices, n_ground)``."""
     order = host_rng(key).permutation(len(x))  # random order of the points
     budget = int(min(rule.max_new, n_empty))
-    chosen = _pick(x, taken, rule.cell, order, budget, ray)  # new ground
+    chosen = new_ground(x, taken, rule, order, budget, ray, levels)
     n_ground = len(chosen)
     refine = int(min(budget - n_ground, np.floor(rule.refine * (n_empty - n_ground))))
     for level in range(1, rule.levels):
@@ -315,19 +391,21 @@ def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
-         config: PriorConfig = PriorConfig(), ray=None) -> tuple[State, GrowInfo]:
+         config: PriorConfig = PriorConfig(), ray=None, levels=None) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
-    ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`)."""
+    ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`);
+    ``levels [n]``: the points' coarse levels (:func:`point_levels`)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
-                               config=config, ray=ray)
+                               config=config, ray=ray, levels=levels)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
-                 key: jax.Array, config: PriorConfig, ray=None) -> tuple[Mixture, GrowInfo]:
+                 key: jax.Array, config: PriorConfig, ray=None, levels=None
+                 ) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     active = is_active(prior)
@@ -335,15 +413,18 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)  # [n, d]
     taken = np.asarray(posterior.space.mean, np.float64)[active]  # [m, d]
     ray = None if ray is None else np.asarray(ray, np.float64)
-    chosen, n_ground = select(x, taken, len(empty), rule, key=key, ray=ray)
+    chosen, n_ground = select(x, taken, len(empty), rule, key=key, ray=ray, levels=levels)
     n_new = len(chosen)
     if n_new == 0:
         return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
     slots = empty[:n_new]
     dtype = prior.alpha.dtype
     scales = None
-    if prior.dim == 3 and config.surface_thickness != 1.0 and len(x) >= 3:
+    coarse = levels is not None and bool(levels[chosen].any())
+    if prior.dim == 3 and (config.surface_thickness != 1.0 or coarse) and len(x) >= 3:
         s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
+        if coarse:  # a component on a coarse cell of side cell 2^j: variance 4^j times
+            s = s * 4.0 ** levels[chosen]
         scales = surface_scales(s, local_normals(x, chosen, ray=ray),
                                 config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),

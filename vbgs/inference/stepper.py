@@ -265,9 +265,11 @@ class Stepper:
         d = self.prior.dim
         return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
 
-    def __call__(self, state: State, xyz, rgb, ray=None) -> tuple[State, StepInfo]:
+    def __call__(self, state: State, xyz, rgb, ray=None, reach=None) -> tuple[State, StepInfo]:
         """Learn the batch ``xyz [n, d]``, ``rgb [n, 3]``; ``ray [n, d]``: measured
-        points' noise along their rays (sparse E-step; :func:`vbgs.inference.model.update`)."""
+        points' noise along their rays (sparse E-step; :func:`vbgs.inference.model.update`);
+        ``reach [n]``: each point's own reach, in place of the stepper's (a point seen
+        coarsely reaches as far as the coarse components it may fall to)."""
         xyz, rgb = model.check_points_host(xyz, rgb)
         if xyz.shape[1] != self.prior.dim:
             raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
@@ -280,7 +282,7 @@ class Stepper:
             cand = np.zeros((size, self.n_candidates), np.int32)  # padding: weight 0
             nearest, cand[:n] = candidates.query_with_distance(tree, x[:n], self.n_candidates)
             if self.reach is not None:
-                learned = nearest <= self.reach
+                learned = nearest <= (self.reach if reach is None else np.asarray(reach))
                 w[:n][~learned] = 0.0
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             self.spec)

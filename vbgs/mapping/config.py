@@ -51,7 +51,9 @@ class GrowthConfig:
     levels: cell levels refinement may use (each half the side of the one before);
     max_new_share: the most components one frame may add, as a share of K;
     reach_cells: points farther than this many cells from every component are left
-        out of the update (:func:`vbgs.inference.grow.reach_of`).
+        out of the update (:func:`vbgs.inference.grow.reach_of`);
+    coarse_levels: coarse cells (side ``cell * 2^j``, j at most this) for ground seen
+        coarsely (:func:`vbgs.inference.grow.point_levels`; 0: one cell side everywhere).
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -59,6 +61,9 @@ class GrowthConfig:
     levels: int = grow.LEVELS
     max_new_share: float = grow.MAX_NEW_SHARE
     reach_cells: float = grow.REACH_CELLS
+    coarse_levels: int = grow.COARSE_LEVELS
+    merge: bool = True
+    count_first: bool = False
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
@@ -68,6 +73,13 @@ class GrowthConfig:
             raise ValueError(f"growth.refine_share must be in [0, 1], got {self.refine_share!r}")
         if not isinstance(self.levels, int) or self.levels < 1:
             raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
+        for name in ("merge", "count_first"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"growth.{name} must be true or false, got "
+                                 f"{getattr(self, name)!r}")
+        if not isinstance(self.coarse_levels, int) or self.coarse_levels < 0:
+            raise ValueError(f"growth.coarse_levels must be an integer >= 0, got "
+                             f"{self.coarse_levels!r}")
 
 
 @dataclass(frozen=True)

@@ -49,11 +49,11 @@ import jax
 import numpy as np
 
 from vbgs.data.scene import Frame
-from vbgs.inference import expfam, grow, model
+from vbgs.inference import expfam, grow, merge, model
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.stepper import Stepper
 from vbgs.mapping.config import Config
-from vbgs.mapping.measurement import depth_variance, point_rays
+from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
 from vbgs.render.camera import unproject
@@ -128,8 +128,13 @@ def update(state: MapState, frame: Frame, config: Config,
     sensor = config.sensor
     ray = None if sensor.exact else point_rays(frame.camera, frame.depth, sensor.model,
                                                 sensor.level)
-    state, slots = grow_components(state, xyz, rgb, config, ray)
+    footprint = point_footprints(frame.camera, frame.depth) if state.growing else None
+    state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
     state = _sync_stepper(state, slots, config)
+    reach = None  # each point's own, when far ground has coarse cells
+    levels = grow.point_levels(state.rule, footprint) if state.growing else None
+    if levels is not None and state.stepper.reach is not None:
+        reach = state.stepper.reach * 2.0**levels
     evidence = state.evidence
     if config.render.opacity_rule == "evidence":  # against the model that assigns
         geometry = (state.geometry if config.assign == "prior"
@@ -141,7 +146,7 @@ def update(state: MapState, frame: Frame, config: Config,
                                    sensor_var=variance,
                                    empty=empty_pixels(frame.depth, holes=not sensor.exact))
     before = state.mixture.posterior
-    mixture, step = state.stepper(state.mixture, xyz, rgb, ray)
+    mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach)
     n = len(xyz)
     if step.learned is not None:  # points beyond reach were left out
         xyz, rgb = xyz[step.learned], rgb[step.learned]
@@ -192,23 +197,58 @@ def mapper(config: Config) -> Mapper:
     return Mapper(bound_init, bound_update, bound_splats)
 
 
-def grow_components(state: MapState, xyz, rgb, config: Config, ray=None
+def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None
                     ) -> tuple[MapState, np.ndarray]:
     """Step 2 of :func:`update` alone: a growing map's new components for the points
     ``xyz [n, 3]``, ``rgb [n, 3]`` (new ground; none for a map with a fixed reference),
     and the slots they filled. The first call fixes the growth rule; ``ray [n, 3]``:
-    the points' noise along their rays (:mod:`vbgs.mapping.measurement`)."""
+    the points' noise along their rays, ``footprint [n]`` their pixel footprints
+    (:mod:`vbgs.mapping.measurement`; far ground gets coarse cells)."""
     if not state.growing:
         return state, np.zeros(0, np.int64)
     mixture, rule = state.mixture, state.rule
     k, g = config.components, config.growth
     if mixture is None:  # the first frame fixes the cell side
         rule = grow.calibrate(xyz, k, g.first_frame_share * k, refine=g.refine_share,
-                              levels=g.levels, rate=g.max_new_share)
+                              levels=g.levels, rate=g.max_new_share, footprint=footprint,
+                              coarse=g.coarse_levels, count=g.count_first)
         mixture = _measured(grow.start_empty(xyz, k, rule.cell, config.prior), config)
     key, sub = jax.random.split(state.key)
-    mixture, info = grow.grow(mixture, xyz, rgb, rule, key=sub, config=config.prior, ray=ray)
-    return state._replace(mixture=mixture, rule=rule, key=key), info.slots
+    levels = grow.point_levels(rule, footprint)
+    state, merged = _make_room(state._replace(mixture=mixture, rule=rule), xyz, ray, levels,
+                               config)
+    mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
+                              ray=ray, levels=levels)
+    return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
+
+
+def _make_room(state: MapState, xyz, ray, levels, config: Config
+               ) -> tuple[MapState, np.ndarray]:
+    """Free slots by merging (:mod:`vbgs.inference.merge`) when the frame shows more new
+    ground than the empty slots can take (``growth.merge``); the state with the pairs
+    merged (statistics, opacity evidence and colour sums alike) and the slots changed."""
+    mixture, rule = state.mixture, state.rule
+    none = np.zeros(0, np.int64)
+    if not config.growth.merge:
+        return state, none
+    prior = mixture.prior
+    active = grow.is_active(prior)
+    n_empty = int((~active).sum())
+    x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)
+    taken = np.asarray(mixture.posterior.space.mean, np.float64)[active]
+    wanted = len(grow.new_ground(x, taken, rule, np.arange(len(x)), rule.max_new,
+                                 None if ray is None else np.asarray(ray, np.float64), levels))
+    if wanted <= n_empty:
+        return state, none
+    counts = np.asarray(mixture.stats.count, np.float64)
+    pairs = merge.choose_pairs(mixture.posterior, counts, active, wanted - n_empty,
+                               config.prior.colour_noise)
+    empty = grow.empty_prior(prior.n_components, prior.origin, rule.cell, config.prior,
+                             prior.alpha.dtype)
+    state = state._replace(mixture=merge.merge(mixture, pairs, empty),
+                           evidence=merge.merge_rows(state.evidence, pairs),
+                           colour=merge.merge_rows(state.colour, pairs))
+    return state, pairs.reshape(-1)
 
 
 def _measured(mixture: model.State, config: Config) -> model.State:

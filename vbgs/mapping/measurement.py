@@ -37,6 +37,16 @@ def point_rays(camera: Camera, depth: np.ndarray, model: str, level: float = 1.0
     return ((sigma[:, None] * rays) @ np.asarray(camera.pose)[:3, :3].T).astype(np.float32)
 
 
+def point_footprints(camera: Camera, depth: np.ndarray) -> np.ndarray:
+    """``[n]``: the side of the patch of surface each valid depth pixel sees, head-on, in
+    world units (``z / f``, ``f`` the mean focal length in pixels), in the order
+    :func:`vbgs.render.camera.unproject` returns the points: how finely the frame
+    resolves the ground there (:mod:`vbgs.inference.grow`: far ground gets coarse cells)."""
+    depth = np.asarray(depth)
+    z = depth[valid_depth(depth)].astype(np.float64)
+    return z / (0.5 * (float(camera.fx) + float(camera.fy)))
+
+
 def depth_variance(means, camera: Camera, model: str, level: float = 1.0) -> np.ndarray:
     """``[k]``: the sensor's variance of a depth reading at the camera depth of each
     world point ``means [k, 3]`` (0 behind the camera)."""

@@ -1,0 +1,84 @@
+"""vbgs.inference.merge: freeing slots by merging neighbours, exactly in the statistics."""
+
+import jax
+import numpy as np
+
+from vbgs.inference import expfam, grow, merge, model
+from vbgs.inference.model import PriorConfig
+
+CONFIG = PriorConfig()
+
+
+def two_clusters_state(seed=0, gap=0.05, colours=((0.5, 0.2, 0.1), (0.5, 0.2, 0.1))):
+    """Four components: 0 and 1 on two halves of one patch (one colour unless told),
+    2 and 3 far away on another patch; each learns its own points (one-hot)."""
+    rng = np.random.default_rng(seed)
+    centres = np.array([[0.0, 0.0, 0.0], [gap, 0.0, 0.0], [3.0, 0.0, 0.0], [3.0, 2.0, 0.0]])
+    cols = np.array([colours[0], colours[1], (0.1, 0.8, 0.1), (0.9, 0.9, 0.9)])
+    xyz = np.concatenate([c + rng.normal(0, 0.03, (200, 3)) * [1, 1, 0.01] for c in centres])
+    rgb = np.concatenate([np.tile(c, (200, 1)) for c in cols])
+    label = np.repeat(np.arange(4), 200)
+    prior = model.make_prior(centres.astype(np.float32), cols.astype(np.float32),
+                             np.zeros(3, np.float32), 0.05, CONFIG)
+    r = np.eye(4, dtype=np.float32)[label]
+    stats = model.moments_to_stats(_moments(r, xyz.astype(np.float32), rgb), 3)
+    state = model.start(prior, CONFIG)
+    return state._replace(posterior=model.m_step(prior, stats), stats=stats), xyz, rgb, label
+
+
+def _moments(r, x, c):
+    """The summed feature moments [k, F] of one-hot responsibilities (model's layout)."""
+    phi = np.asarray(model.features(x, c))
+    return r.T @ phi
+
+
+def test_merged_statistics_are_the_union_of_both_components():
+    state, xyz, rgb, label = two_clusters_state()
+    empty = grow.empty_prior(4, state.prior.origin, 0.05, CONFIG)
+    merged = merge.merge(state, np.array([[0, 1]]), empty)
+    s, m = state.stats, merged.stats
+    np.testing.assert_allclose(m.count[0], s.count[0] + s.count[1], rtol=1e-6)
+    np.testing.assert_allclose(m.sum_x[0], s.sum_x[0] + s.sum_x[1], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(m.sum_xx[0], s.sum_xx[0] + s.sum_xx[1], rtol=1e-5, atol=1e-6)
+    assert float(m.count[1]) == 0.0  # slot 1 is empty again ...
+    assert not grow.is_active(merged.prior)[1]  # ... and takes no responsibility
+    assert grow.is_active(merged.prior)[[0, 2, 3]].all()
+    # the merged posterior mean is the mean of both clusters' points
+    mean = np.asarray(merged.posterior.space.mean[0]) + np.asarray(merged.prior.origin)
+    np.testing.assert_allclose(mean, xyz[label < 2].mean(0), atol=2e-3)
+    # the untouched components keep their posterior exactly
+    np.testing.assert_array_equal(np.asarray(merged.posterior.space.scale[2:]),
+                                  np.asarray(state.posterior.space.scale[2:]))
+
+
+def test_near_duplicates_cost_less_than_an_edge_of_colour_or_distance():
+    state, *_ = two_clusters_state()
+    counts = np.asarray(state.stats.count, np.float64)
+    cost = merge.merge_costs(state.posterior, counts, np.array([[0, 1], [2, 3], [0, 2]]),
+                             CONFIG.colour_noise)
+    assert cost[0] < 0.01 * cost[1:].min()  # same patch and colour: ~100 nats, else >1e4
+    assert 50 < cost[0] < 200
+    red, _, _, _ = two_clusters_state(colours=((0.9, 0.1, 0.1), (0.1, 0.1, 0.9)))
+    edge = merge.merge_costs(red.posterior, counts, np.array([[0, 1]]), CONFIG.colour_noise)
+    assert edge[0] > 100 * cost[0]  # the same geometry across a colour edge
+
+
+def test_choose_pairs_takes_disjoint_pairs_cheapest_first():
+    state, *_ = two_clusters_state()
+    counts = np.asarray(state.stats.count, np.float64)
+    active = np.ones(4, bool)
+    pairs = merge.choose_pairs(state.posterior, counts, active, 1, CONFIG.colour_noise)
+    assert pairs.tolist() == [[0, 1]]
+    pairs = merge.choose_pairs(state.posterior, counts, active, 5, CONFIG.colour_noise)
+    assert sorted(pairs.reshape(-1).tolist()) == [0, 1, 2, 3]  # two pairs, disjoint
+    none = merge.choose_pairs(state.posterior, counts, np.eye(4, dtype=bool)[0], 3,
+                              CONFIG.colour_noise)
+    assert none.shape == (0, 2)  # one active component: nothing to merge
+
+
+def test_merge_rows_sums_any_per_component_table():
+    stats = expfam.zero_stats(3, 3, noisy=True)._replace(
+        count=jax.numpy.array([1.0, 2.0, 4.0]))
+    out = merge.merge_rows(stats, np.array([[2, 0]]))
+    assert np.asarray(out.count).tolist() == [0.0, 2.0, 5.0]
+    assert out.sum_noise.shape == (3, 3, 3)
