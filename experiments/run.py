@@ -82,7 +82,7 @@ def _fit_image(args) -> dict:
     h, w, _ = image.shape
     check_fewer_components(args.components, h * w, f"{w}x{h} image",
                            "use fewer --components or a larger --size")
-    result = run_image(task, progress=sys.stderr.isatty(), image=image)
+    result = run_image(task, progress=True, image=image)
     images = result.pop("images")
     if args.save:
         save_comparison(args.save, images["target"], images["render"],
@@ -206,7 +206,7 @@ def _fit_scene(args) -> dict:
     check_fewer_components(args.components, args.frames * args.size**2,
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
-    result = run_scene(task, progress=sys.stderr.isatty(), ply=args.ply)
+    result = run_scene(task, progress=True, ply=args.ply)
     if args.save:
         save_views(args.save, result.images["target"], result.images["render"],
                    f"{args.scene}, {args.method}: {result.psnr:.2f} dB held-out")
@@ -282,7 +282,7 @@ def _tune(args) -> dict:
     per_scene, files, stream = {}, [], f"({args.order}, {args.assign} assignment)"
     for task, name in zip(tasks, names, strict=True):
         scene = load_task_scene(task)
-        rows = tune(task, scene, grid, progress=sys.stderr.isatty())
+        rows = tune(task, scene, grid, progress=True)
         about = (f"{len(scene.train)} training frames streamed once {stream}; scores are "
                  f"means over {len(scene.val)} validation views (no test view is rendered). "
                  f"Best first.")
@@ -329,7 +329,7 @@ def _depth_study(args) -> dict:
 
     task_kw = dict(scene=args.scene, components=args.components, frames=args.frames,
                    size=args.size, init="data", steps_per_frame=args.steps_per_frame)
-    rows = run_depth_study(args.out, methods=args.methods, progress=sys.stderr.isatty(),
+    rows = run_depth_study(args.out, methods=args.methods, progress=True,
                            **task_kw)
     paths = write_table(rows, args.out, "depth_study",
                         command=study_command(task_kw, args.methods, args.out),
@@ -414,7 +414,7 @@ def _colour_gap(args) -> dict:
     task = _diagnostic_task(args, "iterations",
                             **({} if args.ridge is None else {"colour_ridge": args.ridge}))
     gap = colour_gap(task, load_task_scene(task), iterations=args.iterations,
-                     progress=sys.stderr.isatty())
+                     progress=True)
     return {**_diagnostic_header(args), "ridge": task.colour_ridge, **gap}
 
 
@@ -432,7 +432,7 @@ def _render_bound(args) -> dict:
 
     task = _diagnostic_task(args, "steps")
     bound = render_bound(task, load_task_scene(task), steps=args.steps,
-                         progress=sys.stderr.isatty())
+                         progress=True)
     return {**_diagnostic_header(args), **bound}
 
 
@@ -465,7 +465,7 @@ def _add_bench(sub):
 def _bench(args) -> dict:
     from experiments import bench
 
-    progress = sys.stderr.isatty()
+    progress = True
     defaults = {"image": ([64, 128], [500, 1000, 2000, 4000, 8000]),
                 "estep": ([128], [20000, 50000]), "raster": ([128, 256], [10_000, 50_000]),
                 "stream": ([128], [20000, 50000, 100000]), "depth": ([256], None)}[args.target]

@@ -205,7 +205,11 @@ def _nearest(stamps: np.ndarray, query: float) -> tuple[int, float]:
 def quaternion_to_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
     """Rotation ``[3, 3]`` of the (normalised) Hamilton quaternion ``(qx, qy, qz, qw)``."""
     q = np.array([qw, qx, qy, qz], np.float64)
-    w, x, y, z = q / np.linalg.norm(q)
+    norm = np.linalg.norm(q)
+    if not (np.isfinite(norm) and norm > 0):
+        raise ValueError(f"quaternion (qx, qy, qz, qw) = {(qx, qy, qz, qw)} has no direction "
+                         f"(zero or not finite); a rotation needs a unit quaternion")
+    w, x, y, z = q / norm
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -250,7 +254,10 @@ def load_tum(
         i, jd, jp = matches[k]
         values = [float(v) for v in pose_rows[jp]]
         pose = np.eye(4)
-        pose[:3, :3], pose[:3, 3] = quaternion_to_matrix(*values[3:]), values[:3]
+        try:
+            pose[:3, :3], pose[:3, 3] = quaternion_to_matrix(*values[3:]), values[:3]
+        except ValueError as err:
+            raise ValueError(f"{folder / 'groundtruth.txt'} at {pose_t[jp]}: {err}") from None
         rgb = read_rgb(folder / rgb_rows[i][0], background=_WHITE)
         depth = read_depth_png(folder / depth_rows[jd][0], depth_scale)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], pose)
