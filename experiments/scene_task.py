@@ -146,7 +146,8 @@ def load_task_scene(task: SceneTask) -> Scene:
     scene = within_trained_span(scene, task.frames)
     scene = scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test],
                            val=scene.val[: task.n_val])
-    warn_inconsistent(scene, task.format or detect_format(task.scene), task.scene)
+    if Path(task.scene).is_dir():  # a dataset folder (a real scene by name is one view)
+        warn_inconsistent(scene, task.format or detect_format(task.scene), task.scene)
     return scene
 
 
