@@ -49,7 +49,7 @@ def test_a_clean_trajectory_is_healthy(frames):
 def test_each_pose_mix_up_fails_consistency_and_its_fix_is_named(frames, edit, fix, format):
     report = doctor.examine(posed(frames, edit), format)
     assert not report.healthy and report.checks[-1].ok is False
-    assert report.agreement is None or report.agreement < doctor.CONSISTENT
+    assert report.fix_agreement >= (report.agreement or 0) + doctor.FIX_GAIN
     assert report.fix == fix and report.fix_agreement > 0.8
 
 
@@ -80,6 +80,21 @@ def test_bad_rotations_are_named_per_frame(frames, edit, words):
     assert check.ok is False and check.frames == (3,) and words in check.message
 
 
+@pytest.mark.parametrize("sensor", ["kinect", "realsense", "mono"])
+def test_noisy_sensors_alone_do_not_fail_and_their_mix_ups_still_can(frames, sensor):
+    """A sensor's noise lowers the agreement of every pose set alike: the views stay
+    healthy (RealSense at 32 px agrees at about 0.3 within 5%); a world-to-camera mix-up
+    on the same depth is still named under the two sensors whose noise leaves a margin."""
+    from vbgs.sensors import simulate
+
+    noisy = [f._replace(depth=simulate(sensor, f.depth, f.camera, seed=[0, i]))
+             for i, f in enumerate(frames)]
+    report = doctor.examine(noisy)
+    assert report.healthy and report.fix is None, report.checks[-1]
+    if sensor != "realsense":
+        assert doctor.examine(posed(noisy, np.linalg.inv)).fix == "w2c"
+
+
 def test_a_principal_point_outside_the_image_is_named(frames):
     bad = [f._replace(camera=f.camera._replace(cx=600.0)) for f in frames]
     check = doctor.check_intrinsics(bad)
@@ -92,5 +107,5 @@ def test_one_frame_is_not_measured_and_views_apart_fail(frames):
     moved = np.array(frames[1].camera.pose)
     moved[0, 3] += 100.0  # a hundred units away: no depth lands on the other frame's
     apart = [frames[0], frames[1]._replace(camera=frames[1].camera._replace(pose=moved))]
-    check, score = doctor.check_consistency(apart)
+    check, score, _ = doctor.check_consistency(apart)
     assert check.ok is False and score is None and "views apart" in check.message
