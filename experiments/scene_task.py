@@ -147,7 +147,9 @@ def load_task_scene(task: SceneTask) -> Scene:
     scene = scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test],
                            val=scene.val[: task.n_val])
     if Path(task.scene).is_dir():  # a dataset folder (a real scene by name is one view)
-        warn_inconsistent(scene, task.format or detect_format(task.scene), task.scene)
+        fmt = task.format or detect_format(task.scene)
+        warn_inconsistent(scene, fmt, task.scene)
+        scene = scene._replace(record={"format": fmt, **scene.record})
     return scene
 
 
