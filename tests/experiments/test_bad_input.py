@@ -786,6 +786,35 @@ def test_one_frame_scene_is_warned_about_before_any_work(folders, tmp_path, caps
     assert code == 2 and "has one training frame" in capsys.readouterr().err
 
 
+def test_fit_scene_warns_on_views_that_disagree_before_any_work(folders, tmp_path, capsys,
+                                                                monkeypatch):
+    """Consistency is a warning (views may differ for reasons the doctor cannot see); the
+    scene the learner gets carries where its camera and depth scale came from."""
+    monkeypatch.setitem(scene_task.LEARNERS, "vbgs", StopLearner)
+    folder = copy(folders, "blender", tmp_path)
+    poses_everywhere(np.linalg.inv)(folder)
+    refused(["fit-scene", "--scene", str(folder), *FIT, "--depth-scale", "1000"], capsys,
+            "stopped with 10 training frame(s)")
+    code = main(["fit-scene", "--scene", str(folder), *FIT])
+    err = capsys.readouterr().err
+    assert code == 2 and "warning: consistency: only" in err and "world-to-camera" in err
+
+
+def test_what_the_learner_gets_says_where_its_camera_came_from(folders, monkeypatch):
+    seen = {}
+
+    class Keep(StopLearner):
+        def __init__(self, task, scene):
+            seen.update(scene.record)
+            super().__init__(task, scene)
+
+    monkeypatch.setitem(scene_task.LEARNERS, "vbgs", Keep)
+    assert main(["fit-scene", "--scene", str(folders["replica"]), *FIT, "--depth-scale",
+                 "6553.5"]) == 2
+    assert seen["format"] == "replica" and seen["depth_scale_from"] == "--depth-scale"
+    assert seen["intrinsics_from"].endswith("cam_params.json")
+
+
 @pytest.mark.slow
 def test_one_frame_scene_runs_with_a_warning_and_says_what_ran(folders, tmp_path, capsys):
     folder = copy(folders, "blender", tmp_path)
