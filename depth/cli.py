@@ -235,7 +235,11 @@ def run(args) -> dict:
             for chunk in _batches(list(enumerate(frames)), model.batch_size):
                 rgbs = [read_frame(path) for _, path in chunk]
                 same = len({r.shape for r in rgbs}) == 1
-                preds = model.predict(rgbs) if same else [model.predict(r) for r in rgbs]
+                try:  # a model whose output is no depth map (3 channels) fails here
+                    preds = model.predict(rgbs) if same else [model.predict(r) for r in rgbs]
+                except ValueError as err:
+                    raise CliError(f"{err}; {written} of {len(frames)} depth PNGs written "
+                                   f"to {args.output}") from err
                 for (i, path), rgb, pred in zip(chunk, rgbs, preds, strict=True):
                     depth = apply(per_frame.get(path.stem, fit), pred)
                     ok = valid_pixels(depth, max_depth)

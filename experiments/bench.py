@@ -10,7 +10,7 @@ from pathlib import Path
 import jax
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
+from experiments.progress import progress as progress_bar
 
 from vbgs.data.images import image_to_points, load_image
 from vbgs.inference import model
@@ -43,7 +43,7 @@ def bench_image(sizes, components, *, iters: int = 3, image: str = "astronaut",
     iterations, for each image size and component count (data init, seed 0)."""
     rows = []
     cells = [(s, k) for s in sizes for k in components]
-    for size, k in tqdm(cells, desc="bench image", disable=not progress):
+    for size, k in progress_bar(cells, desc="bench image", unit="cell", enabled=progress):
         img = load_image(image, size)
         uv, rgb = image_to_points(img)
         prior = model.init(uv, rgb, k, key=jax.random.key(0), scheme="data")
@@ -141,7 +141,7 @@ def bench_estep(components, *, size: int = 128, frames: int = 60, timing_frames:
     scene = object_scene(size=size, n_train=frames, n_test=8, seed=0)
     points = [frame_points(f) for f in scene.train[:timing_frames]]
     rows = []
-    for k in tqdm(components, desc="bench estep", disable=not progress):
+    for k in progress_bar(components, desc="bench estep", unit="cell", enabled=progress):
         task = SceneTask(components=k, size=size, frames=frames, init="data")
         prior = VbgsLearner(task, scene).prior
         row = {"size": size, "components": k,

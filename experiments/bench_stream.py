@@ -16,7 +16,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from tqdm.auto import tqdm
+from experiments.progress import progress as progress_bar
 
 from vbgs.compilation import CompileTimer
 from vbgs.inference import candidates, grid, model, stepper
@@ -149,7 +149,7 @@ def bench_stream(components=(20000, 50000, 100000), scenes=("object", "room"),
     cells = [(s, k, e) for s in scenes for k in components for e in esteps
              if e == "sparse" or k <= dense_max]
     loaded, priors = {}, {}
-    for scene_name, k, estep in tqdm(cells, desc="bench stream", disable=not progress):
+    for scene_name, k, estep in progress_bar(cells, desc="bench stream", unit="cell", enabled=progress):
         if scene_name not in loaded:
             loaded[scene_name] = load_scene(scene_name, size=size, n_train=frames, n_test=1,
                                             seed=0)

@@ -17,6 +17,7 @@ import jax
 import numpy as np
 
 from experiments.init_schemes import oracle_start
+from experiments.progress import progress as progress_bar
 from experiments.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.inference import grow, model
@@ -84,9 +85,7 @@ def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.A
     (the image's size is the sensor's, known before any data); ``data`` and ``random``
     start from the whole image ``uv``, ``rgb`` (an oracle start). With ``reassign`` on,
     the bound's ``q_{t-1}`` is the posterior before the re-seeding (not after)."""
-    from tqdm.auto import tqdm
-
-    shown = tqdm(batches, desc="patches", disable=not progress, leave=False)
+    shown = progress_bar(batches, desc="patches", unit="patch", enabled=progress)
     total = [StreamBound()]
 
     def observe(i, before: model.Mixture, after: model.Mixture):
@@ -172,8 +171,6 @@ def run_gradient_image(task: ImageTask, *, steps: int | None = None, progress: b
     trace under ``"loss"`` and ``"elbo": []``. ``config``: a
     :class:`vbgs.baseline.TrainConfig` (its defaults when None); ``image`` as for
     :func:`run_image`."""
-    from tqdm.auto import tqdm  # the baseline (optax) is imported only when it runs
-
     from vbgs.baseline import TrainConfig, count_live, params_from_prior
     from vbgs.baseline.densify import DEAD_OPACITY
     from vbgs.baseline.image import IMAGE_STEPS, fit_image, render_image_params
@@ -186,7 +183,7 @@ def run_gradient_image(task: ImageTask, *, steps: int | None = None, progress: b
     uv, rgb = image_to_points(img)
     k_init, k_fit = task_keys(task.seed)  # as run_image splits
     prior = image_prior(task, uv, rgb, k_init)
-    bar = tqdm(total=steps, desc="Adam", unit="step", disable=not progress, leave=False)
+    bar = progress_bar(total=steps, desc="Adam", unit="step", enabled=progress)
     start = time.perf_counter()
     config = replace(config or TrainConfig(), lr_decay_steps=steps)  # images have no depth
     params, losses = fit_image(params_from_prior(prior), img, steps=steps, config=config,

@@ -36,9 +36,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from experiments.init_schemes import oracle_start
+from experiments.progress import progress as progress_bar
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
 from vbgs.mapping.config import SensorConfig
@@ -177,7 +177,7 @@ def stream_frames(task, scene: Scene, order: np.ndarray, *, progress: bool = Fal
     counts from 1), the background estimated from the frames that have arrived (or
     fixed by the task, see :func:`scene_background`)."""
     estimate = bg.empty()
-    for step, i in enumerate(tqdm(order, desc="frames", disable=not progress, leave=False), 1):
+    for step, i in enumerate(progress_bar(order, desc="frames", unit="frame", enabled=progress), 1):
         frame = scene.train[i]
         estimate = bg.observe(estimate, frame.rgb, frame.depth, holes=measured(task))
         yield step, frame, scene_background(task, estimate)
@@ -237,7 +237,7 @@ def static_protocol(task, scene: Scene, learner, frames: list, *, progress: bool
     for frame in scene.train:
         estimate = bg.observe(estimate, frame.rgb, frame.depth, holes=measured(task))
     background = scene_background(task, estimate)
-    bar = tqdm(total=task.steps, desc="steps", disable=not progress, leave=False)
+    bar = progress_bar(total=task.steps, desc="steps", unit="step", enabled=progress)
     start = time.perf_counter()
     for done in range(0, task.steps, PROGRESS_BLOCK):
         n = min(PROGRESS_BLOCK, task.steps - done)

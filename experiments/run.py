@@ -3,6 +3,7 @@
 Commands:
   fit-image   fit one photo (batch CAVI or a patch stream) and score it
   fit-scene   learn a 3-D splat from a stream of RGB-D frames, score held-out views
+  check       a dataset doctor: cameras, depth scale and multi-view consistency of a folder
   sweep       run a grid of cells from a TOML config (resumable), then report
   report      tables and plots from a sweep's results folder
   depth-study sensor depth against estimated depth (RGB-only path), per method
@@ -26,6 +27,7 @@ from experiments.cli_common import (
     meaningless_score_warning,
     print_result,
 )
+from experiments.inapplicable import given_flags, refuse_inapplicable, watched
 from experiments.settings import (
     ASSIGN,
     COLOUR_RULE,
@@ -80,7 +82,7 @@ def _fit_image(args) -> dict:
     h, w, _ = image.shape
     check_fewer_components(args.components, h * w, f"{w}x{h} image",
                            "use fewer --components or a larger --size")
-    result = run_image(task, progress=sys.stderr.isatty(), image=image)
+    result = run_image(task, progress=True, image=image)
     images = result.pop("images")
     if args.save:
         save_comparison(args.save, images["target"], images["render"],
@@ -131,9 +133,52 @@ def _add_fit_scene(sub):
     p.add_argument("--background", default="auto",
                    help="auto (estimated from the pixels without depth of the frames seen) "
                         "or R,G,B in [0, 1]")
+    _add_calibration(p)
     p.add_argument("--ply", metavar="OUT", help="save the splats as a 3DGS PLY")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _add_calibration(p) -> None:
+    p.add_argument("--intrinsics", metavar="FX,FY,CX,CY", default=None,
+                   help="a dataset folder's camera in pixels of its images as stored, pixel "
+                        "centres at integers (default: the folder's, else the format's)")
+    p.add_argument("--depth-scale", type=float, default=None, metavar="S",
+                   help="depth PNG codes per scene unit (1000: millimetres; default: the "
+                        "folder's, else the format's)")
+
+
+def _calibration(args) -> dict:
+    from vbgs.data.calibration import check_depth_scale, check_intrinsics
+
+    out = {}
+    if args.intrinsics is not None:
+        out["intrinsics"] = tuple(check_intrinsics(args.intrinsics))[:4]
+    if args.depth_scale is not None:
+        out["depth_scale"] = check_depth_scale(args.depth_scale)
+    return out
+
+
+def _add_check(sub):
+    p = sub.add_parser("check", help="a dataset doctor: rotations, intrinsics, depth scale and "
+                                     "multi-view consistency; names the likely fix (exit 2 "
+                                     "when a check fails)")
+    p.add_argument("--scene", required=True, help="a dataset folder (or a synthetic scene name)")
+    add_choice(p, "--format", FORMAT)
+    p.add_argument("--size", type=int, default=128, help="image size (longer side; 0: keep)")
+    p.add_argument("--frames", type=int, default=None, help="training frames (default: all)")
+    _add_calibration(p)
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _check(args) -> dict:
+    from experiments.check import check_scene
+
+    if args.size < 0 or (args.frames is not None and args.frames < 1):
+        raise ValueError(f"--size must be >= 0 and --frames >= 1, got {args.size} and "
+                         f"{args.frames}")
+    return check_scene(args.scene, args.format, args.size or None, args.frames,
+                       **_calibration(args))
 
 
 def _fit_scene(args) -> dict:
@@ -151,7 +196,7 @@ def _fit_scene(args) -> dict:
                      depth_align=args.depth_align, background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
-                     sensor=args.sensor,
+                     sensor=args.sensor, **_calibration(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
@@ -161,7 +206,7 @@ def _fit_scene(args) -> dict:
     check_fewer_components(args.components, args.frames * args.size**2,
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
-    result = run_scene(task, progress=sys.stderr.isatty(), ply=args.ply)
+    result = run_scene(task, progress=True, ply=args.ply)
     if args.save:
         save_views(args.save, result.images["target"], result.images["render"],
                    f"{args.scene}, {args.method}: {result.psnr:.2f} dB held-out")
@@ -237,7 +282,7 @@ def _tune(args) -> dict:
     per_scene, files, stream = {}, [], f"({args.order}, {args.assign} assignment)"
     for task, name in zip(tasks, names, strict=True):
         scene = load_task_scene(task)
-        rows = tune(task, scene, grid, progress=sys.stderr.isatty())
+        rows = tune(task, scene, grid, progress=True)
         about = (f"{len(scene.train)} training frames streamed once {stream}; scores are "
                  f"means over {len(scene.val)} validation views (no test view is rendered). "
                  f"Best first.")
@@ -284,7 +329,7 @@ def _depth_study(args) -> dict:
 
     task_kw = dict(scene=args.scene, components=args.components, frames=args.frames,
                    size=args.size, init="data", steps_per_frame=args.steps_per_frame)
-    rows = run_depth_study(args.out, methods=args.methods, progress=sys.stderr.isatty(),
+    rows = run_depth_study(args.out, methods=args.methods, progress=True,
                            **task_kw)
     paths = write_table(rows, args.out, "depth_study",
                         command=study_command(task_kw, args.methods, args.out),
@@ -369,7 +414,7 @@ def _colour_gap(args) -> dict:
     task = _diagnostic_task(args, "iterations",
                             **({} if args.ridge is None else {"colour_ridge": args.ridge}))
     gap = colour_gap(task, load_task_scene(task), iterations=args.iterations,
-                     progress=sys.stderr.isatty())
+                     progress=True)
     return {**_diagnostic_header(args), "ridge": task.colour_ridge, **gap}
 
 
@@ -387,7 +432,7 @@ def _render_bound(args) -> dict:
 
     task = _diagnostic_task(args, "steps")
     bound = render_bound(task, load_task_scene(task), steps=args.steps,
-                         progress=sys.stderr.isatty())
+                         progress=True)
     return {**_diagnostic_header(args), **bound}
 
 
@@ -420,7 +465,7 @@ def _add_bench(sub):
 def _bench(args) -> dict:
     from experiments import bench
 
-    progress = sys.stderr.isatty()
+    progress = True
     defaults = {"image": ([64, 128], [500, 1000, 2000, 4000, 8000]),
                 "estep": ([128], [20000, 50000]), "raster": ([128, 256], [10_000, 50_000]),
                 "stream": ([128], [20000, 50000, 100000]), "depth": ([256], None)}[args.target]
@@ -506,6 +551,7 @@ def _sweep_cli(name: str):
 
 
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
+            "check": (_add_check, _check),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
             "colour-gap": (_add_colour_gap, _colour_gap),
@@ -527,11 +573,21 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _command_parser(name: str) -> argparse.ArgumentParser:
+    """One command's own parser (its options without the command's name)."""
+    sub = argparse.ArgumentParser().add_subparsers()
+    COMMANDS[name][0](sub)
+    return sub.choices[name]
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     try:  # building the parser imports modules: Ctrl-C there ends cleanly too
         command = argv[0] if argv and argv[0] in COMMANDS else None  # else: all, for help
         args = build_parser(command).parse_args(argv)
+        if watched(args.command):  # flags given that do not apply: refused, saying why
+            given = given_flags(_command_parser(args.command), argv[1:], watched(args.command))
+            refuse_inapplicable(args.command, args, given)
         from vbgs.compilation import CompileTimer, enable_persistent_cache
 
         enable_persistent_cache()  # opt out with VBGS_NO_COMPILE_CACHE=1
@@ -545,6 +601,9 @@ def main(argv: list[str] | None = None) -> int:
         return interrupted(err)
     if args.command in ("fit-image", "fit-scene"):
         result["compile_seconds"] = timer.seconds  # all compilation (or cache loads) in the run
+    if args.command == "check" and "error" in result:  # the report, then the verdict: exit 2
+        print_result(args.command, result, as_json=args.json)
+        return fail(ValueError(result["error"]))
     warning = meaningless_score_warning(result)
     if warning:
         result["warning"] = warning

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.check import check_calibration, warn_inconsistent, within_trained_span
 from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
@@ -32,7 +33,8 @@ from experiments.settings import (
     REPLAY_DEFAULT,
     SENSOR,
 )
-from vbgs.data.formats import load_scene
+from vbgs.data.doctor import refuse_bad_cameras
+from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene
 from vbgs.data.synthetic import SCENES
 from vbgs.inference import model
@@ -82,6 +84,10 @@ class SceneTask:
     # vbgs.mapping.SensorConfig; the gradient baseline weights its depth L1 by 1/sigma)
     sensor: str = MEASURED_BY.default
     background: str = "auto"  # auto (from pixels without depth, as frames arrive) | R,G,B
+    # a dataset folder's camera and depth PNG scale instead of the folder's or the
+    # format's (vbgs.data.calibration): (fx, fy, cx, cy) in pixels of the stored images
+    intrinsics: tuple | None = None
+    depth_scale: float | None = None
     # gradient baseline only (see experiments.learners.gradient_learner)
     replay: str = REPLAY_DEFAULT
     steps_per_frame: int = 50
@@ -116,6 +122,7 @@ class SceneTask:
             raise ValueError(f"simulate_sensor {self.simulate_sensor!r} and depth_model both "
                              f"replace the training depth; give one of them")
         oracle_start(self.init)  # a known scheme
+        check_calibration(self)
         parse_background(self.background)  # fails on a malformed R,G,B
         if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):
             raise ValueError(f"splat_blur must be a pixel filter variance in [0, 10) px², "
@@ -132,9 +139,18 @@ def load_task_scene(task: SceneTask) -> Scene:
     if task.scene in SCENES and not Path(task.scene).is_dir():
         return load_scene(task.scene, size=task.size, n_train=task.frames, n_test=task.n_test,
                           seed=task.seed, n_val=task.n_val)
-    scene = load_scene(task.scene, format=task.format, size=task.size)
-    return scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test],
-                          val=scene.val[: task.n_val])
+    given = {k: v for k in ("intrinsics", "depth_scale") if (v := getattr(task, k)) is not None}
+    scene = load_scene(task.scene, format=task.format, size=task.size, **given)
+    refuse_bad_cameras(scene.train + scene.test + scene.val,
+                       scene.record.get("depth_scale"), f"scene {task.scene!r}")
+    scene = within_trained_span(scene, task.frames)
+    scene = scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test],
+                           val=scene.val[: task.n_val])
+    if Path(task.scene).is_dir():  # a dataset folder (a real scene by name is one view)
+        fmt = task.format or detect_format(task.scene)
+        warn_inconsistent(scene, fmt, task.scene)
+        scene = scene._replace(record={"format": fmt, **scene.record})
+    return scene
 
 
 def prepare_scene(task) -> tuple[Scene, dict]:
@@ -185,7 +201,12 @@ def what_ran(task: SceneTask, scene: Scene) -> dict:
     ran = {"frames": len(scene.train), "n_test": len(scene.test), "n_val": len(scene.val)}
     asked = {f"{name}_asked": getattr(task, name) for name, n in ran.items()
              if getattr(task, name) != n}
-    return {**ran, **asked}
+    camera = {}
+    if scene.record:  # a dataset folder: the camera as run (pixel centres at col + 0.5)
+        cam = scene.train[0].camera
+        camera = {"intrinsics": [float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)],
+                  "image_size": [int(cam.width), int(cam.height)]}
+    return {**ran, **asked, **camera, **scene.record}
 
 
 # A share of the training points left unlearned above this is said on stderr.

@@ -18,6 +18,8 @@ from pathlib import Path
 
 from tqdm.auto import tqdm
 
+from experiments.progress import progress as progress_bar
+
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"  # the bundled configs
 
 
@@ -115,8 +117,8 @@ def _run(records, pending: list, labels: list[str], out: Path, log: SweepLog,
 
     by_key = {c.key: c for c in pending}
     counts = {"ok": 0, "failed": 0}
-    bar = tqdm(total=len(pending), unit="cell", desc=f"sweep {name}",
-               disable=not sys.stderr.isatty() or not pending)
+    bar = progress_bar(total=len(pending), unit="cell", desc=f"sweep {name}",
+                       enabled=bool(pending))
     try:
         for i, record in enumerate(records, 1):
             record = store_record(out, record)

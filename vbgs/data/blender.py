@@ -40,6 +40,8 @@ from pathlib import Path
 import numpy as np
 from skimage import io as skio
 
+from vbgs.data.calibration import check_depth_scale, provenance
+from vbgs.data.calibration import check_intrinsics as given_intrinsics
 from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
 from vbgs.data.images import read_rgb
 from vbgs.data.scene import (
@@ -158,7 +160,8 @@ def _reference_size(intr: dict, width: int, height: int, first, what: str):
     return first or (width, height)
 
 
-def _load_split(path: Path, keep, size, background, depth_scale, require_depth) -> list[Frame]:
+def _load_split(path: Path, keep, size, background, depth_scale, require_depth,
+                intrinsics=None) -> list[Frame]:
     """Frames of one transforms file; ``keep(n)`` gives the frame indices to read."""
     try:
         meta = json.loads(path.read_text())
@@ -191,10 +194,13 @@ def _load_split(path: Path, keep, size, background, depth_scale, require_depth) 
         if not np.isfinite(pose_gl).all():
             raise ValueError(f"{what}: transform_matrix has {int((~np.isfinite(pose_gl)).sum())} "
                              f"NaN/inf entries; fix this frame's pose in {path.name}")
-        intr = check_intrinsics(_intrinsics(meta, entry), f"{path.name} ({what})")
         height, width = rgb.shape[:2]
-        first = _reference_size(intr, width, height, first, f"{what} ({image.name})")
-        cam = _camera(intr, width, height, first, pose_gl)
+        if intrinsics is not None:  # given by the caller: the file's are not read
+            cam = intrinsics.camera(width, height, opengl_to_opencv(pose_gl))
+        else:
+            intr = check_intrinsics(_intrinsics(meta, entry), f"{path.name} ({what})")
+            first = _reference_size(intr, width, height, first, f"{what} ({image.name})")
+            cam = _camera(intr, width, height, first, pose_gl)
         depth = _depth_beside(image, depth_scale, require_depth, rgb.shape[:2])
         frame = validate_frame(Frame(rgb, depth, cam), f"{what} ({image})")
         frames.append(resize_frame(require_some_depth(frame, f"{what} ({image})")
@@ -209,10 +215,11 @@ def load_blender(
     stride: int = 1,
     max_test: int | None = None,
     background=BLENDER_BACKGROUND,
-    depth_scale: float = MILLIMETRES,
+    depth_scale: float | None = None,
     require_depth: bool = True,
     max_val: int | None = None,
     val_every: int | None = VAL_EVERY,
+    intrinsics=None,
 ) -> Scene:
     """Load a Blender/NeRF-synthetic folder (see the module docstring).
 
@@ -221,10 +228,17 @@ def load_blender(
     validation split; val_every: without a separate ``transforms_val.json``, hold out
     every val_every-th training frame for validation (None: no validation views);
     depth_scale: PNG
-    depth codes per scene unit; require_depth: raise if a frame has no depth
-    file (else its depth is all 0). Bounds come from the training depth.
+    depth codes per scene unit (None: millimetres); require_depth: raise if a frame has no depth
+    file (else its depth is all 0); intrinsics: ``fx, fy, cx, cy`` (pixels of the images
+    as stored, centres at integers) instead of the file's. Bounds come from the
+    training depth.
     """
     folder = Path(folder)
+    depth_from = "Blender default (millimetres)" if depth_scale is None else "--depth-scale"
+    depth_scale = MILLIMETRES if depth_scale is None else check_depth_scale(depth_scale)
+    intrinsics = None if intrinsics is None else given_intrinsics(intrinsics)
+    calibration = provenance(intrinsics, "--intrinsics" if intrinsics else
+                             "transforms_*.json", depth_scale, depth_from)
     train_json = folder / "transforms_train.json"
     if not train_json.is_file():
         raise FileNotFoundError(f"{train_json} not found: a Blender dataset needs this file")
@@ -233,7 +247,7 @@ def load_blender(
     if test_json is None:
         raise FileNotFoundError(f"{folder}: neither {tests[0].name} nor {tests[1].name} found")
     background = tuple(float(c) for c in background)
-    args = (size, background, depth_scale, require_depth)
+    args = (size, background, depth_scale, require_depth, intrinsics)
     train = _load_split(train_json, lambda n: select(n, stride, max_frames), *args)
     test = _load_split(test_json, lambda n: list(range(n))[:max_test], *args)
     val_json = folder / "transforms_val.json"
@@ -242,7 +256,8 @@ def load_blender(
     else:
         train, val = hold_out_validation(train, val_every)
         val = val[:max_val]
-    return Scene(folder.name, train, test, bounds_from_frames(train), background, val)
+    return Scene(folder.name, train, test, bounds_from_frames(train), background, val,
+                 calibration)
 
 
 def write_blender(scene: Scene, folder) -> Path:

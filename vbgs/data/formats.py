@@ -34,11 +34,19 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
 from vbgs.data.blender import VAL_EVERY, load_blender, write_blender
+from vbgs.data.calibration import (
+    REPLICA_DEPTH_SCALE,
+    REPLICA_INTRINSICS,
+    TUM_DEPTH_SCALE,
+    TUM_FR1_INTRINSICS,
+    Intrinsics,
+    replica_calibration,
+    tum_calibration,
+)
 from vbgs.data.depth_png import read_depth_png
 from vbgs.data.images import read_rgb
 from vbgs.data.scene import (
@@ -54,11 +62,11 @@ from vbgs.data.scene import (
 )
 from vbgs.data.stereo import REAL_SCENES
 from vbgs.data.synthetic import SCENES, make_scene
-from vbgs.render.camera import Camera
-from vbgs.render.pixels import pixel_centre
 
 __all__ = [
+    "REPLICA_DEPTH_SCALE",
     "REPLICA_INTRINSICS",
+    "TUM_DEPTH_SCALE",
     "TUM_FR1_INTRINSICS",
     "Intrinsics",
     "detect_format",
@@ -70,37 +78,7 @@ __all__ = [
     "write_blender",
 ]
 
-REPLICA_DEPTH_SCALE = 6553.5
-TUM_DEPTH_SCALE = 5000.0
 _WHITE = (1.0, 1.0, 1.0)  # RGBA frames are composited onto white, as the Blender loader does by default
-
-
-class Intrinsics(NamedTuple):
-    """Published pinhole intrinsics for ``width x height`` images, pixel centres at integers."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: int
-    height: int
-
-    def camera(self, width: int, height: int, pose: np.ndarray) -> Camera:
-        """A library :class:`Camera` for images of ``width x height`` (rescaled if they differ)."""
-        sx, sy = width / self.width, height / self.height
-        return Camera(
-            self.fx * sx,
-            self.fy * sy,
-            pixel_centre(self.cx) * sx,
-            pixel_centre(self.cy) * sy,
-            int(width),
-            int(height),
-            np.asarray(pose, np.float64),
-        )
-
-
-REPLICA_INTRINSICS = Intrinsics(600.0, 600.0, 599.5, 339.5, 1200, 680)
-TUM_FR1_INTRINSICS = Intrinsics(517.3, 516.5, 318.6, 255.3, 640, 480)
 
 
 # --------------------------------------------------------------------------- Replica
@@ -140,12 +118,14 @@ def load_replica(
     max_frames: int | None = None,
     stride: int = 1,
     test_every: int | None = 8,
-    intrinsics: Intrinsics = REPLICA_INTRINSICS,
-    depth_scale: float = REPLICA_DEPTH_SCALE,
+    intrinsics: Intrinsics | None = None,
+    depth_scale: float | None = None,
     val_every: int | None = VAL_EVERY,
 ) -> Scene:
-    """Load Replica in the SplaTAM layout (see module docstring)."""
+    """Load Replica in the SplaTAM layout (see module docstring); intrinsics and depth
+    scale as given, else from a cam_params.json (:mod:`vbgs.data.calibration`)."""
     folder = Path(folder)
+    intrinsics, depth_scale, calibration = replica_calibration(folder, intrinsics, depth_scale)
     results = folder / "results"
     if not results.is_dir():
         raise FileNotFoundError(
@@ -174,15 +154,15 @@ def load_replica(
         depth = read_depth_png(depths[i], depth_scale)
         frame = validate_frame(Frame(rgb, depth, cam), f"{images[i]} (depth {depths[i].name})")
         frames.append(resize_frame(require_some_depth(frame, f"{depths[i]}"), size))
-    return _split(folder.name, frames, test_every, val_every)
+    return _split(folder.name, frames, test_every, val_every, calibration)
 
 
-def _split(name: str, frames: list[Frame], test_every, val_every) -> Scene:
+def _split(name: str, frames: list[Frame], test_every, val_every, calibration) -> Scene:
     """A scene from one trajectory: test views held out first, then validation views
     from what is left (see the module docstring); bounds from the training frames."""
     train, test = hold_out(frames, test_every)
     train, val = hold_out_validation(train, val_every)
-    return Scene(name, train, test, bounds_from_frames(train), val=val)
+    return Scene(name, train, test, bounds_from_frames(train), val=val, record=calibration)
 
 
 # --------------------------------------------------------------------------- TUM RGB-D
@@ -225,7 +205,11 @@ def _nearest(stamps: np.ndarray, query: float) -> tuple[int, float]:
 def quaternion_to_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
     """Rotation ``[3, 3]`` of the (normalised) Hamilton quaternion ``(qx, qy, qz, qw)``."""
     q = np.array([qw, qx, qy, qz], np.float64)
-    w, x, y, z = q / np.linalg.norm(q)
+    norm = np.linalg.norm(q)
+    if not (np.isfinite(norm) and norm > 0):
+        raise ValueError(f"quaternion (qx, qy, qz, qw) = {(qx, qy, qz, qw)} has no direction "
+                         f"(zero or not finite); a rotation needs a unit quaternion")
+    w, x, y, z = q / norm
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -241,13 +225,15 @@ def load_tum(
     max_frames: int | None = None,
     stride: int = 1,
     test_every: int | None = 8,
-    intrinsics: Intrinsics = TUM_FR1_INTRINSICS,
-    depth_scale: float = TUM_DEPTH_SCALE,
+    intrinsics: Intrinsics | None = None,
+    depth_scale: float | None = None,
     max_time_diff: float = 0.02,
     val_every: int | None = VAL_EVERY,
 ) -> Scene:
-    """Load a TUM RGB-D sequence (see module docstring)."""
+    """Load a TUM RGB-D sequence (see module docstring); intrinsics and depth scale as
+    given, else the Freiburg preset the folder's name names (:mod:`vbgs.data.calibration`)."""
     folder = Path(folder)
+    intrinsics, depth_scale, calibration = tum_calibration(folder, intrinsics, depth_scale)
     rgb_t, rgb_rows = _read_list(folder / "rgb.txt", 1)
     depth_t, depth_rows = _read_list(folder / "depth.txt", 1)
     pose_t, pose_rows = _read_list(folder / "groundtruth.txt", 7)
@@ -268,14 +254,17 @@ def load_tum(
         i, jd, jp = matches[k]
         values = [float(v) for v in pose_rows[jp]]
         pose = np.eye(4)
-        pose[:3, :3], pose[:3, 3] = quaternion_to_matrix(*values[3:]), values[:3]
+        try:
+            pose[:3, :3], pose[:3, 3] = quaternion_to_matrix(*values[3:]), values[:3]
+        except ValueError as err:
+            raise ValueError(f"{folder / 'groundtruth.txt'} at {pose_t[jp]}: {err}") from None
         rgb = read_rgb(folder / rgb_rows[i][0], background=_WHITE)
         depth = read_depth_png(folder / depth_rows[jd][0], depth_scale)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], pose)
         what = f"{folder / rgb_rows[i][0]} (depth {depth_rows[jd][0]})"
         frame = require_some_depth(validate_frame(Frame(rgb, depth, cam), what), what)
         frames.append(resize_frame(frame, size))
-    return _split(folder.name, frames, test_every, val_every)
+    return _split(folder.name, frames, test_every, val_every, calibration)
 
 
 # --------------------------------------------------------------------------- entry point

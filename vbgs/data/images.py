@@ -89,6 +89,9 @@ def read_image_file(path: str | Path) -> np.ndarray:
 
     path = Path(path)
     try:
+        upright = _exif_upright(path)
+        if upright is not None:
+            return upright
         with warnings.catch_warnings():  # imageio's plugin notes on a bad file
             warnings.simplefilter("ignore", DeprecationWarning)
             return np.asarray(skio.imread(path))
@@ -97,6 +100,26 @@ def read_image_file(path: str | Path) -> np.ndarray:
             f"could not read image file {path} ({err}); it may be truncated or not an image: "
             "replace or re-export it"
         ) from err
+
+
+_EXIF_ORIENTATION = 0x0112  # the EXIF tag; 1 = stored upright
+_EXIF_SUFFIXES = (".jpg", ".jpeg", ".png")
+
+
+def _exif_upright(path: Path) -> np.ndarray | None:
+    """The pixels turned upright when a JPEG/PNG's EXIF orientation says the camera was
+    held rotated (a phone photo read as stored lies on its side), else None. Needs
+    Pillow (it comes with matplotlib); without it the pixels are read as stored."""
+    if path.suffix.lower() not in _EXIF_SUFFIXES:
+        return None
+    try:
+        from PIL import Image, ImageOps
+    except ImportError:
+        return None
+    with Image.open(path) as image:
+        if image.getexif().get(_EXIF_ORIENTATION, 1) in (0, 1):
+            return None
+        return np.asarray(ImageOps.exif_transpose(image))
 
 
 def load_image(name_or_path: str | Path, size: int | tuple[int, int] | None = None, *,

@@ -49,7 +49,10 @@ class Scene(NamedTuple):
     val: validation views, apart from both the training and the test views: whatever
     is still tuned (render settings) is chosen on these, never on ``test``. Last, with
     a default, so positional construction ``Scene(name, train, test, bounds)`` keeps
-    working (a scene built that way has none).
+    working (a scene built that way has none);
+    record: what a loader wants said in a run's record: where a dataset's intrinsics and
+    depth scale came from
+    (:func:`vbgs.data.calibration.provenance`), views left out; empty for synthetic scenes.
     """
 
     name: str
@@ -58,6 +61,7 @@ class Scene(NamedTuple):
     bounds: tuple[np.ndarray, np.ndarray]
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     val: list[Frame] = []  # a NamedTuple field: shared default, never mutated
+    record: dict = {}  # shared default, never mutated
 
 
 def validate_frame(frame: Frame, what: str = "frame") -> Frame:
@@ -254,3 +258,25 @@ def resize_frame(frame: Frame, size) -> Frame:
         fx=cam.fx * sx, fy=cam.fy * sy, cx=cam.cx * sx, cy=cam.cy * sy, width=new_w, height=new_h
     )
     return Frame(np.clip(rgb, 0.0, 1.0).astype(np.float32), depth.astype(np.float32), camera)
+
+
+# A view lies inside the trained span when its camera is within this many typical
+# spacings of the trained frames (median distance to a trained frame's nearest) of one.
+SPAN_SPACINGS = 1.5
+
+
+def inside_span(trained: list[Frame], views: list[Frame]) -> np.ndarray:
+    """Mask ``[len(views)]``: which views' camera centres lie near the trained frames
+    (the nearest trained camera within SPAN_SPACINGS of their typical spacing), so a
+    view scored after training on part of a trajectory shows ground that was seen."""
+    if not views:
+        return np.zeros(0, bool)
+    centres = np.stack([f.camera.position for f in trained])  # [n, 3]
+    if len(centres) < 2:
+        return np.ones(len(views), bool)  # no spacing to measure: a 1-frame scene is warned about
+    gaps = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+    np.fill_diagonal(gaps, np.inf)
+    spacing = float(np.median(gaps.min(axis=1)))
+    at = np.stack([f.camera.position for f in views])  # [m, 3]
+    nearest = np.linalg.norm(at[:, None] - centres[None], axis=-1).min(axis=1)
+    return nearest <= SPAN_SPACINGS * spacing

@@ -1,0 +1,101 @@
+"""``python -m experiments.run check --scene FOLDER``: the dataset doctor, and the checks
+``fit-scene`` runs on a dataset folder before any work.
+
+The checks themselves are :mod:`vbgs.data.doctor`'s; where intrinsics and depth scales
+come from, :mod:`vbgs.data.calibration`'s. Here: the command's report, the task's
+calibration flags, the consistency warning and the test views scored after training on
+part of a trajectory.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from vbgs.data.calibration import check_depth_scale, check_intrinsics
+from vbgs.data.doctor import examine
+from vbgs.data.formats import detect_format, load_scene
+from vbgs.data.scene import Scene, inside_span
+from vbgs.data.synthetic import SCENES
+
+# fit-scene's consistency check looks at this many frames (the doctor at DOCTOR_FRAMES).
+FIT_FRAMES = 4
+DOCTOR_FRAMES = 8
+
+
+def check_calibration(task) -> None:
+    """A task's ``intrinsics`` and ``depth_scale``: well formed, and for a dataset folder."""
+    if task.intrinsics is None and task.depth_scale is None:
+        return
+    if task.scene in SCENES and not Path(task.scene).is_dir():
+        raise ValueError(f"--intrinsics and --depth-scale apply to dataset folders; "
+                         f"{task.scene!r} is a synthetic scene with exact cameras and depth")
+    if task.intrinsics is not None:
+        check_intrinsics(task.intrinsics)
+    if task.depth_scale is not None:
+        check_depth_scale(task.depth_scale)
+
+
+def within_trained_span(scene: Scene, frames: int) -> Scene:
+    """With fewer training frames than the folder holds, only the test views whose camera
+    lies within the trained part of the trajectory (:func:`vbgs.data.scene.inside_span`):
+    the others show ground never seen. Says on stderr how many were left out, and the
+    record carries the count; none left is refused."""
+    train = scene.train[:frames]
+    if len(train) == len(scene.train) or not scene.test:
+        return scene
+    keep = inside_span(train, scene.test)
+    outside = int((~keep).sum())
+    if not outside:
+        return scene
+    if outside == len(scene.test):
+        raise ValueError(f"--frames {frames}: none of the {len(scene.test)} test views lies "
+                         f"near the {len(train)} trained frames (of {len(scene.train)}), so "
+                         f"no score would measure what was learned; give more --frames")
+    print(f"note: --frames {frames} trains on {len(train)} of {len(scene.train)} frames; "
+          f"{outside} of {len(scene.test)} test views lie outside the span they cover and "
+          f"are not scored", file=sys.stderr)
+    return scene._replace(test=[f for f, k in zip(scene.test, keep, strict=True) if k],
+                          record={**scene.record, "test_views_outside_span": outside})
+
+
+def warn_inconsistent(scene: Scene, format: str | None, where: str) -> None:
+    """Say on stderr when a few training frames' depth does not agree across views,
+    naming the pose fix that makes it agree when one does."""
+    report = examine(scene.train, format, scene.record.get("depth_scale"), FIT_FRAMES)
+    check = report.checks[-1]
+    if check.ok is False:
+        fix = f"; likely: {report.fix_words}" if report.fix else ""
+        print(f"warning: consistency: {check.message}{fix} (`python -m experiments.run check "
+              f"--scene {where}` says more)", file=sys.stderr)
+
+
+def check_scene(scene: str, format: str | None = None, size: int | None = 128,
+                frames: int | None = None, intrinsics=None, depth_scale=None) -> dict:
+    """The doctor's report on a scene loaded as fit-scene loads it: every check
+    (``rows``), ``healthy``, the views' agreement, the fix named when one makes them
+    agree, the intrinsics and depth scale used and where they came from, and ``error``
+    (the first failure in one line) when unhealthy. Load failures raise ValueError."""
+    given = {k: v for k, v in (("intrinsics", intrinsics), ("depth_scale", depth_scale))
+             if v is not None}
+    folder = Path(scene).is_dir()
+    if given and not folder:
+        raise ValueError(f"--intrinsics and --depth-scale apply to dataset folders; {scene!r} "
+                         f"is not one")
+    format = format or (detect_format(scene) if folder else None)
+    loaded = load_scene(scene, format=format, size=size, **given)
+    train = loaded.train[:frames]
+    report = examine(train, format, loaded.record.get("depth_scale"), DOCTOR_FRAMES)
+    cam = train[0].camera
+    out = {"scene": scene, "format": format or "synthetic", "frames": len(train),
+           "healthy": report.healthy, "agreement": report.agreement, "fix": report.fix,
+           "fix_words": report.fix_words, "fix_agreement": report.fix_agreement,
+           "intrinsics": [float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)],
+           "image_size": [int(cam.width), int(cam.height)], **loaded.record,
+           "rows": [{"check": c.name, "ok": c.ok, "message": c.message,
+                     "frames": ",".join(map(str, c.frames[:12]))} for c in report.checks]}
+    failed = [c for c in report.checks if c.ok is False]
+    if failed:
+        fix = f"; likely fix: {report.fix_words}" if report.fix else ""
+        out["error"] = f"{failed[0].name}: {failed[0].message}{fix}"
+    return out

@@ -1,0 +1,61 @@
+"""Flags that do not apply to what runs: refused in one line naming why, instead of
+accepted and ignored (the summary would echo a setting that never ran).
+
+Whether a flag was given is read off the command line (:func:`given_flags`), not off
+its value: ``--protocol continual`` given with VBGS is harmless, ``--protocol static``
+is not, and ``--opacity 0.9`` equal to a default is still a request.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+_UNSET = object()
+
+# (dest, the flag, applies when, why not otherwise); `when` reads the parsed args.
+_VBGS_STREAMS = ("VBGS learns each frame once by a conjugate update: it takes no optimiser "
+                 "steps and keeps no replay buffer")
+RULES = {
+    "fit-scene": (
+        ("replay", "--replay", lambda a: a.method == "gradient",
+         f"applies to the gradient baseline (--method gradient); {_VBGS_STREAMS}"),
+        ("steps_per_frame", "--steps-per-frame", lambda a: a.method == "gradient",
+         f"applies to the gradient baseline (--method gradient); {_VBGS_STREAMS}"),
+        ("steps", "--steps", lambda a: a.method == "gradient",
+         f"applies to the gradient baseline under --protocol static; {_VBGS_STREAMS}"),
+        ("protocol", "--protocol static", lambda a: a.method == "gradient" or
+         a.protocol != "static", "applies to the gradient baseline (--method gradient); VBGS "
+         "always streams, each frame once"),
+        ("opacity", "--opacity", lambda a: a.opacity_rule == "constant",
+         "sets the opacity of --opacity-rule constant; under the default rule (evidence) each "
+         "splat's opacity comes from the rays that hit or pass it; add --opacity-rule constant"),
+        ("depth_kind", "--depth-kind", lambda a: bool(a.depth_model),
+         "describes the output of --depth-model ONNX; without a model the folder's own depth "
+         "is used"),
+        ("depth_preset", "--depth-preset", lambda a: bool(a.depth_model),
+         "names the family of --depth-model ONNX; without a model the folder's own depth is "
+         "used"),
+        ("depth_align", "--depth-align", lambda a: bool(a.depth_model),
+         "aligns the depth of --depth-model ONNX; without a model the folder's own depth is "
+         "used"),
+    ),
+}
+
+
+def given_flags(parser: argparse.ArgumentParser, argv: list[str], dests) -> set[str]:
+    """Which of ``dests`` the command line ``argv`` gives (argparse fills only the
+    attributes a namespace lacks with their defaults, so preset ones stay unset)."""
+    probe = parser.parse_args(argv, namespace=argparse.Namespace(**dict.fromkeys(dests, _UNSET)))
+    return {d for d in dests if getattr(probe, d) is not _UNSET}
+
+
+def refuse_inapplicable(command: str, args, given: set[str]) -> None:
+    """Raise ValueError on the first given flag that does not apply, saying why."""
+    for dest, flag, applies, why in RULES.get(command, ()):
+        if dest in given and not applies(args):
+            raise ValueError(f"{flag} {why}")
+
+
+def watched(command: str) -> tuple[str, ...]:
+    """The destinations whose presence :func:`refuse_inapplicable` needs for ``command``."""
+    return tuple(dest for dest, *_ in RULES.get(command, ()))

@@ -1,0 +1,382 @@
+"""A dataset doctor: is a loaded scene's geometry what the loaders promise?
+
+Loaders hand out frames with camera-to-world poses in OpenCV axes, intrinsics in
+pixels and depth in scene units (:mod:`vbgs.data.scene`). A file written under
+another convention loads without complaint and learns a plausible-looking bad map,
+so the checks here look at what a convention mix-up does to the numbers:
+
+* **rotations**: orthonormal with determinant +1 (scaled, sheared, reflected poses);
+* **intrinsics**: a field of view under 180 degrees, the principal point inside the image;
+* **depth codes**: depth read from 16-bit PNGs whose codes are small integers (under
+  :data:`SMALL_CODES`) was written in metres, not in the file's units;
+* **depth scale**: the camera's step between neighbouring frames against the median
+  depth (a camera that moves many depths between frames has translations in other
+  units than its depth);
+* **consistency**: each frame's depth points projected into other frames agree with
+  their depth (:func:`agreement`); a pose-convention mix-up (world-to-camera given
+  for camera-to-world, OpenGL axes for OpenCV, a quaternion read in the wrong order,
+  translations in millimetres) leaves almost no pixel agreeing. When consistency is
+  poor every candidate fix (:data:`FIXES`) is applied to the poses and the one that
+  makes the views agree is named, with the change to make in words.
+
+:func:`examine` runs them all and returns a :class:`Report`; :func:`refuse_bad_cameras`
+is the cheap subset that ``fit-scene`` runs before any work.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from vbgs.data.scene import Frame, check_rotation
+from vbgs.render.camera import Camera, opengl_to_opencv, project, unproject
+
+# A projected point agrees with the other frame's depth within this share of it.
+AGREE_TOLERANCE = 0.05
+# Views that agree at under this share (median frame's best neighbour) fail even when no
+# fix helps. Low on purpose: noisy sensors agree at 0.16-0.5 under AGREE_TOLERANCE (the
+# synthetic room, object and walk with RealSense noise at 32-64 px), exact depth at
+# 0.86-0.96.
+POOR = 0.1
+# A frame pair overlaps when this share of one frame's points lands on the other's
+# measured depth; a frame without such a neighbour is not scored.
+MIN_OVERLAP = 0.1
+# Points per frame used in the consistency check (a regular subsample of valid depth).
+MAX_POINTS = 3000
+# A camera stepping more than this many median depths between neighbouring frames has
+# its translations in other units than its depth.
+MAX_STEP_DEPTHS = 10.0
+# Depth PNG codes below this, all integers, are metres written without the scale.
+SMALL_CODES = 256
+# A candidate fix is named, and the views fail, when it lifts agreement by at least this
+# much: relative to the data's own agreement, so noisy depth does not fail by itself.
+FIX_GAIN = 0.15
+
+
+class Check(NamedTuple):
+    """One check's verdict: ``ok`` None when it could not be measured."""
+
+    name: str
+    ok: bool | None
+    message: str
+    frames: tuple = ()  # the frames it concerns (indices into the frames examined)
+
+    def as_dict(self) -> dict:
+        return {"check": self.name, "ok": self.ok, "message": self.message,
+                "frames": list(self.frames)}
+
+
+class Fix(NamedTuple):
+    """A candidate fix: a name, the change in words, and the frames it gives (from the
+    frames as loaded and the format; see :func:`try_fixes`)."""
+
+    name: str
+    words: str
+    apply: Callable[[list[Frame], str | None], list[Frame]]
+
+
+class Report(NamedTuple):
+    """Every check, the measured agreement and, when one helps, the fix that does."""
+
+    checks: list[Check]
+    agreement: float | None
+    fix: str | None = None
+    fix_words: str | None = None
+    fix_agreement: float | None = None
+
+    @property
+    def healthy(self) -> bool:
+        return all(c.ok is not False for c in self.checks)
+
+    def as_dict(self) -> dict:
+        return {"healthy": self.healthy, "agreement": self.agreement, "fix": self.fix,
+                "fix_words": self.fix_words, "fix_agreement": self.fix_agreement,
+                "checks": [c.as_dict() for c in self.checks]}
+
+
+# --------------------------------------------------------------------------- cameras
+
+
+def rotation_problem(pose: np.ndarray) -> str | None:
+    """What is wrong with a pose's rotation (scaled, sheared, reflected), or None."""
+    try:
+        check_rotation(np.asarray(pose)[:3, :3], "rotation")
+    except ValueError as err:
+        return str(err).removeprefix("rotation: ")
+    return None
+
+
+def intrinsics_problem(cam: Camera) -> str | None:
+    """What is implausible about a camera's intrinsics, or None: focal lengths must be
+    positive (a field of view under 180 degrees), the principal point inside the image."""
+    if not (np.isfinite(cam.fx) and np.isfinite(cam.fy) and cam.fx > 0 and cam.fy > 0):
+        return f"focal lengths fx={cam.fx}, fy={cam.fy} are not positive"
+    if not (0 <= cam.cx <= cam.width and 0 <= cam.cy <= cam.height):
+        return (f"principal point ({cam.cx:.1f}, {cam.cy:.1f}) lies outside the "
+                f"{cam.width}x{cam.height} image; are these another camera's intrinsics?")
+    return None
+
+
+def field_of_view(cam: Camera) -> float:
+    """Horizontal field of view in degrees."""
+    return float(np.degrees(2 * np.arctan(0.5 * cam.width / cam.fx)))
+
+
+def check_rotations(frames: list[Frame]) -> Check:
+    bad = [(i, p) for i, f in enumerate(frames) if (p := rotation_problem(f.camera.pose))]
+    if not bad:
+        return Check("rotations", True, f"{len(frames)} rotations orthonormal, det +1")
+    return Check("rotations", False, f"frame {bad[0][0]}: {bad[0][1]} ({len(bad)} frame(s))",
+                 tuple(i for i, _ in bad))
+
+
+def check_intrinsics(frames: list[Frame]) -> Check:
+    bad = [(i, p) for i, f in enumerate(frames) if (p := intrinsics_problem(f.camera))]
+    if bad:
+        return Check("intrinsics", False, f"frame {bad[0][0]}: {bad[0][1]} "
+                     f"({len(bad)} frame(s))", tuple(i for i, _ in bad))
+    cam = frames[0].camera
+    return Check("intrinsics", True, f"field of view {field_of_view(cam):.1f} degrees, "
+                 f"principal point ({cam.cx:.1f}, {cam.cy:.1f}) in {cam.width}x{cam.height}")
+
+
+# --------------------------------------------------------------------------- depth
+
+
+def check_depth_codes(frames: list[Frame], depth_scale: float | None) -> Check:
+    """Depth PNG codes (depth * scale) that are all small integers were written in
+    metres (or another coarse unit) instead of depth * scale."""
+    if not depth_scale:
+        return Check("depth codes", None, "depth not read from PNG codes")
+    codes = np.concatenate([f.depth[f.depth > 0] for f in frames]) * float(depth_scale)
+    if not len(codes):
+        return Check("depth codes", None, "no depth")
+    integer = np.abs(codes - np.round(codes)).max() < 1e-2
+    if integer and codes.max() < SMALL_CODES:
+        values = np.unique(np.round(codes)).astype(int)
+        return Check("depth codes", False,
+                     f"the depth PNGs hold only {len(values)} distinct codes, all under "
+                     f"{SMALL_CODES} ({values[:6].tolist()}...): depth in metres written as "
+                     f"whole numbers to a 16-bit PNG? Write depth x {depth_scale:g} (the "
+                     f"file's scale); --depth-scale 1 reads these as metres, but everything "
+                     f"under a metre is lost")
+    return Check("depth codes", True, f"depth codes up to {codes.max():.0f} at scale "
+                 f"{depth_scale:g}")
+
+
+def camera_step(frames: list[Frame]) -> float:
+    """Median distance between neighbouring frames' camera centres."""
+    centres = np.stack([f.camera.position for f in frames])
+    return float(np.median(np.linalg.norm(np.diff(centres, axis=0), axis=1)))
+
+
+def check_depth_scale(frames: list[Frame]) -> Check:
+    """The camera's step between neighbouring frames against the median depth."""
+    depth = np.concatenate([f.depth[f.depth > 0] for f in frames])
+    if len(frames) < 2 or not len(depth):
+        return Check("depth scale", None, "needs two frames with depth")
+    median, step = float(np.median(depth)), camera_step(frames)
+    words = f"median depth {median:.4g}, median camera step {step:.4g}"
+    if step > MAX_STEP_DEPTHS * median:
+        return Check("depth scale", False,
+                     f"{words}: the camera moves {step / median:.0f} median depths between "
+                     f"neighbouring frames; translations and depth are in different units "
+                     f"(millimetres and metres?)")
+    return Check("depth scale", True, words)
+
+
+# --------------------------------------------------------------------------- consistency
+
+
+def _points(frame: Frame) -> np.ndarray:
+    """At most MAX_POINTS of a frame's depth points, world ``[n, 3]``, a regular subsample."""
+    xyz, _ = unproject(frame.camera, frame.rgb, frame.depth)
+    return xyz[:: max(1, len(xyz) // MAX_POINTS)]
+
+
+def pair_agreement(xyz: np.ndarray, other: Frame) -> tuple[float, float]:
+    """Of world points ``xyz [n, 3]`` (one frame's depth), the share landing on ``other``'s
+    measured depth, and of those the share whose depth agrees with it (within
+    AGREE_TOLERANCE of it)."""
+    if not len(xyz):
+        return 0.0, 0.0
+    cam = other.camera
+    uv, z = project(cam, xyz)
+    col, row = np.floor(uv[:, 0]).astype(np.int64), np.floor(uv[:, 1]).astype(np.int64)
+    inside = (z > 0) & (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+    seen = np.zeros(len(xyz), np.float64)
+    seen[inside] = other.depth[row[inside], col[inside]]
+    hit = seen > 0
+    if not hit.any():
+        return 0.0, 0.0
+    agree = np.abs(z[hit] - seen[hit]) <= AGREE_TOLERANCE * seen[hit]
+    return float(hit.mean()), float(agree.mean())
+
+
+def neighbours(n: int, i: int, sample: list[int]) -> list[int]:
+    """Frames compared with frame ``i``: its trajectory neighbours and the sample."""
+    return sorted({j for j in (i - 2, i - 1, i + 1, i + 2, *sample) if 0 <= j < n and j != i})
+
+
+def sample_frames(n: int, count: int) -> list[int]:
+    """``count`` frame indices spread evenly over ``n``."""
+    return sorted({int(round(x)) for x in np.linspace(0, n - 1, min(n, count))})
+
+
+def agreement(frames: list[Frame], count: int = 8) -> tuple[float | None, list[float | None]]:
+    """Multi-view consistency: for ``count`` frames spread over the sequence, the best
+    agreement with any overlapping other frame (:func:`pair_agreement`); and their
+    median (None when no frame overlaps another)."""
+    sample = sample_frames(len(frames), count)
+    per_frame = []
+    for i in sample:
+        xyz = _points(frames[i])
+        best = None
+        for j in neighbours(len(frames), i, sample):
+            hit, agree = pair_agreement(xyz, frames[j])
+            if hit >= MIN_OVERLAP:
+                best = max(best or 0.0, agree)
+        per_frame.append(best)
+    scored = [a if a is not None else 0.0 for a in per_frame]
+    if all(a is None for a in per_frame):
+        return None, per_frame
+    return float(np.median(scored)), per_frame
+
+
+def _with_poses(frames: list[Frame], poses: list[np.ndarray]) -> list[Frame]:
+    return [f._replace(camera=f.camera._replace(pose=np.asarray(p, np.float64)))
+            for f, p in zip(frames, poses, strict=True)]
+
+
+def _pose_fix(name: str, words: str, fix: Callable[[np.ndarray], np.ndarray]) -> Fix:
+    """A fix of each pose as the file holds it: a Blender file's are OpenGL-axis poses,
+    the loaded ones times diag(1, -1, -1, 1) (its own inverse, so the same map goes back)."""
+
+    def apply(frames, format):
+        file_axes = opengl_to_opencv if format == "blender" else (lambda p: p)
+        return _with_poses(frames, [file_axes(fix(file_axes(np.asarray(f.camera.pose,
+                                                                       np.float64))))
+                                    for f in frames])
+
+    return Fix(name, words, apply)
+
+
+def _focal_fix(factor: float) -> Fix:
+    def apply(frames, format):
+        return [f._replace(camera=f.camera._replace(fx=f.camera.fx * factor,
+                                                    fy=f.camera.fy * factor)) for f in frames]
+
+    side = "short" if factor > 1 else "long"
+    return Fix(f"focal x{factor:g}", f"the focal lengths are about {factor:g} x too {side}: "
+               f"the intrinsics are another camera's? give this camera's with --intrinsics "
+               f"fx,fy,cx,cy (Replica: a cam_params.json beside the folder)", apply)
+
+
+def _mm(p):
+    p = p.copy()
+    p[:3, 3] *= 1e-3
+    return p
+
+
+def _quaternion_swapped(p):
+    """The pose whose quaternion was written qw qx qy qz and read as qx qy qz qw."""
+    from vbgs.data.formats import quaternion_to_matrix
+    from vbgs.render.splats import quaternions_from_rotations
+
+    w, x, y, z = quaternions_from_rotations(p[None, :3, :3])[0]  # what was read, (x,y,z,w)
+    out = p.copy()
+    out[:3, :3] = quaternion_to_matrix(y, z, w, x)  # the file's first value is qw
+    return out
+
+
+_AXES = ("the file's poses use the other camera axis convention than the format's "
+         "(Blender/NeRF: OpenGL, x right, y up, z back; Replica, TUM: OpenCV, x right, y down, "
+         "z forward)")
+
+FIXES = (
+    _pose_fix("w2c", "the file's poses are world-to-camera: invert each 4x4 (camera-to-world "
+                     "is expected)", np.linalg.inv),
+    _pose_fix("axes", f"{_AXES}: multiply each pose on the right by diag(1, -1, -1, 1)",
+              opengl_to_opencv),
+    _pose_fix("w2c+axes", "the file's poses are world-to-camera in the other axis convention: "
+                          "invert each 4x4, then multiply it on the right by diag(1, -1, -1, 1)",
+              lambda p: opengl_to_opencv(np.linalg.inv(p))),
+    _pose_fix("translation-mm", "the translations are in millimetres and the depth in metres: "
+                                "divide each pose's translation by 1000", _mm),
+    _pose_fix("quaternion-wxyz", "groundtruth.txt's quaternions are written qw qx qy qz; TUM "
+                                 "writes tx ty tz qx qy qz qw: move qw to the end of each line",
+              _quaternion_swapped),
+    *(_focal_fix(k) for k in (0.5, 2 / 3, 1.5, 2.0)),
+)
+TUM_ONLY = ("quaternion-wxyz",)
+
+
+def try_fixes(frames: list[Frame], format: str | None, count: int = 8):
+    """Each candidate fix's agreement, best first: ``[(agreement, fix)]``."""
+    out = []
+    for fix in FIXES:
+        if fix.name in TUM_ONLY and format != "tum":
+            continue
+        score, _ = agreement(fix.apply(frames, format), count)
+        out.append((score or 0.0, fix))
+    return sorted(out, key=lambda s: -s[0])
+
+
+def check_consistency(frames: list[Frame], format: str | None = None, count: int = 8
+                      ) -> tuple[Check, float | None, tuple[float, Fix] | None]:
+    """The views' agreement (:func:`agreement`) against every candidate fix's: failed when
+    a fix lifts it by FIX_GAIN (that fix returned), when it is under POOR, or when no
+    frame's depth lands on another's. Returns the check, the agreement and the fix."""
+    if len(frames) < 2:
+        return Check("consistency", None, "one frame: nothing to compare"), None, None
+    score, per_frame = agreement(frames, count)
+    best = try_fixes(frames, format, count)[0]
+    if best[0] < (score or 0.0) + FIX_GAIN:
+        best = None
+    if score is None:
+        return (Check("consistency", False, "no frame's depth lands on another frame's depth: "
+                      "the poses put the views apart (or the depth is far off)"), None, best)
+    sample = sample_frames(len(frames), count)
+    poor = tuple(i for i, a in zip(sample, per_frame, strict=True) if (a or 0.0) < POOR)
+    words = (f"{score:.0%} of the pixels projected into a neighbouring frame agree with its "
+             f"depth within {AGREE_TOLERANCE:.0%} (median over {len(sample)} frames)")
+    if best is not None:
+        return Check("consistency", False, f"only {words}; {best[0]:.0%} once the poses are "
+                     f"changed as below", poor), score, best
+    if score < POOR:
+        return Check("consistency", False, f"only {words}: the poses, intrinsics or depth "
+                     f"do not describe one scene", poor), score, None
+    return Check("consistency", True, words, poor), score, None
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def cheap_checks(frames: list[Frame], depth_scale: float | None = None) -> list[Check]:
+    """The checks that cost next to nothing (no projection)."""
+    return [check_rotations(frames), check_intrinsics(frames),
+            check_depth_codes(frames, depth_scale), check_depth_scale(frames)]
+
+
+def examine(frames: list[Frame], format: str | None = None, depth_scale: float | None = None,
+            count: int = 8) -> Report:
+    """Every check on ``frames`` (a trajectory in order) and, when the views agree better
+    under a candidate fix, that fix."""
+    if not frames:
+        raise ValueError("no frames to examine")
+    consistency, score, best = check_consistency(frames, format, count)
+    checks = [*cheap_checks(frames, depth_scale), consistency]
+    if best is None:
+        return Report(checks, score)
+    return Report(checks, score, best[1].name, best[1].words, best[0])
+
+
+def refuse_bad_cameras(frames: list[Frame], depth_scale: float | None = None,
+                       what: str = "scene") -> None:
+    """The cheap checks, a failure refused in one line (ValueError) naming the frame."""
+    for check in cheap_checks(frames, depth_scale):
+        if check.ok is False:
+            raise ValueError(f"{what}: {check.name}: {check.message}; "
+                             f"`python -m experiments.run check --scene ...` says more")
