@@ -73,6 +73,10 @@ REACH_CELLS = 2.0
 # level-0 side, for ground seen 32 times more coarsely than the first frame's median
 # (a street's end 30 units away against 1 unit in front of the camera).
 COARSE_LEVELS = 5
+# Ground seen this many times more coarsely than the first frame's median point starts
+# the coarse cells (point_levels): a room's far wall, 2x its median depth, keeps the
+# fine cells; a street's end, 10x, does not.
+COARSE_FROM = 4.0
 # Measured points: the cells a point is looked up in reach this many sigma of its noise
 # along its ray, before and behind it (see _pick).
 NOISE_SIGMAS = 2.0
@@ -220,7 +224,8 @@ class Growth(NamedTuple):
     levels: cell sides ``cell / 2^l`` for l < levels (finer levels refine);
     refine: share of the empty slots that refinement (levels >= 1) may take per batch;
     max_new: the most components one batch may add (the bounded rate);
-    coarse: see :func:`point_levels` (far ground, seen coarsely, gets coarse cells).
+    coarse, footprint, coarse_from: see :func:`point_levels` (far ground, seen coarsely,
+        gets coarse cells).
     """
 
     cell: float
@@ -228,20 +233,24 @@ class Growth(NamedTuple):
     refine: float
     max_new: int
     coarse: int = 0  # coarse levels far ground may use (cell * 2^j, j <= coarse)
+    footprint: float = 0.0  # the first batch's median pixel footprint (0: not given)
+    coarse_from: float = 4.0  # footprints this many times the median's start coarse cells
 
 
 def point_levels(rule: Growth, footprint) -> np.ndarray | None:
     """``[n]`` int: the coarse level of each point, whose pixel footprint (the side of
     the patch of surface its pixel sees, :func:`vbgs.mapping.measurement.point_footprints`)
-    is ``footprint [n]``. A component need not be finer than the pixel it is seen with:
-    a point is new ground only when no component lies in its cell of side
-    ``cell * 2^j``, the finest at least as wide as its footprint (``j <= rule.coarse``),
+    is ``footprint [n]``. A component need not be finer than the pixels it is seen
+    with: a point seen ``r >= rule.coarse_from`` times more coarsely than the first
+    batch's median point is new ground only where no component lies in its cell of side
+    ``cell * 2^j``, ``j = 1 + floor(log2(r / coarse_from))`` (at most ``rule.coarse``),
     so far ground (a street's end, a field) takes a few components where near ground
     takes many. None without footprints or coarse levels."""
-    if footprint is None or rule.coarse <= 0:
+    if footprint is None or rule.coarse <= 0 or not rule.footprint > 0:
         return None
-    ratio = np.maximum(np.asarray(footprint, np.float64) / rule.cell, 1.0)
-    return np.minimum(np.ceil(np.log2(ratio)), rule.coarse).astype(np.int64)
+    ratio = np.asarray(footprint, np.float64) / (rule.footprint * rule.coarse_from)
+    level = 1.0 + np.floor(np.log2(np.maximum(ratio, 0.5)))
+    return np.clip(level, 0, rule.coarse).astype(np.int64)
 
 
 def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
@@ -256,39 +265,40 @@ def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
 
 def calibrate(xyz, n_components: int, first_cells: float, *, refine: float = 0.0,
               levels: int = LEVELS, rate: float = MAX_NEW_SHARE, footprint=None,
-              coarse: int = 0, count: bool = False) -> Growth:
+              coarse: int = 0, coarse_from: float = COARSE_FROM) -> Growth:
     """The rule for a stream whose first batch ``xyz [n, d]`` should get about
     ``first_cells`` level-0 components: the cell side is ``sqrt(A / first_cells)`` for
     the area ``A`` the batch covers (:func:`covered_area`); at most ``ceil(rate * K)``
-    new components per batch. ``footprint [n]``: the points' pixel footprints, for far
-    ground's coarse cells (:func:`point_levels`, ``coarse`` levels at most); with
-    ``count`` the side is the one that gives the batch ``first_cells`` cells of new
-    ground, counted, not estimated."""
+    new components per batch. ``footprint [n]``: the points' pixel footprints, whose
+    median is the reference of far ground's coarse cells (:func:`point_levels`, at most
+    ``coarse`` levels, from ``coarse_from`` times the median); when the batch has such
+    points the area no longer tells the count, and the side is the one that gives the
+    batch ``first_cells`` cells of new ground, counted."""
     first_cells = float(min(max(first_cells, 1.0), n_components))
     if not 0 < rate <= 1:
         raise ValueError(f"the growth rate must be in (0, 1] of the capacity, got {rate!r}")
     if not 0 <= refine <= 1:
         raise ValueError(f"the refinement share must be in [0, 1], got {refine!r}")
     cell = float(np.sqrt(covered_area(xyz) / first_cells))
+    reference = 0.0 if footprint is None else float(np.median(footprint))
     rule = Growth(cell, int(levels), float(refine), int(np.ceil(rate * n_components)),
-                  int(coarse))
-    if not count:
+                  int(coarse), reference, float(coarse_from))
+    point_level = point_levels(rule, footprint)
+    if point_level is None or not point_level.any():
         return rule
     # the side that gives the batch first_cells cells of new ground, counted (by
     # bisection in log(cell): the count falls as the side grows; a dozen halvings of a
-    # factor-of-4 bracket: within 0.1%), not estimated as area / cell^2: on a frame with
-    # far ground, slanted or on coarse cells, the estimate is off by up to a factor of 3
+    # factor-of-4 bracket: within 0.1%); the levels depend on footprints only
     x = np.asarray(xyz, np.float64)
     x = x - 0.5 * (x.min(0) + x.max(0))
     order, none = np.arange(len(x)), np.zeros((0, x.shape[1]))
 
     def count(side: float) -> int:
-        trial = rule._replace(cell=side)
-        return len(new_ground(x, none, trial, order, len(x), None,
-                              point_levels(trial, footprint)))  # levels None: level 0
+        return len(new_ground(x, none, rule._replace(cell=side), order, len(x), None,
+                              point_level))
 
     lo, hi, step = math.log(cell / 4.0), math.log(cell * 4.0), math.log(4.0)
-    for _ in range(8):  # widen the bracket until it holds the side (far ground: wider)
+    for _ in range(8):  # widen the bracket until it holds the side
         if count(math.exp(hi)) < first_cells:
             break
         lo, hi = hi, hi + step

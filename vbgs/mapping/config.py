@@ -63,7 +63,7 @@ class GrowthConfig:
     reach_cells: float = grow.REACH_CELLS
     coarse_levels: int = grow.COARSE_LEVELS
     merge: bool = True
-    count_first: bool = False
+    coarse_from: float = grow.COARSE_FROM
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
@@ -73,10 +73,9 @@ class GrowthConfig:
             raise ValueError(f"growth.refine_share must be in [0, 1], got {self.refine_share!r}")
         if not isinstance(self.levels, int) or self.levels < 1:
             raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
-        for name in ("merge", "count_first"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"growth.{name} must be true or false, got "
-                                 f"{getattr(self, name)!r}")
+        if not isinstance(self.merge, bool):
+            raise ValueError(f"growth.merge must be true or false, got {self.merge!r}")
+        _positive("growth", "coarse_from", self.coarse_from)
         if not isinstance(self.coarse_levels, int) or self.coarse_levels < 0:
             raise ValueError(f"growth.coarse_levels must be an integer >= 0, got "
                              f"{self.coarse_levels!r}")

@@ -211,7 +211,7 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     if mixture is None:  # the first frame fixes the cell side
         rule = grow.calibrate(xyz, k, g.first_frame_share * k, refine=g.refine_share,
                               levels=g.levels, rate=g.max_new_share, footprint=footprint,
-                              coarse=g.coarse_levels, count=g.count_first)
+                              coarse=g.coarse_levels, coarse_from=g.coarse_from)
         mixture = _measured(grow.start_empty(xyz, k, rule.cell, config.prior), config)
     key, sub = jax.random.split(state.key)
     levels = grow.point_levels(rule, footprint)

@@ -314,12 +314,12 @@ def test_a_surface_prior_stream_far_from_the_origin():
 
 
 def test_far_ground_is_new_only_in_its_coarse_cell():
-    """A point whose pixel sees more than a cell is new ground only where its coarse
-    cell (the finest of side cell * 2^j at least as wide as its footprint) holds no
-    component."""
-    rule = grow.Growth(cell=1.0, levels=1, refine=0.0, max_new=100, coarse=3)
-    levels = grow.point_levels(rule, np.array([0.5, 1.0, 1.5, 2.0, 5.0, 100.0]))
-    assert levels.tolist() == [0, 0, 1, 1, 3, 3]  # capped at rule.coarse
+    """A point seen coarse_from (4) times or more coarsely than the first batch's median
+    is new ground only where its coarse cell (side cell * 2^j) holds no component."""
+    rule = grow.Growth(cell=1.0, levels=1, refine=0.0, max_new=100, coarse=3,
+                       footprint=0.01, coarse_from=4.0)
+    levels = grow.point_levels(rule, np.array([0.005, 0.02, 0.039, 0.04, 0.08, 0.17, 9.0]))
+    assert levels.tolist() == [0, 0, 0, 1, 2, 3, 3]  # capped at rule.coarse
     assert grow.point_levels(rule._replace(coarse=0), np.ones(3)) is None
     # two far points 4 apart, a component 1.5 from the first: level 0 (cells of 1) sees
     # both as new ground, level 2 (cells of 4) only the second's cell is empty
@@ -331,22 +331,20 @@ def test_far_ground_is_new_only_in_its_coarse_cell():
     assert far.tolist() == [1]
 
 
-def test_calibrate_with_footprints_gives_the_first_batch_its_share():
-    """With footprints the first batch gets first_cells components on new ground (the
-    cell side is counted by bisection), far points on coarse cells."""
+def test_calibrate_with_coarse_ground_gives_the_first_batch_its_share():
+    """With far points on coarse cells the first batch gets first_cells components on
+    new ground (the cell side counted by bisection), not area / cell^2 of them; without
+    any, the side is the area's."""
     rng = np.random.default_rng(0)
     near = np.c_[rng.uniform(0, 1, (4000, 2)), np.zeros(4000)]
     far = np.c_[rng.uniform(0, 20, (2000, 2)), np.full(2000, 5.0)]
     xyz = np.concatenate([near, far])
     footprint = np.r_[np.full(4000, 0.016), np.full(2000, 0.45)]  # as the points lie
-    rule = grow.calibrate(xyz, 5000, 2000, footprint=footprint, coarse=5, count=True)
+    rule = grow.calibrate(xyz, 5000, 2000, footprint=footprint, coarse=5)
     levels = grow.point_levels(rule, footprint)
-    assert levels[:4000].max() == 0 and levels[4000:].min() >= 3
+    assert levels[:4000].max() == 0 and levels[4000:].min() == 3  # 28x: 1 + floor(log2(7))
     x = xyz - 0.5 * (xyz.min(0) + xyz.max(0))
     n = len(grow.new_ground(x, np.zeros((0, 3)), rule, np.arange(len(x)), len(x), None, levels))
-    assert abs(n - 2000) <= 40
-    flat = grow.calibrate(near, 5000, 500, footprint=np.full(4000, 0.02), coarse=5,
-                          count=True)
-    centred = near - 0.5 * (near.min(0) + near.max(0))
-    n = len(grow.new_ground(centred, np.zeros((0, 3)), flat, np.arange(4000), 4000))
-    assert abs(n - 500) <= 15  # the count moves in steps  # honest without coarse cells too
+    assert abs(n - 2000) <= 40  # the count moves in steps
+    flat = grow.calibrate(near, 5000, 500, footprint=np.full(4000, 0.016), coarse=5)
+    assert flat.cell == grow.calibrate(near, 5000, 500).cell
