@@ -10,6 +10,7 @@ Commands:
   oracle      render splats built from a view's ground truth: is the renderer right here?
   colour-gap  the streamed (lumped) colour fit against exact least squares (a diagnostic)
   render-bound  VBGS's splats refined by gradient: colours, + opacities, + geometry (a diagnostic)
+  front       run time and memory against error: VBGS, VBGS-polish and the gradient baseline
   bench       benchmarks: image, estep, raster, depth
 """
 
@@ -108,9 +109,16 @@ def _add_fit_scene(sub):
                    help="VBGS splat covariance scale (sigma multiplier)")
     p.add_argument("--splat-blur", type=float, default=None, metavar="PX2",
                    help="VBGS pixel filter: variance (px²) added to each projected splat")
-    p.add_argument("--replay", default=REPLAY_DEFAULT, help="gradient: none | fifo:K | reservoir:K | full")
-    p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
-    p.add_argument("--steps", type=int, default=3000, help="gradient, static protocol")
+    p.add_argument("--replay", default=REPLAY_DEFAULT,
+                   help="gradient, vbgs-polish (continual): none | fifo:K | reservoir:K | full")
+    p.add_argument("--steps-per-frame", type=int, default=50,
+                   help="gradient, vbgs-polish: steps per arriving frame (continual)")
+    p.add_argument("--steps", type=int, default=3000,
+                   help="gradient, vbgs-polish: steps on all frames (static protocol)")
+    p.add_argument("--anchor", type=float, default=None, metavar="W",
+                   help="vbgs-polish: weight of the posterior's anchor on the polished "
+                        "splats (0: a free polish; default "
+                        "vbgs.baseline.anchor.ANCHOR_WEIGHT)")
     add_choice(p, "--protocol", PROTOCOL)
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
     add_choice(p, "--depth-kind", DEPTH_KIND)
@@ -140,7 +148,8 @@ def _fit_scene(args) -> dict:
     from experiments.scene_task import SceneTask, run_scene, save_views
 
     render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale),
-                                ("splat_blur", args.splat_blur)) if v is not None}
+                                ("splat_blur", args.splat_blur),
+                                ("polish_anchor", args.anchor)) if v is not None}
     task = SceneTask(scene=args.scene, format=args.format, method=args.method,
                      components=args.components, frames=args.frames, n_test=args.test_views,
                      size=args.size, order=args.order, assign=args.assign, estep=args.estep,
@@ -161,6 +170,9 @@ def _fit_scene(args) -> dict:
     check_fewer_components(args.components, args.frames * args.size**2,
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
+    if args.anchor is not None and args.method != "vbgs-polish":
+        raise ValueError(f"--anchor weighs the polish of --method vbgs-polish; "
+                         f"--method {args.method} has none: drop --anchor")
     result = run_scene(task, progress=sys.stderr.isatty(), ply=args.ply)
     if args.save:
         save_views(args.save, result.images["target"], result.images["render"],
@@ -269,7 +281,7 @@ def _add_depth_study(sub):
     p.add_argument("--components", type=int, default=5000)
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--size", type=int, default=64)
-    p.add_argument("--methods", nargs="+", choices=METHOD.values, default=list(METHOD.values))
+    p.add_argument("--methods", nargs="+", choices=METHOD.values, default=["vbgs", "gradient"])
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--out", default="runs/depth_study",
                    help="output folder (default runs/depth_study, ignored by git)")

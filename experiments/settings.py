@@ -40,7 +40,9 @@ class Choice:
             raise ValueError(f"unknown {name} {value!r}: use one of {', '.join(self.values)}")
 
 
-METHOD = Choice(("vbgs", "gradient"), "vbgs", "vbgs, or the gradient 3DGS baseline")
+METHOD = Choice(("vbgs", "gradient", "vbgs-polish"), "vbgs",
+                "vbgs, the gradient 3DGS baseline, or vbgs-polish (VBGS, then gradient "
+                "steps from its splats; scenes only)")
 INIT = Choice(INITS, INITS[0], INIT_HELP)
 ORDER = Choice(ORDERS, "sequential", "stream order")
 ASSIGN = Choice(("prior", "posterior"), "prior",
