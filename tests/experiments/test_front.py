@@ -57,3 +57,13 @@ def test_front_refuses_several_scene_component_counts(capsys):
     code = main(["front", "--scene", "object", "--components", "100,200", "--json"])
     assert code == 2
     assert "one count" in capsys.readouterr().err
+
+
+def test_image_front_times_warm_fits(tmp_path):
+    out = tmp_path / "img"
+    assert main(["front", "--image", "astronaut", "--size", "16", "--components", "20",
+                 "--gradient-steps", "5", "--iters", "2", "--out", str(out)]) == 0
+    table = pd.read_csv(out / "astronaut.csv")
+    assert table.method.tolist() == ["vbgs", "gradient"]
+    assert table.steps.tolist() == [2, 5] and (table.protocol == "image").all()
+    assert (table.compile_seconds >= 0).all() and (out / "astronaut.png").exists()
