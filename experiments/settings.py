@@ -53,7 +53,8 @@ FORMAT = Choice(("blender", "replica", "tum"), None,
                 "dataset layout of a scene folder (detected from the folder if left out)")
 PROTOCOL = Choice(("continual", "static"), "continual",
                   "continual: frames arrive one by one, once; static: every training frame "
-                  "from the start, --steps steps on frames drawn uniformly (gradient only)")
+                  "from the start, --steps steps on frames drawn uniformly (gradient, "
+                  "vbgs-polish)")
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")
