@@ -131,9 +131,9 @@ class PolishLearner:
         with self._timed("vbgs"):
             self.vbgs.learn(frame, background)
 
-    def _rebase(self, frames: list[Frame]) -> None:
+    def _rebase(self, frames: list) -> None:
         """Anchor on VBGS's current splats, carry the polish onto them, and make sure the
-        rasterizer's capacity drops nothing in ``frames``."""
+        rasterizer's capacity drops nothing in ``frames`` (anything with a ``camera``)."""
         splats = self.vbgs.splats()
         base = params_from_splats(splats)
         mix, state, cfg = self.vbgs.state.mixture, self.vbgs.state, self.vbgs.config
@@ -186,7 +186,7 @@ class PolishLearner:
         with self._timed("polish"):
             if self.extent is None:  # a stream knows its extent from its first frame
                 self.extent = stream_extent(frame.camera.position, frame_points(frame)[0])
-            self._rebase([frame])
+            self._rebase([frame, *self.replay.items])  # every view it will train on
         arrays = train_arrays(self.task, frame)
         self.train([arrays, *self.replay.items], self.task.steps_per_frame, background)
         self.replay = self.replay.add(arrays)
