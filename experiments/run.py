@@ -117,8 +117,7 @@ def _add_fit_scene(sub):
                    help="gradient, vbgs-polish: steps on all frames (static protocol)")
     p.add_argument("--anchor", type=float, default=None, metavar="W",
                    help="vbgs-polish: weight of the posterior's anchor on the polished "
-                        "splats (0: a free polish; default "
-                        "vbgs.baseline.anchor.ANCHOR_WEIGHT)")
+                        "splats (0: a free polish; default: 0.01 continual, 0 static)")
     add_choice(p, "--protocol", PROTOCOL)
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
     add_choice(p, "--depth-kind", DEPTH_KIND)

@@ -29,8 +29,11 @@ residual on top of it, never a copy that drifts away.
    points is held near what it knows; one it barely saw, or never, is free to follow the
    pictures. So a view the polish no longer sees (no replay) cannot drag well-known
    splats away: the forgetting a gradient learner suffers is held back by the posterior.
-   The weight (``task.polish_anchor``, nats of the posterior per point against the loss
-   per pixel) is :data:`vbgs.baseline.anchor.ANCHOR_WEIGHT` by default; 0 polishes freely.
+   The weight (``task.polish_anchor``, loss units per nat of the posterior per point) is
+   chosen by protocol unless given (:func:`anchor_weight`): continual,
+   :data:`vbgs.baseline.anchor.ANCHOR_WEIGHT`; static, 0 (a free polish: every frame is
+   in every step's draw, so there is nothing to forget, and the free polish scored best
+   on validation views). The residual and the carry stay either way.
 
 Not done: no densification (the rows are VBGS's components, and a moved row would lose
 its anchor), and the learning-rate decay spans the whole polish (``steps`` or
@@ -70,13 +73,25 @@ from vbgs.baseline import (
     reset_moments,
     to_splats,
 )
-from vbgs.baseline.anchor import anchor_penalty, carry, make_anchor
+from vbgs.baseline.anchor import ANCHOR_WEIGHT, anchor_penalty, carry, make_anchor
 from vbgs.baseline.train import make_step
 from vbgs.compilation import compile_seconds
 from vbgs.data.scene import Frame, Scene
 from vbgs.data.streams import stream_order
 from vbgs.render.raster import exact_capacity
 from vbgs.render.splats import Splats, drawn
+
+
+# The static protocol's anchor weight (see the module docstring and ANCHOR_WEIGHT's note).
+STATIC_ANCHOR = 0.0
+
+
+def anchor_weight(task) -> float:
+    """``task.polish_anchor``, or by protocol when it is None: ANCHOR_WEIGHT when
+    continual, STATIC_ANCHOR when static."""
+    if task.polish_anchor is not None:
+        return float(task.polish_anchor)
+    return STATIC_ANCHOR if task.protocol == "static" else ANCHOR_WEIGHT
 
 
 def anchored_step(config, optimizer):
@@ -144,7 +159,7 @@ class PolishLearner:
             dof=post.space.dof, colour_precision=post.colour.kappa / cfg.prior.colour_noise**2,
             opacity_count=(evidence.prior_hits + evidence.prior_passes
                            + state.evidence.hits + state.evidence.passes),
-            points=float(jnp.sum(post.alpha - mix.prior.alpha)), weight=self.task.polish_anchor)
+            points=float(jnp.sum(post.alpha - mix.prior.alpha)), weight=anchor_weight(self.task))
         capacity = max(exact_capacity(splats, f.camera, blur=self.blur) for f in frames)
         if self.trainer is None or capacity > self.trainer.config.raster_capacity:
             self.trainer = Trainer(replace(self.config, raster_capacity=capacity),
@@ -210,7 +225,7 @@ class PolishLearner:
         return {**self.vbgs.details(result),
                 "steps_total": int(losses.size),
                 "final_loss": float(last.mean()) if last.size else float("nan"),
-                "polish_anchor": self.task.polish_anchor,
+                "polish_anchor": anchor_weight(self.task),
                 "seconds_vbgs": self.seconds["vbgs"], "seconds_polish": self.seconds["polish"],
                 "seconds": self.seconds["vbgs"] + self.seconds["polish"],
                 "seconds_compiling": self.seconds["compiling"]}

@@ -37,13 +37,15 @@ from vbgs.baseline.params import Params, covariances
 from vbgs.inference.precision import mat_vec
 from vbgs.render.splats import rotations_from_quaternions, scale_rotation_from_covs
 
-# Loss units per nat of the posterior per point it learned from. Read as a log-likelihood,
-# the L1 loss per pixel is |r| / b nats for a Laplace error of scale b, so a nat weighs b
-# loss units: b is a few hundredths of a colour unit for these pictures. Provisional, not
-# tuned: on the object at 32 px / 400 components / 6 frames, 60 static steps, validation
-# PSNR was 19.30 dB unpolished, then 21.88 free (0), 21.51 (0.01), 20.97 (0.05), 19.81 (1);
-# streamed at 64 px / 3000 / 20 frames (10 steps a frame, no replay) the early views'
-# curve dipped by 2.0 dB mid-stream when free and by at most 0.26 dB at 0.01.
+# Loss units per nat of the posterior per point it learned from: the polish's default on a
+# stream (a static polish runs free, experiments.learners.polish_learner). Read as a
+# log-likelihood, the L1 loss per pixel is |r| / b nats for a Laplace error of scale b, so a
+# nat weighs b loss units, and b is about a hundredth to a twentieth of a colour unit here:
+# 0.01 is that order, not a tuned value. Seen so far: object, 32 px / 400 components /
+# 6 frames, 60 static steps, validation PSNR 19.30 dB unpolished, then 21.88 free (0),
+# 21.51 (0.01), 20.97 (0.05), 19.81 (1); streamed at 64 px / 3000 / 20 frames (10 steps a
+# frame, no replay), the early (test) views dipped by 2.0 dB mid-stream when free and by at
+# most 0.26 dB at 0.01 (an observation, not a choice: tune it on validation views).
 ANCHOR_WEIGHT = 0.01
 
 
