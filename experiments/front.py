@@ -16,7 +16,8 @@ For an image (``--image``) VBGS's batch fit against the 2-D gradient baseline at
 step count, for each component count (where splats are far fewer than pixels).
 
 Each row: method, protocol, steps, replay, wall seconds, replay bytes, PSNR, SSIM,
-depth L1 and ``on_front``: on the Pareto front of PSNR against wall time (no other row
+depth L1, the early views' PSNR when seen and at the end (continual rows: the
+forgetting, :mod:`experiments.protocol`) and ``on_front``: on the Pareto front of PSNR against wall time (no other row
 is at least as fast and at least as good, and better in one). Written as CSV and
 markdown (:func:`experiments.bench.write_table`) and one PNG: PSNR against wall time
 (log scale), the front drawn, and PSNR against replay memory. Wall times are the
@@ -39,7 +40,8 @@ import numpy as np
 from vbgs.io_atomic import write_atomic
 
 COLUMNS = ("method", "protocol", "init", "components", "steps", "replay", "wall_seconds",
-           "compile_seconds", "replay_bytes", "psnr", "ssim", "depth_l1", "dropped")
+           "compile_seconds", "replay_bytes", "psnr", "ssim", "depth_l1",
+           "early_psnr_when_seen", "early_psnr_at_end", "dropped")
 
 
 @dataclass(frozen=True)
@@ -104,7 +106,14 @@ def scene_row(task, record: dict) -> dict:
             "wall_seconds": record["seconds"] - record["seconds_compiling"],
             "compile_seconds": record["seconds_compiling"], "replay_bytes": record["replay_bytes"], "psnr": record["psnr"],
             "ssim": record["ssim"], "depth_l1": record["depth_l1"],
+            **{k: nan_if_none(record[k]) for k in ("early_psnr_when_seen",
+                                                   "early_psnr_at_end")},
             "dropped": record["dropped"]}
+
+
+def nan_if_none(value) -> float:
+    """A metric a protocol does not measure (None) as NaN, for the table."""
+    return float("nan") if value is None else float(value)
 
 
 def _say(i: int, n: int, row: dict) -> None:
@@ -149,7 +158,8 @@ def run_image_front(image: str, size: int, components: tuple[int, ...], iters: i
                      "replay": "none", "wall_seconds": record["seconds"],
                      "compile_seconds": compiled, "replay_bytes": 0,
                      "psnr": record["psnr"], "ssim": record["ssim"],
-                     "depth_l1": float("nan"), "dropped": 0})
+                     "depth_l1": float("nan"), "early_psnr_when_seen": float("nan"),
+                     "early_psnr_at_end": float("nan"), "dropped": 0})
         _say(i, len(tasks), rows[-1])
     return mark_front(rows)
 
@@ -183,6 +193,7 @@ def plot_front(rows: list[dict], path: Path, title: str) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator
 
     fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(12, 4.6))
     series: dict[str, list[dict]] = {}
@@ -203,6 +214,10 @@ def plot_front(rows: list[dict], path: Path, title: str) -> None:
     ax_t.step([r["wall_seconds"] for r in front], [r["psnr"] for r in front], where="post",
               color="black", linewidth=2.5, alpha=0.35, label="Pareto front", zorder=0)
     ax_t.set_xscale("log")
+    plain = FuncFormatter(lambda x, _: f"{x:g}")  # 0.2, 0.5, 1, 2, 5, 10, ...
+    ax_t.xaxis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))
+    ax_t.xaxis.set_major_formatter(plain)
+    ax_t.xaxis.set_minor_formatter(plain)
     ax_t.set_xlabel("wall seconds (training; log scale)")
     ax_m.set_xscale("symlog", linthresh=0.01)
     ax_m.set_xlabel("replay memory (MiB of frames held; symlog)")
