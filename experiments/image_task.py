@@ -43,7 +43,7 @@ class ImageTask:
     assign: str = ASSIGN.default
     patch: int = 8
     reassign: bool = True  # batch fits re-seed unused components (streams: opt-in)
-    method: str = METHOD.default  # vbgs | gradient
+    method: str = METHOD.default  # vbgs | gradient (vbgs-polish: scenes only)
     steps: int = 2000  # gradient baseline only: optimiser steps
     prior: model.PriorConfig = model.PriorConfig()
 
@@ -55,6 +55,9 @@ class ImageTask:
             raise ValueError(f"components must be a positive integer, got {self.components!r}")
         if not isinstance(self.iters, int) or self.iters < 1:
             raise ValueError(f"iters must be a positive integer, got {self.iters!r}")
+        if self.method == "vbgs-polish":
+            raise ValueError("vbgs-polish is a scene learner: fit an image with --method vbgs "
+                             "or gradient")
         oracle_start(self.init)  # a known scheme
         if self.init == "stream" and self.stream != "none" and self.reassign:
             raise ValueError("reassign moves unused components, but a stream started with "

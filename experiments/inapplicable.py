@@ -15,17 +15,19 @@ _UNSET = object()
 # (dest, the flag, applies when, why not otherwise); `when` reads the parsed args.
 _VBGS_STREAMS = ("VBGS learns each frame once by a conjugate update: it takes no optimiser "
                  "steps and keeps no replay buffer")
+_STEPPED = ("gradient", "vbgs-polish")  # the methods that take optimiser steps
+_FOR_STEPPED = "applies to the gradient baseline and vbgs-polish (--method gradient | vbgs-polish)"
+
 RULES = {
     "fit-scene": (
-        ("replay", "--replay", lambda a: a.method == "gradient",
-         f"applies to the gradient baseline (--method gradient); {_VBGS_STREAMS}"),
-        ("steps_per_frame", "--steps-per-frame", lambda a: a.method == "gradient",
-         f"applies to the gradient baseline (--method gradient); {_VBGS_STREAMS}"),
-        ("steps", "--steps", lambda a: a.method == "gradient",
-         f"applies to the gradient baseline under --protocol static; {_VBGS_STREAMS}"),
-        ("protocol", "--protocol static", lambda a: a.method == "gradient" or
-         a.protocol != "static", "applies to the gradient baseline (--method gradient); VBGS "
-         "always streams, each frame once"),
+        ("replay", "--replay", lambda a: a.method in _STEPPED,
+         f"{_FOR_STEPPED}; {_VBGS_STREAMS}"),
+        ("steps_per_frame", "--steps-per-frame", lambda a: a.method in _STEPPED,
+         f"{_FOR_STEPPED}; {_VBGS_STREAMS}"),
+        ("steps", "--steps", lambda a: a.method in _STEPPED,
+         f"{_FOR_STEPPED} under --protocol static; {_VBGS_STREAMS}"),
+        ("protocol", "--protocol static", lambda a: a.method in _STEPPED or
+         a.protocol != "static", f"{_FOR_STEPPED}; VBGS always streams, each frame once"),
         ("opacity", "--opacity", lambda a: a.opacity_rule == "constant",
          "sets the opacity of --opacity-rule constant; under the default rule (evidence) each "
          "splat's opacity comes from the rays that hit or pass it; add --opacity-rule constant"),

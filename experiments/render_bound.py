@@ -29,11 +29,11 @@ import numpy as np
 
 from experiments.learners.gradient_learner import DEFAULT_CONFIG
 from experiments.tune import learn_once
-from vbgs.baseline import camera_extent, frame_arrays, trainable
-from vbgs.baseline.params import Params, logit, to_splats
+from vbgs.baseline import camera_extent, frame_arrays, params_from_splats, trainable
+from vbgs.baseline.params import Params, to_splats
 from vbgs.baseline.train import make_optimizer, make_step
 from vbgs.render.raster import exact_capacity
-from vbgs.render.splats import Splats, scale_rotation_from_covs
+from vbgs.render.splats import Splats
 from vbgs.render.views import evaluate
 
 # What each refinement trains (Params fields); the rest keep VBGS's values.
@@ -42,19 +42,6 @@ REFINED = {
     "colours_opacities": ("colour_logits", "opacity_logits"),
     "everything": ("colour_logits", "opacity_logits", "means", "log_scales", "rotations"),
 }
-EPS = 1e-4  # colours and opacities are clipped to [EPS, 1 - EPS] before the logit
-
-
-def params_from_splats(splats: Splats) -> Params:
-    """The gradient baseline's parameters for ``splats`` (every row active)."""
-    scales, quats = scale_rotation_from_covs(np.asarray(splats.covs, np.float64))
-    clip = lambda a: jnp.clip(jnp.asarray(a, jnp.float32), EPS, 1.0 - EPS)  # noqa: E731
-    return Params(jnp.asarray(splats.means, jnp.float32),
-                  jnp.asarray(np.log(scales), jnp.float32), jnp.asarray(quats, jnp.float32),
-                  logit(clip(splats.opacities)), logit(clip(splats.colours)),
-                  jnp.ones(splats.count, bool))
-
-
 def refine(splats: Splats, frames: list, background, *, what: str, steps: int, blur: float,
            extent: float, seed: int = 0) -> Splats:
     """``splats`` after ``steps`` Adam steps on ``frames`` refining ``what`` (a key of

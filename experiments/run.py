@@ -11,6 +11,7 @@ Commands:
   oracle      render splats built from a view's ground truth: is the renderer right here?
   colour-gap  the streamed (lumped) colour fit against exact least squares (a diagnostic)
   render-bound  VBGS's splats refined by gradient: colours, + opacities, + geometry (a diagnostic)
+  front       run time and memory against error: VBGS, VBGS-polish and the gradient baseline
   bench       benchmarks: image, estep, raster, depth
 """
 
@@ -110,9 +111,15 @@ def _add_fit_scene(sub):
                    help="VBGS splat covariance scale (sigma multiplier)")
     p.add_argument("--splat-blur", type=float, default=None, metavar="PX2",
                    help="VBGS pixel filter: variance (px²) added to each projected splat")
-    p.add_argument("--replay", default=REPLAY_DEFAULT, help="gradient: none | fifo:K | reservoir:K | full")
-    p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
-    p.add_argument("--steps", type=int, default=3000, help="gradient, static protocol")
+    p.add_argument("--replay", default=REPLAY_DEFAULT,
+                   help="gradient, vbgs-polish (continual): none | fifo:K | reservoir:K | full")
+    p.add_argument("--steps-per-frame", type=int, default=50,
+                   help="gradient, vbgs-polish: steps per arriving frame (continual)")
+    p.add_argument("--steps", type=int, default=3000,
+                   help="gradient, vbgs-polish: steps on all frames (static protocol)")
+    p.add_argument("--anchor", type=float, default=None, metavar="W",
+                   help="vbgs-polish: weight of the posterior's anchor on the polished "
+                        "splats (0: a free polish; default: 0.01 continual, 0 static)")
     add_choice(p, "--protocol", PROTOCOL)
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
     add_choice(p, "--depth-kind", DEPTH_KIND)
@@ -185,7 +192,8 @@ def _fit_scene(args) -> dict:
     from experiments.scene_task import SceneTask, run_scene, save_views
 
     render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale),
-                                ("splat_blur", args.splat_blur)) if v is not None}
+                                ("splat_blur", args.splat_blur),
+                                ("polish_anchor", args.anchor)) if v is not None}
     task = SceneTask(scene=args.scene, format=args.format, method=args.method,
                      components=args.components, frames=args.frames, n_test=args.test_views,
                      size=args.size, order=args.order, assign=args.assign, estep=args.estep,
@@ -206,6 +214,9 @@ def _fit_scene(args) -> dict:
     check_fewer_components(args.components, args.frames * args.size**2,
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
+    if args.anchor is not None and args.method != "vbgs-polish":
+        raise ValueError(f"--anchor weighs the polish of --method vbgs-polish; "
+                         f"--method {args.method} has none: drop --anchor")
     result = run_scene(task, progress=True, ply=args.ply)
     if args.save:
         save_views(args.save, result.images["target"], result.images["render"],
@@ -314,7 +325,7 @@ def _add_depth_study(sub):
     p.add_argument("--components", type=int, default=5000)
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--size", type=int, default=64)
-    p.add_argument("--methods", nargs="+", choices=METHOD.values, default=list(METHOD.values))
+    p.add_argument("--methods", nargs="+", choices=METHOD.values, default=["vbgs", "gradient"])
     p.add_argument("--steps-per-frame", type=int, default=50, help="gradient, continual")
     p.add_argument("--out", default="runs/depth_study",
                    help="output folder (default runs/depth_study, ignored by git)")
@@ -434,6 +445,92 @@ def _render_bound(args) -> dict:
     bound = render_bound(task, load_task_scene(task), steps=args.steps,
                          progress=True)
     return {**_diagnostic_header(args), **bound}
+
+
+def _add_front(sub):
+    p = sub.add_parser("front", help="PSNR / SSIM / depth L1 against wall time and replay "
+                                     "memory: VBGS, VBGS-polish and the gradient baseline at "
+                                     "several step counts; CSV, markdown and a PNG")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--scene", help="object | room | walk | a dataset folder")
+    what.add_argument("--image", help="a bundled photo or an image file: VBGS against the "
+                                      "2-D gradient baseline")
+    add_choice(p, "--format", FORMAT)
+    p.add_argument("--size", type=int, default=None,
+                   help="image size (default: 128 for scenes, 256 for images)")
+    p.add_argument("--components", default=None, metavar="K[,K...]",
+                   help="components / splats (default: 20000 for scenes; 2000,8000,16000 "
+                        "for images); scenes take one count")
+    p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
+    p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--polish-steps", default="30,100,300,900", metavar="N,N",
+                   help="vbgs-polish static step counts")
+    p.add_argument("--gradient-steps", default=None, metavar="N,N",
+                   help="gradient step counts (default: 100,300,900,3000 for scenes, "
+                        "100,300,1000,3000 for images)")
+    p.add_argument("--replays", default="none,fifo:8",
+                   help="continual rows: replay buffers, comma-separated ('' for none)")
+    p.add_argument("--steps-per-frame", type=int, default=20, help="continual rows")
+    p.add_argument("--iters", type=int, default=10, help="images: VBGS's CAVI iterations")
+    p.add_argument("--out", default=None, help="folder for NAME.csv, .md and .png "
+                   "(default runs/front/NAME, ignored by git)")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _front(args) -> dict:
+    from pathlib import Path
+
+    from experiments.front import FrontPlan, parse_counts, write_front
+
+    name = Path(args.scene or args.image).name or "front"
+    out = Path(args.out or Path("runs/front") / name)
+    image = args.image is not None
+    size = args.size or (256 if image else 128)
+    components = parse_counts(args.components or ("2000,8000,16000" if image else "20000"),
+                              "--components")
+    gradient = parse_counts(args.gradient_steps or ("100,300,1000,3000" if image
+                                                    else "100,300,900,3000"),
+                            "--gradient-steps")
+    argv = ["front", *(["--image", args.image] if image else ["--scene", args.scene]),
+            "--size", str(size), "--components", ",".join(map(str, components)),
+            "--gradient-steps", ",".join(map(str, gradient)), "--seed", str(args.seed)]
+    if image:
+        from experiments.front import run_image_front
+
+        for k in components:
+            check_fewer_components(k, size * size, f"a {size}x{size} image",
+                                   "use fewer --components or a larger --size")
+        argv += ["--iters", str(args.iters)]
+        rows = run_image_front(args.image, size, components, args.iters, gradient,
+                               seed=args.seed)
+        title = f"{name}, {size} px"
+    else:
+        from experiments.front import run_scene_front
+        from experiments.scene_task import SceneTask
+
+        if len(components) != 1:
+            raise ValueError(f"--components: a scene's front takes one count, got "
+                             f"{args.components!r}")
+        replays = tuple(r.strip() for r in args.replays.split(",") if r.strip())
+        plan = FrontPlan(polish_steps=parse_counts(args.polish_steps, "--polish-steps"),
+                         gradient_steps=gradient, replays=replays,
+                         steps_per_frame=args.steps_per_frame, continual=bool(replays))
+        base = SceneTask(scene=args.scene, format=args.format, components=components[0],
+                         frames=args.frames, n_test=args.test_views, n_val=0, size=size,
+                         seed=args.seed)
+        check_fewer_components(components[0], args.frames * size**2,
+                               f"at most {args.frames} frames x {size}x{size}",
+                               "use fewer --components, a larger --size or more --frames")
+        argv += ["--frames", str(args.frames), "--test-views", str(args.test_views),
+                 "--polish-steps", ",".join(map(str, plan.polish_steps)),
+                 "--replays", ",".join(replays), "--steps-per-frame", str(args.steps_per_frame)]
+        rows = run_scene_front(base, plan)
+        title = (f"{name}, {size} px, {components[0]} components, {args.frames} frames")
+    argv += ["--out", str(out)]
+    files = write_front(rows, out, name, command="python -m experiments.run " + " ".join(argv),
+                        title=title)
+    return {"rows": rows, "files": [str(p) for p in files]}
 
 
 def _add_bench(sub):
@@ -556,6 +653,7 @@ COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_sc
             "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
             "colour-gap": (_add_colour_gap, _colour_gap),
             "render-bound": (_add_render_bound, _render_bound),
+            "front": (_add_front, _front),
             "sweep": (_sweep_cli("add_sweep"), _sweep_cli("run_sweep")),
             "report": (_sweep_cli("add_report"), _sweep_cli("run_report"))}
 

@@ -93,6 +93,9 @@ class SceneTask:
     steps_per_frame: int = 50
     steps: int = 3000
     protocol: str = PROTOCOL.default
+    # vbgs-polish only: weight of the posterior's anchor; None: by protocol
+    # (experiments.learners.polish_learner.anchor_weight)
+    polish_anchor: float | None = None
     # VBGS's method constants without a flag (frozen: safe to share); tune reaches each by
     # its dotted name (prior.cov_scale, growth.reach_cells, evidence.pass_sigmas)
     prior: model.PriorConfig = model.SURFACE_PRIOR
@@ -127,6 +130,10 @@ class SceneTask:
         if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):
             raise ValueError(f"splat_blur must be a pixel filter variance in [0, 10) px², "
                              f"got {self.splat_blur!r}")
+        if self.polish_anchor is not None and not (
+                isinstance(self.polish_anchor, (int, float)) and self.polish_anchor >= 0):
+            raise ValueError(f"polish_anchor must be a number >= 0 (0: a free polish), "
+                             f"got {self.polish_anchor!r}")
         if not self.colour_ridge > 0:
             raise ValueError(f"colour_ridge must be > 0 (pixels' worth of weight on the "
                              f"posterior colour), got {self.colour_ridge!r}")

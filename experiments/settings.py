@@ -40,7 +40,9 @@ class Choice:
             raise ValueError(f"unknown {name} {value!r}: use one of {', '.join(self.values)}")
 
 
-METHOD = Choice(("vbgs", "gradient"), "vbgs", "vbgs, or the gradient 3DGS baseline")
+METHOD = Choice(("vbgs", "gradient", "vbgs-polish"), "vbgs",
+                "vbgs, the gradient 3DGS baseline, or vbgs-polish (VBGS, then gradient "
+                "steps from its splats; scenes only)")
 INIT = Choice(INITS, INITS[0], INIT_HELP)
 ORDER = Choice(ORDERS, "sequential", "stream order")
 ASSIGN = Choice(("prior", "posterior"), "prior",
@@ -51,7 +53,8 @@ FORMAT = Choice(("blender", "replica", "tum"), None,
                 "dataset layout of a scene folder (detected from the folder if left out)")
 PROTOCOL = Choice(("continual", "static"), "continual",
                   "continual: frames arrive one by one, once; static: every training frame "
-                  "from the start, --steps steps on frames drawn uniformly (gradient only)")
+                  "from the start, --steps steps on frames drawn uniformly (gradient, "
+                  "vbgs-polish)")
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")

@@ -6,9 +6,10 @@ A learner class takes ``(task, scene)``, has ``PROTOCOLS`` (the protocols it run
 """
 
 from experiments.learners.gradient_learner import GradientLearner
+from experiments.learners.polish_learner import PolishLearner
 from experiments.learners.vbgs_learner import VbgsLearner
 
-LEARNERS = {"vbgs": VbgsLearner, "gradient": GradientLearner}
+LEARNERS = {"vbgs": VbgsLearner, "gradient": GradientLearner, "vbgs-polish": PolishLearner}
 METHODS = tuple(LEARNERS)
 
-__all__ = ["LEARNERS", "METHODS", "GradientLearner", "VbgsLearner"]
+__all__ = ["LEARNERS", "METHODS", "GradientLearner", "PolishLearner", "VbgsLearner"]

@@ -77,6 +77,16 @@ def total_steps(task, scene: Scene) -> int:
     return len(scene.train) * task.steps_per_frame
 
 
+def train_arrays(task, frame: Frame):
+    """The frame as the step takes it; under a measured depth (``task.sensor``) its
+    depth term weighted by the sensor's noise (:mod:`vbgs.baseline.loss`)."""
+    sensor = task_sensor(task)
+    if sensor.exact:
+        return frame_arrays(frame)
+    return frame_arrays(frame, depth_weights(frame.depth, frame.camera, sensor.model,
+                                             sensor.level))
+
+
 class GradientLearner:
     """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
 
@@ -160,13 +170,7 @@ class GradientLearner:
         self.losses.append(losses)
 
     def _arrays(self, frame: Frame):
-        """The frame as the step takes it; under a measured depth (``task.sensor``) its
-        depth term weighted by the sensor's noise (:mod:`vbgs.baseline.loss`)."""
-        sensor = task_sensor(self.task)
-        if sensor.exact:
-            return frame_arrays(frame)
-        return frame_arrays(frame, depth_weights(frame.depth, frame.camera, sensor.model,
-                                                 sensor.level))
+        return train_arrays(self.task, frame)
 
     def learn(self, frame: Frame, background) -> None:
         """Train on the arriving frame and the replay buffer, then buffer the frame

@@ -35,6 +35,11 @@ def _gradient(s: dict) -> bool:
     return s.get("method") == "gradient"
 
 
+def _steps(s: dict) -> bool:
+    """The method takes optimiser steps (and a replay buffer, and the protocol choice)."""
+    return s.get("method") in ("gradient", "vbgs-polish")
+
+
 def _batch_image(s: dict) -> bool:
     return s["task"] == "image" and s.get("stream", "none") == "none"
 
@@ -47,20 +52,22 @@ RULES: tuple[Rule, ...] = (
     # setting       when                                    effect  reason
     Rule("method", lambda s: _streamed_image(s) and _gradient(s), SKIP,
          "patch streams are VBGS only (the gradient image baseline fits all pixels at once)"),
-    Rule("replay", lambda s: not _gradient(s) and s.get("replay", "none") != "none", SKIP,
-         "replay buffers belong to the gradient baseline; VBGS streams without one"),
+    Rule("method", lambda s: s["task"] == "image" and s.get("method") == "vbgs-polish", SKIP,
+         "vbgs-polish is a scene learner (an image has no frames to polish on)"),
+    Rule("replay", lambda s: not _steps(s) and s.get("replay", "none") != "none", SKIP,
+         "replay buffers belong to the gradient learners; VBGS streams without one"),
     Rule("dataset", lambda s: not TASKS[s["task"]].dataset_exists(s["dataset"]), SKIP,
          "the dataset is another task's built-in dataset"),
     Rule("assign", _gradient, DROP, "the gradient baseline has no E-step assignment"),
     Rule("estep", _gradient, DROP, "the gradient baseline has no E-step"),
     Rule("candidates", lambda s: _gradient(s) or s.get("estep") == "dense", DROP,
          "candidates only limit the sparse E-step"),
-    Rule("steps_per_frame", lambda s: not _gradient(s), DROP,
-         "optimiser steps belong to the gradient baseline"),
-    Rule("steps", lambda s: not _gradient(s), DROP,
-         "optimiser steps belong to the gradient baseline"),
-    Rule("protocol", lambda s: not _gradient(s), DROP,
-         "VBGS always streams (the protocol choice is the gradient baseline's)"),
+    Rule("steps_per_frame", lambda s: not _steps(s), DROP,
+         "optimiser steps belong to the gradient learners (gradient, vbgs-polish)"),
+    Rule("steps", lambda s: not _steps(s), DROP,
+         "optimiser steps belong to the gradient learners (gradient, vbgs-polish)"),
+    Rule("protocol", lambda s: not _steps(s), DROP,
+         "VBGS always streams (the protocol choice is the gradient learners')"),
     Rule("order", _batch_image, DROP, "a batch image fit sees all pixels at once"),
     Rule("assign", _batch_image, DROP, "a batch image fit iterates CAVI on all pixels"),
     Rule("patch", _batch_image, DROP, "patches exist only in patch streams"),

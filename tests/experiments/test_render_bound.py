@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from experiments.render_bound import params_from_splats, refine
+from experiments.render_bound import refine
 from experiments.run import main
 from experiments.scene_task import SceneTask, load_task_scene
 from experiments.tune import learn_once
-from vbgs.baseline import camera_extent, to_splats
+from vbgs.baseline import camera_extent, params_from_splats, to_splats
 from vbgs.render.views import evaluate
 
 TINY = SceneTask(components=150, frames=3, n_test=1, n_val=0, size=16)

@@ -18,6 +18,7 @@ from vbgs.baseline.params import (
     live,
     opacities,
     params_from_prior,
+    params_from_splats,
     to_splats,
     trainable,
 )
@@ -40,5 +41,5 @@ __all__ = [
     "Replay", "TrainConfig", "TrainState", "Trainer", "camera_extent", "colours", "count_live",
     "covariances", "depth_loss", "frame_arrays", "frame_loss", "image_loss", "init_params",
     "learning_rates", "live", "make_optimizer", "make_step", "opacities", "params_from_prior",
-    "parse_replay", "relocate", "reset_moments", "to_splats", "trainable",
+    "params_from_splats", "parse_replay", "relocate", "reset_moments", "to_splats", "trainable",
 ]

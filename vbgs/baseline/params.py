@@ -29,11 +29,20 @@ import numpy as np
 
 from vbgs.inference import expfam
 from vbgs.inference.precision import matmul
-from vbgs.render.splats import Splats, covs_from_scale_rotation, rotations_from_quaternions
+from vbgs.render.splats import (
+    Splats,
+    covs_from_scale_rotation,
+    rotations_from_quaternions,
+    scale_rotation_from_covs,
+)
 
 INIT_OPACITY = 0.1  # 3DGS's initial opacity
 COLOUR_EPS = 1e-3  # initial colours are clipped to [eps, 1 - eps] before the logit
 IDENTITY_QUATERNION = (1.0, 0.0, 0.0, 0.0)  # (w, x, y, z)
+# Splat colours and opacities are clipped to [eps, 1 - eps] before the logit: far enough
+# from 0 and 1 that the logit is finite in float32, close enough that the round trip
+# (sigmoid of the logit) renders the same picture to ~1e-6.
+SPLAT_EPS = 1e-6
 
 
 class Params(NamedTuple):
@@ -178,6 +187,19 @@ def params_from_prior(prior, *, capacity: int | None = None, active=None,
     scales = jnp.sqrt(jnp.diagonal(cov, axis1=-2, axis2=-1))  # [n, d]
     return init_params(prior.space.mean + prior.origin, prior.colour.mean, scales,
                        capacity=capacity, active=active, opacity=opacity)
+
+
+def params_from_splats(splats: Splats, *, eps: float = SPLAT_EPS) -> Params:
+    """The parameters of ``splats`` (every row active): means as they are, per-axis sigmas
+    and rotations from an eigendecomposition of the covariances
+    (:func:`vbgs.render.splats.scale_rotation_from_covs`), colours and opacities through
+    the logit after clipping to ``[eps, 1 - eps]``."""
+    scales, quats = scale_rotation_from_covs(np.asarray(splats.covs, np.float64))
+    clip = lambda a: jnp.clip(jnp.asarray(a, jnp.float32), eps, 1.0 - eps)  # noqa: E731
+    return Params(jnp.asarray(splats.means, jnp.float32),
+                  jnp.asarray(np.log(scales), jnp.float32), jnp.asarray(quats, jnp.float32),
+                  logit(clip(splats.opacities)), logit(clip(splats.colours)),
+                  jnp.ones(splats.count, bool))
 
 
 def live(params: Params, threshold: float) -> jax.Array:

@@ -158,7 +158,7 @@ def frame_arrays(frame, pixel_weight=None) -> FrameArrays:
 
 
 def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, on_trace=None,
-              frozen: tuple[str, ...] = ()):
+              frozen: tuple[str, ...] = (), penalty=None):
     """The jitted ``step(params, opt_state, rgb, depth, camera, pixel_weight, background)
     -> (params, opt_state, loss)`` (``*frame_arrays(frame)`` gives rgb, depth, camera and
     the depth term's pixel weights, None for exact depth):
@@ -166,21 +166,27 @@ def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, o
     as frames arrive costs no recompile), :func:`vbgs.baseline.loss.frame_loss`, one
     optimiser update; one compile per image size (the camera's static width and
     height). ``on_trace()`` (optional) is called each time it is traced. ``frozen``
-    names Params fields whose gradients are zeroed, so Adam leaves them where they are."""
+    names Params fields whose gradients are zeroed, so Adam leaves them where they are.
+    ``penalty(theta, *extra) -> scalar`` (optional) is added to the loss, ``extra`` being
+    the step's arguments after ``background`` (e.g. the anchor of
+    :mod:`vbgs.baseline.anchor`); the returned loss includes it."""
 
-    def loss_fn(theta: Params, active, rgb, depth, camera: Camera, pixel_weight, background):
+    def loss_fn(theta: Params, active, rgb, depth, camera: Camera, pixel_weight, background,
+                *extra):
         out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
                         tile=config.tile, capacity=config.raster_capacity, blur=config.blur)
-        return frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
+        loss = frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
                           depth_weight=config.depth_weight, pixel_weight=pixel_weight)
+        return loss if penalty is None else loss + penalty(theta, *extra)
 
     @jax.jit
-    def step(params: Params, opt_state, rgb, depth, camera: Camera, pixel_weight, background):
+    def step(params: Params, opt_state, rgb, depth, camera: Camera, pixel_weight, background,
+             *extra):
         if on_trace is not None:
             on_trace()
         theta = trainable(params)
         loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
-                                                  pixel_weight, background)
+                                                  pixel_weight, background, *extra)
         grads = grads._replace(**{f: jnp.zeros_like(getattr(grads, f)) for f in frozen})
         updates, opt_state = optimizer.update(grads, opt_state, theta)
         theta = optax.apply_updates(theta, updates)
