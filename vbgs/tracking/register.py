@@ -62,7 +62,7 @@ LEVELS = (512, 2048, 2048)
 # each level (0: the map as it is).
 INFLATE = (1.0, 0.25, 0.0)
 # Candidate look-ups per level, and Levenberg-Marquardt iterations after each.
-PASSES = 2
+PASSES = 1
 ITERATIONS = 6
 # Nearest components each point scores.
 CANDIDATES = 4
