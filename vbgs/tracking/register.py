@@ -61,8 +61,10 @@ LEVELS = (512, 2048, 2048)
 # The components' covariances are widened by this many times their own RMS radius at
 # each level (0: the map as it is).
 INFLATE = (1.0, 0.25, 0.0)
-# Candidate look-ups per level, and Levenberg-Marquardt iterations after each.
-PASSES = 1
+# Candidate look-ups per level (each followed by ITERATIONS Levenberg-Marquardt steps):
+# the coarse level, cheap, moves farthest (one pass there left a room frame 19 cm and
+# 8 degrees from its guess at 1.6 degrees).
+PASSES = (3, 2, 1)
 ITERATIONS = 6
 # Nearest components each point scores.
 CANDIDATES = 4
@@ -85,7 +87,7 @@ class TrackConfig:
 
     levels: tuple[int, ...] = LEVELS
     inflate: tuple[float, ...] = INFLATE
-    passes: int = PASSES
+    passes: tuple[int, ...] = PASSES
     iterations: int = ITERATIONS
     candidates: int = CANDIDATES
     robust: float = ROBUST
@@ -94,13 +96,16 @@ class TrackConfig:
     colour_noise: float = model.PriorConfig.colour_noise  # sigma_c of the colour term
 
     def __post_init__(self):
-        if not self.levels or len(self.levels) != len(self.inflate):
-            raise ValueError(f"tracking needs one inflate factor per level, got levels "
-                             f"{self.levels} and inflate {self.inflate}")
+        if not self.levels or not len(self.levels) == len(self.inflate) == len(self.passes):
+            raise ValueError(f"tracking needs one inflate factor and one pass count per "
+                             f"level, got levels {self.levels}, inflate {self.inflate} and "
+                             f"passes {self.passes}")
+        if any(int(n) < 1 for n in self.passes):
+            raise ValueError(f"tracking passes must be at least 1 per level, got {self.passes}")
         if any(int(n) < 6 for n in self.levels) or any(f < 0 for f in self.inflate):
             raise ValueError(f"tracking levels need at least 6 points each and inflate "
                              f"factors >= 0, got {self.levels} and {self.inflate}")
-        for name in ("passes", "iterations", "candidates"):
+        for name in ("iterations", "candidates"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"tracking {name} must be at least 1, got "
                                  f"{getattr(self, name)!r}")
@@ -327,12 +332,12 @@ def register(map_target: MapTarget, camera: Camera, depth: np.ndarray, guess,
     dtype = map_target.table.dtype
     robust, reach = float(config.robust), float(config.reach)
     k = min(int(config.candidates), len(map_target.used))
-    for n, inflate in zip(config.levels, config.inflate, strict=True):
+    for n, inflate, passes in zip(config.levels, config.inflate, config.passes, strict=True):
         idx, w = _draw(len(p_all), int(n), rng)
         p = p_all[idx]
         u = np.zeros_like(p) if ray is None else np.asarray(ray, np.float32)[idx]
         c = jnp.asarray(colours[idx])
-        for _ in range(int(config.passes)):
+        for _ in range(int(passes)):
             world = p.astype(np.float64) @ pose[:3, :3].T + pose[:3, 3]
             cand = map_target.used[cands.query(map_target.tree, world, k)]
             out, cost, h, w_used = _solve(
