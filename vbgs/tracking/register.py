@@ -11,7 +11,12 @@ registration), robustly:
   the E-step's terms (:func:`vbgs.inference.model.component_terms`: ``E[Sigma^-1]``,
   ``E[log pi]``, the log-determinant); the point's distance is
   ``s_i = -2 log sum_c exp(l_ic) + 2 log sum_c exp(const_c)`` (>= 0; the Mahalanobis
-  distance when one component explains it);
+  distance when one component explains it); with the frame's colours the E-step's
+  colour term joins ``const`` (it decides which component explains a point, so a point
+  on a textured wall is drawn along the wall, not only onto it);
+* each component's covariance is ``E[Sigma^-1]^-1 = Psi / nu`` plus :data:`COV_FLOOR`
+  of its mean variance (a few float32 scale matrices of a map are not quite positive
+  definite; a component still singular is left out);
 * with a measured depth (``sensor``) the component's covariance gains the point's noise
   along its ray, ``Sigma_k + u_i u_i^T`` (:mod:`vbgs.mapping.measurement`; Sherman-
   Morrison on the precision, as the sparse E-step does);
