@@ -121,6 +121,15 @@ class TrackConfig:
                              f"{self.colour_noise}")
 
 
+# Without a motion guess (the second frame of a track: no velocity yet) the start may be
+# a whole frame's motion off (the walk: 0.55 units and 3.6 degrees at 60 frames, along
+# a road whose ground and facades barely constrain forward motion): the basin is widened
+# first by components 16 and 8 times their size (the default levels left that frame
+# where it started; these, at 0.2 mm).
+BOOTSTRAP = dict(levels=(512, 512, 512, 2048, 2048), inflate=(16.0, 8.0, 2.0, 0.25, 0.0),
+                 passes=(6, 4, 3, 2, 1))
+
+
 class MapTarget(NamedTuple):
     """A map's posterior as the tracker reads it (built once per frame)."""
 
@@ -272,7 +281,8 @@ def _solve(pose, p, u, rgb, w, cols, origin, inflate, robust, reach, damping, co
     rot, t = pose[:3, :3], pose[:3, 3] - origin
     x0 = [sum(rot[i, j] * p[j] for j in range(3)) + t[i] for i in range(3)]
     dist2 = sum((x0[i] - mean[i][:, 0]) ** 2 for i in range(3))
-    w = w * (dist2 <= reach**2 * 3.0 * size[:, 0]) * ok[:, 0]  # unseen ground: out
+    # unseen ground is out: farther than reach radii of the (widened) nearest component
+    w = w * (dist2 <= reach**2 * 3.0 * (1.0 + inflate**2) * size[:, 0]) * ok[:, 0]
 
     def lin(rot, t):
         return _linearise(rot, t, p, u, w, mean, prec_l, const, robust)
