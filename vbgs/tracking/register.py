@@ -282,7 +282,9 @@ def _solve(pose, p, u, rgb, w, cols, origin, inflate, robust, reach, damping, co
     x0 = [sum(rot[i, j] * p[j] for j in range(3)) + t[i] for i in range(3)]
     dist2 = sum((x0[i] - mean[i][:, 0]) ** 2 for i in range(3))
     # unseen ground is out: farther than reach radii of the (widened) nearest component
-    w = w * (dist2 <= reach**2 * 3.0 * (1.0 + inflate**2) * size[:, 0]) * ok[:, 0]
+    # and the point's own depth noise
+    noise2 = sum(u[i] ** 2 for i in range(3))
+    w = w * (dist2 <= reach**2 * (3.0 * (1.0 + inflate**2) * size[:, 0] + noise2)) * ok[:, 0]
 
     def lin(rot, t):
         return _linearise(rot, t, p, u, w, mean, prec_l, const, robust)
