@@ -33,6 +33,7 @@ from experiments.settings import (
     ASSIGN,
     COLOUR_RULE,
     DEPTH_KIND,
+    DRIFT_DEFAULT,
     ESTEP,
     FORMAT,
     INIT,
@@ -40,6 +41,7 @@ from experiments.settings import (
     METHOD,
     OPACITY_RULE,
     ORDER,
+    POSES,
     PROTOCOL,
     REPLAY_DEFAULT,
     SENSOR,
@@ -141,6 +143,12 @@ def _add_fit_scene(sub):
                    help="auto (estimated from the pixels without depth of the frames seen) "
                         "or R,G,B in [0, 1]")
     _add_calibration(p)
+    add_choice(p, "--poses", POSES)
+    p.add_argument("--drift", default=DRIFT_DEFAULT, metavar="SIGMA_T,SIGMA_R",
+                   help="--poses odometry: the odometry's error per frame, scene units "
+                        "(metres) and degrees (a seeded random walk)")
+    p.add_argument("--plot", metavar="PNG", help="--poses track|odometry: top view of the "
+                                                 "true, tracked (and odometry) trajectories")
     p.add_argument("--ply", metavar="OUT", help="save the splats as a 3DGS PLY")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
@@ -204,13 +212,17 @@ def _fit_scene(args) -> dict:
                      depth_align=args.depth_align, background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
-                     sensor=args.sensor, **_calibration(args),
+                     sensor=args.sensor, poses=args.poses, drift=args.drift,
+                     **_calibration(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
                          f"held-out views), got {args.test_views}")
     check_output_file(args.save, "--save", ".png")
     check_output_file(args.ply, "--ply", ".ply")
+    check_output_file(args.plot, "--plot", ".png")
+    if args.plot and args.poses == "given":
+        raise ValueError("--plot draws the tracked trajectory: give --poses track or odometry")
     check_fewer_components(args.components, args.frames * args.size**2,
                            f"at most {args.frames} frames x {args.size}x{args.size}",
                            "use fewer --components, a larger --size or more --frames")
@@ -221,7 +233,13 @@ def _fit_scene(args) -> dict:
     if args.save:
         save_views(args.save, result.images["target"], result.images["render"],
                    f"{args.scene}, {args.method}: {result.psnr:.2f} dB held-out")
-    return result.to_dict(images=False)
+    out = result.to_dict(images=False)
+    if args.plot:
+        from experiments.tracking import save_trajectory_plot
+
+        save_trajectory_plot(args.plot, out, f"{args.scene}, --poses {args.poses}: ATE RMSE "
+                                             f"{out['ate_rmse']:.4f}")
+    return out
 
 
 # opacity comes from evidence (the default); scale and pixel filter are chosen together

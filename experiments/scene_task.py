@@ -18,10 +18,12 @@ from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
 from experiments.sensor_swap import simulate_training_depth
+from experiments.tracking import TrackedLearner, check_poses
 from experiments.settings import (
     ASSIGN,
     COLOUR_RULE,
     DEPTH_KIND,
+    DRIFT_DEFAULT,
     ESTEP,
     FORMAT,
     INIT,
@@ -88,6 +90,10 @@ class SceneTask:
     # format's (vbgs.data.calibration): (fx, fy, cx, cy) in pixels of the stored images
     intrinsics: tuple | None = None
     depth_scale: float | None = None
+    # training poses: given | track | odometry (experiments.tracking), and the odometry's
+    # drift per frame "SIGMA_T,SIGMA_R" (scene units, degrees; vbgs.tracking.drift)
+    poses: str = "given"
+    drift: str = DRIFT_DEFAULT
     # gradient baseline only (see experiments.learners.gradient_learner)
     replay: str = REPLAY_DEFAULT
     steps_per_frame: int = 50
@@ -126,6 +132,7 @@ class SceneTask:
                              f"replace the training depth; give one of them")
         oracle_start(self.init)  # a known scheme
         check_calibration(self)
+        check_poses(self)
         parse_background(self.background)  # fails on a malformed R,G,B
         if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):
             raise ValueError(f"splat_blur must be a pixel filter variance in [0, 10) px², "
@@ -190,6 +197,8 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
         print(f"warning: scene {task.scene!r} has one training frame: a map from one view "
               f"scores poorly on held-out views seen from elsewhere", file=sys.stderr)
     learner = learner_cls(task, scene)
+    if task.poses != "given":  # fed the poses it tracks (the first given)
+        learner = TrackedLearner(learner, task, scene)
     if task.protocol == "static" and "static" in learner_cls.PROTOCOLS:
         result = static_protocol(task, scene, learner, learner.static_frames(scene),
                                  progress=progress, ply=ply)

@@ -75,6 +75,11 @@ MEASURED_BY = Choice(SENSOR_NAMES, "exact",
                      "account (VBGS: the noise along each ray, holes that are not "
                      "background; the gradient baseline: its depth L1 weighted by 1/sigma); "
                      "exact: the depth is the surface's")
+POSES = Choice(("given", "track", "odometry"), "given",
+               "training poses: given (ground truth), track (each frame registered against "
+               "the map from a constant-velocity guess; the first pose given) or odometry "
+               "(the guess from a drifting odometry, --drift, then registered); VBGS only")
+DRIFT_DEFAULT = "0.01,0.5"  # --drift: metres and degrees per frame (vbgs.tracking.drift)
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 
 

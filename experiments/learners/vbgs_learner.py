@@ -9,13 +9,17 @@ The task's settings become one :class:`vbgs.mapping.Config` (:func:`task_config`
 from __future__ import annotations
 
 import jax
+import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
 from experiments.protocol import SceneResult, task_sensor
 from vbgs import mapping
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference.bound import StreamBound
+from vbgs.mapping.measurement import point_rays
 from vbgs.render.splats import Splats
+from vbgs.tracking import register
+from vbgs.tracking.register import Registration, TrackConfig
 
 
 def task_config(task) -> mapping.Config:
@@ -78,3 +82,19 @@ class VbgsLearner:
         if self.state.growing and self.config.estep == "sparse":
             extra["points_unlearned"] = self.state.points_unlearned
         return {**self.bound.summary(), **extra}
+
+    def locate(self, frame: Frame, guess, config: TrackConfig, seed: int = 0) -> Registration:
+        """The frame's pose registered against the map learned so far, from ``guess``
+        (:func:`vbgs.tracking.register.register`; the frame's own pose is not read), with
+        its colours and the task's sensor noise along the rays when the depth is
+        measured."""
+        state, sensor = self.state, self.config.sensor
+        if state.mixture is None:
+            raise ValueError("the map has seen no frame yet: give the first pose")
+        ray = None
+        if not sensor.exact:  # the noise in the camera frame: the pose is what is sought
+            camera = frame.camera._replace(pose=np.eye(4))
+            ray = point_rays(camera, frame.depth, sensor.model, sensor.level)
+        found = register.target(state.mixture.posterior, state.mixture.prior)
+        return register.register(found, frame.camera, frame.depth, guess, config,
+                                 rgb=frame.rgb, ray=ray, seed=seed)

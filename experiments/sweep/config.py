@@ -39,6 +39,7 @@ from experiments.settings import (
     METHOD,
     OPACITY_RULE,
     ORDER,
+    POSES,
     PROTOCOL,
     SENSOR,
     STREAM,
@@ -124,6 +125,7 @@ SETTINGS: dict[str, Spec] = {
     "sensor_level": Spec((float,), "noise multiplier of the simulated sensor",
                          check=_sensor_level),
     "sensor": Spec(_STR, MEASURED_BY.help, MEASURED_BY.values),
+    "poses": Spec(_STR, POSES.help, POSES.values),
 }
 TOP_LEVEL = ("name", "description", "fixed", "grid")
 

@@ -36,7 +36,8 @@ GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "ord
 METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("lpips", "LPIPS"), ("depth_l1", "depth L1"),
            ("forgetting_db", "forgetting (dB)"), ("seconds", "fit s"),
            ("seconds_per_frame", "s/frame"), ("peak_memory_mb", "peak MB"),
-           ("replay_mb", "replay MB"), ("components_used", "used"))
+           ("replay_mb", "replay MB"), ("components_used", "used"),
+           ("ate_rmse", "ATE RMSE"), ("odometry_ate_rmse", "odometry ATE"))
 NOT_GROUPED = ("seed", "depth_model")  # seeds are averaged; depth_model shows as `depth`
 
 

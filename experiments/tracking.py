@@ -1,0 +1,151 @@
+"""Tracked streams (``fit-scene --poses track|odometry``): the learner is fed each frame
+at the pose the tracker finds against its own map, not at the true one.
+
+:class:`TrackedLearner` wraps a learner that can ``locate(frame, guess, config, seed)``
+(VBGS: :meth:`experiments.learners.vbgs_learner.VbgsLearner.locate`) and is itself a
+:class:`experiments.protocol.Learner`, so the stream protocol, its timing and its
+scores are unchanged: ``learn`` registers the frame (the first pose is given: it
+fixes the map's frame), then learns it at the estimated pose; its seconds count in
+the run's ``seconds_per_frame``. The guess for frame ``i`` is
+
+* ``track``: constant velocity, ``P_i-1 (P_i-2^-1 P_i-1)``; for the second frame the
+  first pose, registered with the wider start :data:`vbgs.tracking.register.BOOTSTRAP`;
+* ``odometry``: the odometry's measured motion applied to the previous estimate,
+  ``P_i-1 (O_i-1^-1 O_i)``, the odometry drifting by ``--drift`` per frame
+  (:mod:`vbgs.tracking.drift`; the true poses feed only this simulated sensor).
+
+Test views keep their true poses: the map's frame is the first camera's, which is
+given, so renders need no alignment; the trajectory metrics
+(:mod:`vbgs.tracking.trajectory`) use the standard one.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from experiments.protocol import COMPILE_FRAMES
+from experiments.settings import POSES
+from vbgs.data.scene import Frame, Scene
+from vbgs.io_atomic import write_atomic
+from vbgs.tracking import drift, trajectory
+from vbgs.tracking.register import BOOTSTRAP, TrackConfig
+from vbgs.tracking.se3 import orthonormalise, relative
+
+
+def check_poses(task) -> None:
+    """Refuse pose settings a tracked stream cannot run, in one line each."""
+    POSES.check("poses", task.poses)
+    drift.parse_drift(task.drift)
+    if task.poses == "given":
+        return
+    flag = f"--poses {task.poses}"
+    if task.method != "vbgs":
+        raise ValueError(f"{flag} registers frames against the VBGS posterior: use "
+                         f"--method vbgs (the gradient baseline learns given poses only)")
+    if task.order != "sequential":
+        raise ValueError(f"{flag} needs the frames in temporal order (each guess comes from "
+                         f"the frames before): use --order sequential, not {task.order!r}")
+    if task.init != "stream":
+        raise ValueError(f"{flag} needs --init stream: init {task.init!r} starts the map "
+                         f"from every training frame at its true pose")
+
+
+class TrackedLearner:
+    """A learner fed estimated poses (module docstring)."""
+
+    def __init__(self, learner, task, scene: Scene, config: TrackConfig = TrackConfig()):
+        self.inner, self.mode, self.config, self.seed = learner, task.poses, config, task.seed
+        self.odometry = None
+        if self.mode == "odometry":
+            truth = np.stack([f.camera.pose for f in scene.train])
+            self.odometry = drift.odometry(truth, *drift.parse_drift(task.drift), seed=task.seed)
+        self.truth: list[np.ndarray] = []
+        self.estimates: list[np.ndarray] = []
+        self.sigmas: list[list[float]] = []  # per registered frame: |sigma_t|, |sigma_r| (deg)
+        self.seconds: list[float] = []  # registration time per registered frame
+
+    replay_bytes = property(lambda self: self.inner.replay_bytes)
+    blur = property(lambda self: self.inner.blur)
+
+    def splats(self, drop_unused: bool = False):
+        return self.inner.splats(drop_unused)
+
+    def diagnose(self, frame: Frame) -> None:
+        hook = getattr(self.inner, "diagnose", None)
+        if hook is not None:
+            hook(frame)
+
+    def guess(self) -> np.ndarray:
+        """The next frame's starting pose (module docstring)."""
+        i, last = len(self.estimates), self.estimates[-1]
+        if self.odometry is not None:
+            return orthonormalise(last @ relative(self.odometry[i - 1], self.odometry[i]))
+        if i >= 2:
+            return orthonormalise(last @ relative(self.estimates[-2], last))
+        return last
+
+    def learn(self, frame: Frame, background) -> None:
+        pose = np.asarray(frame.camera.pose, np.float64)  # the first: given
+        if self.estimates:
+            start = time.perf_counter()
+            config = self.config
+            if self.odometry is None and len(self.estimates) == 1:  # no velocity yet
+                config = replace(config, **BOOTSTRAP)
+            found = self.inner.locate(frame, self.guess(), config,
+                                      seed=self.seed + len(self.estimates))
+            self.seconds.append(time.perf_counter() - start)
+            pose = found.pose
+            self.sigmas.append([float(np.linalg.norm(found.sigma_t)),
+                                float(np.linalg.norm(found.sigma_r_deg))])
+        self.truth.append(np.asarray(frame.camera.pose, np.float64))
+        self.estimates.append(pose)
+        moved = frame._replace(camera=frame.camera._replace(pose=pose))
+        self.inner.learn(moved, background)
+
+    def details(self, result) -> dict:
+        """The inner learner's details and the trajectory's: ``ate_rmse``, ``rpe_trans``,
+        ``rpe_rot_deg``, ``odometry_ate_rmse`` (odometry), ``tracking_seconds_per_frame``
+        (compilation left out), per-frame ``pose_errors`` ([position, degrees]),
+        ``pose_sigmas`` ([|sigma_t|, |sigma_r| degrees] of each registered frame) and
+        the camera centres (``trajectory``: true, estimated, odometry)."""
+        truth, est = np.stack(self.truth), np.stack(self.estimates)
+        err = trajectory.errors(est, truth)
+        steady = self.seconds[COMPILE_FRAMES:] or self.seconds or [0.0]
+        out = {"ate_rmse": err.ate_rmse, "rpe_trans": err.rpe_trans,
+               "rpe_rot_deg": err.rpe_rot_deg}
+        paths = {"true": truth[:, :3, 3].tolist(), "estimated": est[:, :3, 3].tolist()}
+        if self.odometry is not None:
+            odo = self.odometry[: len(est)]
+            out["odometry_ate_rmse"] = trajectory.errors(odo, truth).ate_rmse
+            paths["odometry"] = odo[:, :3, 3].tolist()
+        out.update(tracking_seconds_per_frame=float(np.mean(steady)),
+                   pose_errors=np.stack([err.trans, err.rot_deg], -1).tolist(),
+                   pose_sigmas=self.sigmas, trajectory=paths)
+        return {**self.inner.details(result), **out}
+
+
+def save_trajectory_plot(path, result: dict, title: str) -> None:
+    """Top view (x, y; the synthetic scenes' z is up) of the true, estimated and (with
+    odometry) odometry camera centres of a tracked run's record."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 5))
+    styles = {"true": ("k-", "true"), "estimated": ("C0.-", "tracked"),
+              "odometry": ("C3--", "odometry")}
+    for name, (style, label) in styles.items():
+        if name in result["trajectory"]:
+            xy = np.asarray(result["trajectory"][name])[:, :2]
+            ax.plot(xy[:, 0], xy[:, 1], style, label=label, ms=3, lw=1)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.legend()
+    ax.set_title(title, fontsize=9)
+    write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight"))
+    plt.close(fig)

@@ -1,0 +1,40 @@
+"""End to end: ``fit-scene --poses track|odometry`` on a tiny scene, and its refusals."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from experiments.run import main
+
+TINY = ["--scene", "room", "--components", "500", "--frames", "6", "--test-views", "2",
+        "--size", "32"]
+
+
+def test_fit_scene_tracks(tmp_path):
+    png = tmp_path / "t.png"
+    out = subprocess.run([sys.executable, "-m", "experiments.run", "fit-scene", *TINY,
+                          "--poses", "odometry", "--drift", "0.01,0.5", "--plot", str(png),
+                          "--json"], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout.strip().splitlines()[-1])
+    for key in ("ate_rmse", "rpe_trans", "rpe_rot_deg", "odometry_ate_rmse",
+                "tracking_seconds_per_frame", "psnr"):
+        assert np.isfinite(r[key]), key
+    assert r["poses"] == "odometry" and len(r["pose_errors"]) == 6
+    assert len(r["pose_sigmas"]) == 5  # the first pose is given
+    # (6 frames around the room are 60 degrees apart, too little overlap at 32 px for a
+    # meaningful figure: tests/vbgs/tracking/test_register.py checks the accuracy)
+    assert png.stat().st_size > 5_000
+
+
+def test_fit_scene_refuses_what_tracking_cannot_run(capsys):
+    cases = [(["--poses", "track", "--method", "gradient"], "use --method vbgs"),
+             (["--poses", "track", "--order", "shuffled"], "temporal order"),
+             (["--poses", "odometry", "--init", "data"], "--init stream"),
+             (["--poses", "odometry", "--drift", "0.01"], "SIGMA_T,SIGMA_R"),
+             (["--plot", "x.png"], "--plot draws the tracked trajectory")]
+    for extra, message in cases:
+        assert main(["fit-scene", *TINY, *extra]) == 2, extra
+        assert message in capsys.readouterr().err, extra
