@@ -74,8 +74,11 @@ def test_vbgs_record_has_the_streaming_bound():
 def test_the_streaming_bound_counts_only_the_points_learned():
     """Points beyond the stream start's reach are left out of the update, so the bound
     (what the model claims to explain) leaves them out too. The room's walkthrough
-    reaches new ground after the budget of 300 components is spent (frame 25 at 32 px)."""
-    task = tiny(scene="room", frames=25)
+    reaches new ground after the budget of 300 components is spent (frame 25 at 32 px)
+    and, without merging (which frees slots for it), leaves it out."""
+    from vbgs.mapping import GrowthConfig
+
+    task = tiny(scene="room", frames=25, growth=GrowthConfig(merge=False))
     room = prepare_scene(task)[0]
     learner = VbgsLearner(task, room)
     for frame in room.train:

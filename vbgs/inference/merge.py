@@ -43,8 +43,6 @@ from vbgs.inference.model import Mixture, State
 
 # Each component may merge with one of its this many nearest components (by mean).
 NEIGHBOURS = 4
-# Rounds of matching in choose_pairs (each takes every pair cheapest for both ends).
-MATCH_ROUNDS = 8
 
 
 def _moments(space: expfam.NIW, rows: np.ndarray):
@@ -67,12 +65,15 @@ def _union(wa, ma, ca, wb, mb, cb):
 
 
 def _logdet3(s: np.ndarray) -> np.ndarray:
-    """``log|s|`` ``[m]`` of symmetric positive definite ``s [m, 3, 3]`` (float64),
-    elementwise by the rule of Sarrus (a batched LAPACK call costs ten times more)."""
+    """``log |det s|`` ``[m]`` of symmetric ``s [m, 3, 3]`` (float64), elementwise by the
+    rule of Sarrus (a batched LAPACK call costs ten times more). The absolute value, as
+    ``slogdet``'s: a thin component's float32 posterior scale can come out slightly
+    indefinite, and clamping its determinant instead (so it never merged) lost 0.6-0.9
+    dB on the room's validation views."""
     det = (s[:, 0, 0] * (s[:, 1, 1] * s[:, 2, 2] - s[:, 1, 2] * s[:, 2, 1])
            - s[:, 0, 1] * (s[:, 1, 0] * s[:, 2, 2] - s[:, 1, 2] * s[:, 2, 0])
            + s[:, 0, 2] * (s[:, 1, 0] * s[:, 2, 1] - s[:, 1, 1] * s[:, 2, 0]))
-    return np.log(np.maximum(det, 1e-300))
+    return np.log(np.maximum(np.abs(det), 1e-300))
 
 
 def merge_costs(posterior: Mixture, counts: np.ndarray, pairs: np.ndarray,
@@ -94,10 +95,10 @@ def merge_costs(posterior: Mixture, counts: np.ndarray, pairs: np.ndarray,
 def choose_pairs(posterior: Mixture, counts: np.ndarray, active: np.ndarray, n: int,
                  colour_noise: float, neighbours: int = NEIGHBOURS) -> np.ndarray:
     """Up to ``n`` disjoint pairs ``[p, 2]`` of active components (``active [k]`` bool),
-    each with one of its ``neighbours`` nearest, cheapest first. The pairs are matched
-    in rounds: a pair is taken when it is the cheapest left for both its components
-    (disjoint by construction, and each round vectorised), and a round drops the pairs
-    that touch a component taken; of what the rounds take, the ``n`` cheapest."""
+    each with one of its ``neighbours`` nearest, cheapest merge first (greedy: a pair is
+    taken unless a cheaper one took one of its components; matching the pairs cheapest
+    for both ends instead, in vectorised rounds, lost 0.6 dB on the room's validation
+    views for 10 ms a merge)."""
     from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
 
     idx = np.flatnonzero(active)
@@ -112,23 +113,17 @@ def choose_pairs(posterior: Mixture, counts: np.ndarray, active: np.ndarray, n: 
     key = np.unique(a[keep].astype(np.int64) * len(idx) + b[keep])
     pairs = idx[np.stack([key // len(idx), key % len(idx)], 1)]
     cost = merge_costs(posterior, counts, pairs, colour_noise)
-    order = np.argsort(cost, kind="stable")
-    pairs, cost = pairs[order], cost[order]  # rank = position
-    taken = np.zeros(len(pairs), bool)
-    left = np.ones(len(pairs), bool)
-    rank = np.arange(len(pairs))
-    for _ in range(MATCH_ROUNDS):
-        if taken.sum() >= n or not left.any():
+    used = np.zeros(posterior.n_components, bool)
+    chosen = []
+    for i in np.argsort(cost, kind="stable"):  # greedy: a loop, but it stops at n
+        pa, pb = pairs[i]
+        if used[pa] or used[pb]:
+            continue
+        used[pa] = used[pb] = True
+        chosen.append(i)
+        if len(chosen) == n:
             break
-        best = np.full(posterior.n_components, len(pairs))
-        np.minimum.at(best, pairs[left, 0], rank[left])
-        np.minimum.at(best, pairs[left, 1], rank[left])
-        mutual = left & (best[pairs[:, 0]] == rank) & (best[pairs[:, 1]] == rank)
-        taken |= mutual
-        used = np.zeros(posterior.n_components, bool)
-        used[pairs[mutual].reshape(-1)] = True
-        left &= ~(used[pairs[:, 0]] | used[pairs[:, 1]])
-    return pairs[taken][:n]
+    return pairs[np.asarray(chosen, np.int64)]
 
 
 def merge(state: State, pairs: np.ndarray, empty: Mixture) -> State:

@@ -33,6 +33,10 @@ FIRST_FRAME_SHARE = 0.1
 # The share of the empty slots a frame may spend refining ground already covered (finer
 # cells, vbgs.inference.grow.select); what is left stays for new ground in later frames.
 REFINE_SHARE = 0.05
+# Merging (vbgs.inference.merge) frees at least this share of K at a time, so that a
+# stream meeting new ground every frame merges every few frames, not every frame (each
+# round searches every component's neighbours: 0.1-0.2 s at K = 20k).
+MERGE_AHEAD = 0.02
 
 
 def _positive(owner: str, name: str, value, *, upper: float | None = None) -> None:
@@ -63,6 +67,7 @@ class GrowthConfig:
     reach_cells: float = grow.REACH_CELLS
     coarse_levels: int = grow.COARSE_LEVELS
     merge: bool = True
+    merge_ahead: float = MERGE_AHEAD
     coarse_from: float = grow.COARSE_FROM
 
     def __post_init__(self):
@@ -76,6 +81,8 @@ class GrowthConfig:
         if not isinstance(self.merge, bool):
             raise ValueError(f"growth.merge must be true or false, got {self.merge!r}")
         _positive("growth", "coarse_from", self.coarse_from)
+        if not (isinstance(self.merge_ahead, (int, float)) and 0 <= self.merge_ahead < 0.5):
+            raise ValueError(f"growth.merge_ahead must be in [0, 0.5), got {self.merge_ahead!r}")
         if not isinstance(self.coarse_levels, int) or self.coarse_levels < 0:
             raise ValueError(f"growth.coarse_levels must be an integer >= 0, got "
                              f"{self.coarse_levels!r}")

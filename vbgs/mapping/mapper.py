@@ -222,12 +222,6 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
-# Merging frees at least this share of K at a time, so that a stream meeting new ground
-# every frame merges every few frames, not every frame (each round of merging searches
-# every component's neighbours: 0.1-0.2 s at K = 20k).
-MERGE_AHEAD = 0.02
-
-
 def _make_room(state: MapState, xyz, ray, levels, config: Config
                ) -> tuple[MapState, np.ndarray]:
     """Free slots by merging (:mod:`vbgs.inference.merge`) when the frame shows more new
@@ -247,7 +241,7 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
     if wanted <= n_empty:
         return state, none
     counts = np.asarray(mixture.stats.count, np.float64)
-    n_pairs = max(wanted - n_empty, int(MERGE_AHEAD * prior.n_components))
+    n_pairs = max(wanted - n_empty, int(config.growth.merge_ahead * prior.n_components))
     pairs = merge.choose_pairs(mixture.posterior, counts, active, n_pairs,
                                config.prior.colour_noise)
     empty = grow.empty_prior(prior.n_components, prior.origin, rule.cell, config.prior,
