@@ -11,6 +11,7 @@ and corrupted; refusals come from loading, so no case compiles a learner.
 
 import hashlib
 import json
+import os
 import shutil
 
 import numpy as np
@@ -36,6 +37,25 @@ FIT = ["--size", "24", "--components", "50"]
 
 # --------------------------------------------------------------------------- helpers
 
+
+
+@pytest.fixture(autouse=True)
+def message_log(monkeypatch, request):
+    """With VBGS_BAD_INPUT_LOG=PATH, each refusal's one line is appended to PATH as
+    ``case<TAB>message`` (the closing note's list of cases and their messages)."""
+    path = os.environ.get("VBGS_BAD_INPUT_LOG")
+    if path:
+        import experiments.run as run
+
+        original = run.fail
+
+        def logged(err, as_json=False):
+            with open(path, "a") as log:
+                log.write(f"{request.node.name}\t{err}\n")
+            return original(err, as_json)
+
+        monkeypatch.setattr(run, "fail", logged)
+    yield
 
 @pytest.fixture(scope="module")
 def room():
