@@ -24,6 +24,7 @@ def test_step_lists_are_refused_in_words():
         parse_counts("10,0", "--polish-steps")
 
 
+@pytest.mark.slow  # 31 s of compiling five learners; the image front keeps `front` in the default run
 def test_front_on_a_tiny_scene(tmp_path, capsys):
     out = tmp_path / "front"
     code = main(["front", "--scene", "object", "--size", "16", "--components", "100",
