@@ -146,10 +146,20 @@ def unproject(
             f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
         )
     mask = valid_depth(depth, max_depth)
-    z = depth[mask].astype(np.float64)
-    x_cam = camera_rays(camera)[mask] * z[:, None]  # [n, 3]
-    xyz = x_cam @ camera.pose[:3, :3].T + camera.pose[:3, 3]
+    xyz = _points_at(camera, depth, mask) @ camera.pose[:3, :3].T + camera.pose[:3, 3]
     return xyz.astype(np.float32), rgb[mask].astype(np.float32)
+
+
+def depth_points(camera: Camera, depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:
+    """Camera-frame points ``[n, 3]`` (float64) of the pixels with valid depth, in
+    row-major order (the order :func:`unproject` returns them; the pose is not read)."""
+    depth = np.asarray(depth)
+    return _points_at(camera, depth, valid_depth(depth, max_depth))
+
+
+def _points_at(camera: Camera, depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Camera-frame points ``[n, 3]`` (float64) of the pixels ``mask [h, w]``."""
+    return camera_rays(camera)[mask] * depth[mask].astype(np.float64)[:, None]
 
 
 def project(camera: Camera, xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

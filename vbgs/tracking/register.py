@@ -57,7 +57,7 @@ import numpy as np
 
 from vbgs.inference import candidates as cands
 from vbgs.inference import model
-from vbgs.render.camera import Camera, camera_rays, valid_depth
+from vbgs.render.camera import Camera, depth_points, valid_depth
 from vbgs.tracking.se3 import from_rt, orthonormalise, se3_exp
 
 # Points per level, coarse to fine (fixed: one compiled solver per count, whatever the
@@ -199,14 +199,6 @@ def target(posterior: model.Mixture, prior: model.Mixture) -> MapTarget:
                      cands.means_tree(means))
 
 
-def frame_points(camera: Camera, depth: np.ndarray) -> np.ndarray:
-    """``[n, 3]`` camera-frame points of the valid depth pixels (row-major order, as
-    :func:`vbgs.render.camera.unproject` returns them; the pose is not read)."""
-    depth = np.asarray(depth)
-    mask = valid_depth(depth)
-    return (camera_rays(camera)[mask] * depth[mask][:, None]).astype(np.float32)
-
-
 def _cauchy(s, c):
     """Cauchy's cost ``(c^2 / 2) log(1 + s / c^2)`` of squared distances ``s`` and its
     IRLS weight ``1 / (1 + s / c^2)`` (twice its derivative)."""
@@ -333,7 +325,7 @@ def register(map_target: MapTarget, camera: Camera, depth: np.ndarray, guess,
     each valid pixel's depth noise along its ray in the camera frame
     (:func:`vbgs.mapping.measurement.point_rays` with an identity pose; None: exact
     depth). ``seed`` draws the pixels of each level."""
-    p_all = frame_points(camera, depth)
+    p_all = depth_points(camera, depth).astype(np.float32)  # camera frame, pose unread
     colours, noise = np.zeros_like(p_all), np.inf
     if rgb is not None:
         colours = np.asarray(rgb, np.float32)[valid_depth(np.asarray(depth))]
