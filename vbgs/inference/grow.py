@@ -413,16 +413,32 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
 
 
+def _about_origin(prior: Mixture, posterior: Mixture, xyz, ray=None):
+    """The batch ``xyz [n, d]`` about the grid's origin ``[n, d]``, the means of the
+    components in use ``[m, d]`` (of ``posterior``), the active slots ``[k]`` bool and
+    the rays ``[n, d]`` (or None), in float64 on the host."""
+    active = is_active(prior)
+    x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)
+    taken = np.asarray(posterior.space.mean, np.float64)[active]
+    return x, taken, active, None if ray is None else np.asarray(ray, np.float64)
+
+
+def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None) -> int:
+    """How many more components the new ground of the batch ``xyz [n, d]`` wants (at most
+    ``rule.max_new``, as :func:`select` counts it) than there are empty slots: above 0
+    when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it)."""
+    x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray)
+    wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
+    return wanted - int((~active).sum())
+
+
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
                  key: jax.Array, config: PriorConfig, ray=None, levels=None
                  ) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
-    active = is_active(prior)
+    x, taken, active, ray = _about_origin(prior, posterior, xyz, ray)
     empty = np.flatnonzero(~active)
-    x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)  # [n, d]
-    taken = np.asarray(posterior.space.mean, np.float64)[active]  # [m, d]
-    ray = None if ray is None else np.asarray(ray, np.float64)
     chosen, n_ground = select(x, taken, len(empty), rule, key=key, ray=ray, levels=levels)
     n_new = len(chosen)
     if n_new == 0:

@@ -46,12 +46,10 @@ NEIGHBOURS = 4
 
 
 def _moments(space: expfam.NIW, rows: np.ndarray):
-    """Means ``[m, d]`` and expected covariances ``[m, d, d]`` (float64) of NIW rows."""
-    d = space.mean.shape[-1]
-    mean = np.asarray(space.mean, np.float64)[rows]
-    cov = (np.asarray(space.scale, np.float64)[rows]
-           / (np.asarray(space.dof, np.float64)[rows] - d - 1.0)[:, None, None])
-    return mean, cov
+    """Means ``[m, d]`` and expected covariances ``[m, d, d]`` of NIW rows, in float64
+    on the host (:func:`vbgs.inference.expfam.niw_expected_covariance` on the rows)."""
+    q = expfam.NIW(*(np.asarray(field, np.float64)[rows] for field in space))
+    return q.mean, expfam.niw_expected_covariance(q)
 
 
 def _union(wa, ma, ca, wb, mb, cb):

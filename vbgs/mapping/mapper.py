@@ -231,18 +231,13 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
     none = np.zeros(0, np.int64)
     if not config.growth.merge:
         return state, none
-    prior = mixture.prior
-    active = grow.is_active(prior)
-    n_empty = int((~active).sum())
-    x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)
-    taken = np.asarray(mixture.posterior.space.mean, np.float64)[active]
-    wanted = len(grow.new_ground(x, taken, rule, np.arange(len(x)), rule.max_new,
-                                 None if ray is None else np.asarray(ray, np.float64), levels))
-    if wanted <= n_empty:
+    short = grow.shortfall(mixture, xyz, rule, ray=ray, levels=levels)
+    if short <= 0:
         return state, none
+    prior = mixture.prior
     counts = np.asarray(mixture.stats.count, np.float64)
-    n_pairs = max(wanted - n_empty, int(config.growth.merge_ahead * prior.n_components))
-    pairs = merge.choose_pairs(mixture.posterior, counts, active, n_pairs,
+    n_pairs = max(short, int(config.growth.merge_ahead * prior.n_components))
+    pairs = merge.choose_pairs(mixture.posterior, counts, grow.is_active(prior), n_pairs,
                                config.prior.colour_noise)
     empty = grow.empty_prior(prior.n_components, prior.origin, rule.cell, config.prior,
                              prior.alpha.dtype)
