@@ -45,6 +45,8 @@ from experiments.settings import (
     PROTOCOL,
     REPLAY_DEFAULT,
     SENSOR,
+    SENSOR_HOLES_DEFAULT,
+    SENSOR_HOLES_HELP,
     STREAM,
     add_choice,
 )
@@ -137,6 +139,8 @@ def _add_fit_scene(sub):
                    help="noise multiplier of the sensor, simulated (--simulate-sensor) and "
                         "as the learner takes it (--sensor): 0: exact depth values, "
                         "1: the published model, 2: twice its noise")
+    p.add_argument("--sensor-holes", default=SENSOR_HOLES_DEFAULT, metavar="SPEC",
+                   help=SENSOR_HOLES_HELP)
     add_choice(p, "--opacity-rule", OPACITY_RULE)
     add_choice(p, "--colour-rule", COLOUR_RULE)
     p.add_argument("--background", default="auto",
@@ -212,7 +216,7 @@ def _fit_scene(args) -> dict:
                      depth_align=args.depth_align, background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
-                     sensor=args.sensor, poses=args.poses, drift=args.drift,
+                     sensor_holes=args.sensor_holes, sensor=args.sensor, poses=args.poses, drift=args.drift,
                      **_calibration(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views

@@ -34,6 +34,7 @@ from experiments.settings import (
     PROTOCOL,
     REPLAY_DEFAULT,
     SENSOR,
+    SENSOR_HOLES_DEFAULT,
 )
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
@@ -45,7 +46,7 @@ from vbgs.mapping import EvidenceConfig, GrowthConfig
 from vbgs.render.background import parse_background
 from vbgs.render.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
-from vbgs.sensors import check_level
+from vbgs.sensors import HOLED_SENSORS, check_level, parse_holes
 
 
 @dataclass(frozen=True)
@@ -82,6 +83,9 @@ class SceneTask:
     # validation views keep their exact depth) and its noise multiplier (0: exact values)
     simulate_sensor: str = SENSOR.default
     sensor_level: float = 1.0
+    # its holes: the sensor's own, or none / physical / random:RATE / physical+random:RATE
+    # (vbgs.sensors.holes.parse_holes), apart from the level
+    sensor_holes: str = SENSOR_HOLES_DEFAULT
     # how the training depth was measured, as the learners model it (VBGS:
     # vbgs.mapping.SensorConfig; the gradient baseline weights its depth L1 by 1/sigma)
     sensor: str = MEASURED_BY.default
@@ -127,6 +131,15 @@ class SceneTask:
             raise ValueError(f"sensor_level must be a finite number >= 0 (0: exact depth "
                              f"values, 1: the published sensor model, 2: twice its noise), "
                              f"got {self.sensor_level!r}") from None
+        try:
+            holes = parse_holes(self.sensor_holes)
+        except ValueError as err:
+            raise ValueError(f"sensor_holes: {err}") from None
+        if not holes.own and self.simulate_sensor not in HOLED_SENSORS:
+            raise ValueError(f"sensor_holes {self.sensor_holes!r} sets the holes of a simulated "
+                             f"sensor, but simulate_sensor {self.simulate_sensor!r} makes none; "
+                             f"simulate one of {', '.join(HOLED_SENSORS)}, or leave the holes "
+                             f"at {SENSOR_HOLES_DEFAULT!r}")
         if self.simulate_sensor != "exact" and self.depth_model:
             raise ValueError(f"simulate_sensor {self.simulate_sensor!r} and depth_model both "
                              f"replace the training depth; give one of them")
@@ -175,7 +188,7 @@ def prepare_scene(task) -> tuple[Scene, dict]:
     scene = load_task_scene(task)
     if not task.depth_model:
         return simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,
-                                       task.seed)
+                                       task.seed, task.sensor_holes)
     from experiments.depth_swap import estimate_scene_depth
 
     return estimate_scene_depth(scene, task.depth_model, kind=task.depth_kind,

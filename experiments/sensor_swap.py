@@ -12,32 +12,36 @@ from __future__ import annotations
 import numpy as np
 
 from vbgs.data.scene import Scene
-from vbgs.sensors import SENSORS, check_level, simulate
+from vbgs.sensors import SENSOR_HOLES, SENSORS, check_level, parse_holes, refuse_holes, simulate
 
 SENSOR_STREAM = 7  # second entry of each frame's rng seed: the sensor-noise stream
 
 
 def simulate_training_depth(scene: Scene, sensor: str, level: float = 1.0,
-                            seed: int = 0) -> tuple[Scene, dict]:
-    """The scene with sensor ``sensor``'s depth on its training frames, and the depth
-    report: the source, the sensor, its level, the share of the training pixels with
-    depth that became holes, and the median absolute depth error over the pixels kept."""
+                            seed: int = 0, holes: str = SENSOR_HOLES) -> tuple[Scene, dict]:
+    """The scene with sensor ``sensor``'s depth on its training frames, its holes the
+    sensor's own or those ``holes`` names (:func:`vbgs.sensors.parse_holes`), and the
+    depth report: the source, the sensor, its level, the share of the training pixels
+    with depth that became holes, and the median absolute depth error over the pixels
+    kept."""
     if sensor not in SENSORS:
         raise ValueError(f"unknown simulate_sensor {sensor!r}: use one of {', '.join(SENSORS)}")
     level = check_level(level)
+    spec = parse_holes(holes)
     if sensor == "exact":
+        refuse_holes(sensor, spec)
         return scene, sensor_report(sensor, level, 0, 0, np.zeros(0))
-    train, holes, with_depth, errors = [], 0, 0, []
+    train, n_holes, with_depth, errors = [], 0, 0, []
     for i, frame in enumerate(scene.train):
         measured = simulate(sensor, frame.depth, frame.camera, seed=[seed, SENSOR_STREAM, i],
-                            level=level)
+                            level=level, holes=spec)
         truth = frame.depth > 0
-        holes += int(np.count_nonzero(truth & (measured == 0)))
+        n_holes += int(np.count_nonzero(truth & (measured == 0)))
         with_depth += int(np.count_nonzero(truth))
         kept = truth & (measured > 0)
         errors.append(np.abs(measured[kept].astype(np.float64) - frame.depth[kept]))
         train.append(frame._replace(depth=measured))
-    report = sensor_report(sensor, level, holes, with_depth, np.concatenate(errors))
+    report = sensor_report(sensor, level, n_holes, with_depth, np.concatenate(errors))
     return scene._replace(train=train), report
 
 

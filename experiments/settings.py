@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from depth.presets import KINDS as DEPTH_KINDS
 from experiments.init_schemes import INIT_HELP, INITS
 from vbgs.data.streams import ORDERS
-from vbgs.sensors import SENSOR_NAMES
+from vbgs.sensors import SENSOR_HOLES, SENSOR_NAMES
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,14 @@ POSES = Choice(("given", "track", "odometry"), "given",
                "training poses: given (ground truth), track (each frame registered against "
                "the map from a constant-velocity guess; the first pose given) or odometry "
                "(the guess from a drifting odometry, --drift, then registered); VBGS only")
+# the simulated sensor's holes (vbgs.sensors.holes.parse_holes reads the text)
+SENSOR_HOLES_DEFAULT = SENSOR_HOLES
+SENSOR_HOLES_HELP = ("holes of the simulated sensor (kinect, realsense) on the training "
+                     "frames: sensor (its own: edges, grazing angles, range limits and "
+                     "random dropouts at level x 0.02), none, physical (the first three), "
+                     "random:RATE (random dropouts only, e.g. random:0.05, whatever the "
+                     "level) or physical+random:RATE; the noise drawn is the same whatever "
+                     "the holes")
 DRIFT_DEFAULT = "0.01,0.5"  # --drift: metres and degrees per frame (vbgs.tracking.drift)
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 

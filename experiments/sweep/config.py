@@ -42,6 +42,7 @@ from experiments.settings import (
     POSES,
     PROTOCOL,
     SENSOR,
+    SENSOR_HOLES_HELP,
     STREAM,
 )
 from experiments.sweep.tasks import TASKS, TaskUnavailable
@@ -72,6 +73,17 @@ def _depth_model(value: str) -> str | None:
         return "must be \"sensor\" or the path of an .onnx depth model"
     if not path.is_file():
         return f"depth model file {value!r} does not exist"
+    return None
+
+
+def _sensor_holes(value: str) -> str | None:
+    """The problem :func:`vbgs.sensors.parse_holes` finds in a spec, or None."""
+    from vbgs.sensors import parse_holes  # NumPy only
+
+    try:
+        parse_holes(value)
+    except ValueError as err:
+        return str(err)
     return None
 
 
@@ -124,6 +136,7 @@ SETTINGS: dict[str, Spec] = {
     "simulate_sensor": Spec(_STR, SENSOR.help, SENSOR.values),
     "sensor_level": Spec((float,), "noise multiplier of the simulated sensor",
                          check=_sensor_level),
+    "sensor_holes": Spec(_STR, SENSOR_HOLES_HELP, check=_sensor_holes),
     "sensor": Spec(_STR, MEASURED_BY.help, MEASURED_BY.values),
     "poses": Spec(_STR, POSES.help, POSES.values),
 }

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from experiments.sweep.tasks import DESCRIPTIVE, TASKS, task_fields
+from vbgs.sensors import HOLED_SENSORS
 
 SKIP, DROP = "skip", "drop"
 
@@ -84,6 +85,8 @@ RULES: tuple[Rule, ...] = (
     Rule("sensor_level", lambda s: s.get("simulate_sensor", "exact") == "exact"
          and s.get("sensor", "exact") == "exact", DROP,
          "the exact sensor adds no noise for a level to scale"),
+    Rule("sensor_holes", lambda s: s.get("simulate_sensor", "exact") not in HOLED_SENSORS,
+         DROP, "the simulated sensor makes no holes for a spec to set"),
 )
 
 

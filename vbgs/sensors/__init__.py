@@ -16,7 +16,9 @@ NumPy on the host, seeded and deterministic. Each model turns a true z-depth map
 
 ``level`` multiplies the noise (standard deviations, drifts, warp, random holes):
 0 keeps every depth a model returns exact (the physical holes, and mono's depth on
-pixels without any, remain), 1 is the published model, 2 twice its noise.
+pixels without any, remain), 1 is the published model, 2 twice its noise. ``holes``
+(a :class:`~vbgs.sensors.holes.HoleSpec`, ``parse_holes("random:0.05")``) sets an
+active sensor's holes apart from the level: none, physical only, random at a rate.
 
     from vbgs.sensors import SENSORS, simulate
     measured = simulate("kinect", frame.depth, frame.camera, seed=[0, i])
@@ -29,8 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vbgs.sensors.active import Kinect, RealSense
+from vbgs.sensors.active import ActiveSensor, Kinect, RealSense
 from vbgs.sensors.base import DepthSensor, check_depth, check_level
+from vbgs.sensors.holes import SENSOR_HOLES, HoleSpec, parse_holes, refuse_holes
 from vbgs.sensors.mono import Mono
 from vbgs.sensors.noise import kinect_sigma_z, kinect_step, realsense_sigma_z
 
@@ -46,7 +49,8 @@ class Exact:
         return np.zeros(np.shape(z))
 
     def simulate(self, depth, camera, rng: np.random.Generator | None = None,
-                 level: float = 1.0) -> np.ndarray:
+                 level: float = 1.0, hole_spec: HoleSpec = HoleSpec()) -> np.ndarray:
+        refuse_holes(self.name, hole_spec)
         check_level(level)
         check_depth(depth, camera)
         return np.array(depth, np.float32)
@@ -54,6 +58,8 @@ class Exact:
 
 SENSORS: dict[str, DepthSensor] = {m.name: m for m in (Exact(), Kinect(), RealSense(), Mono())}
 SENSOR_NAMES: tuple[str, ...] = tuple(SENSORS)
+# the sensors whose holes a HoleSpec sets (the others make none)
+HOLED_SENSORS: tuple[str, ...] = tuple(n for n, m in SENSORS.items() if isinstance(m, ActiveSensor))
 
 
 def sensor(name: str) -> DepthSensor:
@@ -64,19 +70,21 @@ def sensor(name: str) -> DepthSensor:
 
 
 def simulate(name: str, depth, camera, *, rng: np.random.Generator | None = None,
-             seed=None, level: float = 1.0) -> np.ndarray:
+             seed=None, level: float = 1.0, holes: HoleSpec = HoleSpec()) -> np.ndarray:
     """The depth ``[h, w]`` float32 that sensor ``name`` reports for the true depth
     ``depth [h, w]`` seen by ``camera``. Give exactly one of ``rng`` (a NumPy
     Generator, advanced) or ``seed`` (anything ``np.random.default_rng`` takes, e.g.
-    ``[task_seed, frame_index]``): the same seed gives the same depth."""
+    ``[task_seed, frame_index]``): the same seed gives the same depth. ``holes``
+    replaces an active sensor's own holes (:func:`~vbgs.sensors.holes.parse_holes`);
+    the noise drawn is the same whatever the holes."""
     model = sensor(name)
     if (rng is None) == (seed is None):
         raise ValueError("give exactly one of rng (a numpy Generator) or seed")
     if rng is None:
         rng = np.random.default_rng(seed)
-    return model.simulate(depth, camera, rng, check_level(level))
+    return model.simulate(depth, camera, rng, check_level(level), holes)
 
 
-__all__ = ["SENSORS", "SENSOR_NAMES", "DepthSensor", "Exact", "Kinect", "Mono", "RealSense",
-           "check_level", "kinect_sigma_z", "kinect_step", "realsense_sigma_z", "sensor",
+__all__ = ["HOLED_SENSORS", "SENSORS", "SENSOR_HOLES", "SENSOR_NAMES", "DepthSensor", "Exact", "HoleSpec",
+           "Kinect", "Mono", "RealSense", "check_level", "parse_holes", "refuse_holes", "kinect_sigma_z", "kinect_step", "realsense_sigma_z", "sensor",
            "simulate"]

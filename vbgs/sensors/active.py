@@ -4,7 +4,9 @@ returns no depth (0) at its holes (:mod:`vbgs.sensors.holes`).
 
 ``level`` scales the noise standard deviation, the Kinect's disparity step and the
 random dropout rate; the holes at depth edges, grazing angles and range limits are
-physical and the same at every level (they are taken from the true depth).
+physical and the same at every level (they are taken from the true depth). A
+:class:`~vbgs.sensors.holes.HoleSpec` replaces the holes (none, physical only, random
+at a rate of its own whatever the level): the noise drawn stays the same.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 import vbgs.sensors.holes as holes
 import vbgs.sensors.noise as noise
 from vbgs.sensors.base import check_depth, check_level
+from vbgs.sensors.holes import HoleSpec
 
 
 @dataclass(frozen=True)
@@ -29,26 +32,29 @@ class ActiveSensor:
     hole_rate: float = holes.HOLE_RATE  # random dropouts at level 1
 
     def holes(self, depth: np.ndarray, camera, rng: np.random.Generator,
-              level: float = 1.0) -> np.ndarray:
-        """Mask ``[h, w]`` of the pixels with true depth that this sensor leaves empty."""
-        found = holes.physical_holes(depth, camera, self.near, self.far,
-                                     self.edge_threshold, self.grazing_degrees)
-        return (found | holes.random_dropouts(depth.shape, level * self.hole_rate, rng)) \
-            & holes.valid(depth)
+              level: float = 1.0, hole_spec: HoleSpec = HoleSpec()) -> np.ndarray:
+        """Mask ``[h, w]`` of the pixels with true depth that this sensor leaves empty
+        (its own holes, or those ``hole_spec`` names)."""
+        found = (holes.physical_holes(depth, camera, self.near, self.far,
+                                      self.edge_threshold, self.grazing_degrees)
+                 if hole_spec.physical else np.zeros(np.shape(depth), bool))
+        rate = hole_spec.dropout_rate(self.hole_rate, level)
+        return (found | holes.random_dropouts(depth.shape, rate, rng)) & holes.valid(depth)
 
     def _measure(self, z: np.ndarray, camera, rng, level: float) -> np.ndarray:
         raise NotImplementedError
 
-    def simulate(self, depth, camera, rng: np.random.Generator,
-                 level: float = 1.0) -> np.ndarray:
+    def simulate(self, depth, camera, rng: np.random.Generator, level: float = 1.0,
+                 hole_spec: HoleSpec = HoleSpec()) -> np.ndarray:
         """Measured depth ``[h, w]`` float32: the true depth with this sensor's noise,
-        0 at its holes and wherever the true depth is missing."""
+        0 at its holes (its own, or those ``hole_spec`` names) and wherever the true
+        depth is missing."""
         level = check_level(level)
         depth = check_depth(depth, camera)
         ok = holes.valid(depth)
         z = np.where(ok, depth, 0.0)
         measured = self._measure(z, camera, rng, level)  # draws before the dropouts
-        hole = self.holes(z, camera, rng, level)
+        hole = self.holes(z, camera, rng, level, hole_spec)
         return np.where(ok & ~hole & (measured > 0), measured, 0.0).astype(np.float32)
 
 

@@ -7,17 +7,20 @@ from typing import Protocol
 
 import numpy as np
 
+from vbgs.sensors.holes import HoleSpec
+
 
 class DepthSensor(Protocol):
     """A named depth measurement model.
 
-    ``simulate(depth, camera, rng, level)`` returns the measured depth ``[h, w]``
+    ``simulate(depth, camera, rng, level, hole_spec)`` returns the measured depth ``[h, w]``
     float32 (0 = no depth) of a true z-depth map ``[h, w]`` (0, NaN or inf = none)
     seen by ``camera`` (anything with ``fx, fy, cx, cy``, e.g.
     :class:`vbgs.render.camera.Camera`); ``sigma_z(z, camera, level)`` is the axial
     standard deviation, in scene units, that it adds to a surface at depth ``z``.
     ``level`` multiplies the noise: 0 keeps every depth it returns exact, 1 is the
-    published model, 2 twice its noise.
+    published model, 2 twice its noise. ``hole_spec`` (:mod:`vbgs.sensors.holes`) sets
+    the holes an active sensor makes; a sensor that makes none refuses any but its own.
     """
 
     name: str
@@ -25,7 +28,7 @@ class DepthSensor(Protocol):
     def sigma_z(self, z, camera=None, level: float = 1.0) -> np.ndarray: ...
 
     def simulate(self, depth: np.ndarray, camera, rng: np.random.Generator,
-                 level: float = 1.0) -> np.ndarray: ...
+                 level: float = 1.0, hole_spec: HoleSpec = HoleSpec()) -> np.ndarray: ...
 
 
 def check_level(level) -> float:

@@ -16,9 +16,17 @@
 The first three are physical: they depend on the true depth only, never on the noise
 level or the seed. Pixels without depth in the input (0, NaN or inf) are not holes
 here; they stay without depth.
+
+Which of them a simulated sensor makes is a :class:`HoleSpec`, written as text by
+:func:`parse_holes` (``sensor``: the sensor's own; ``none``; ``physical``;
+``random:RATE``; ``physical+random:RATE``): a robustness study varies the holes apart
+from the noise.
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,6 +35,69 @@ from vbgs.render.pixels import pixel_rays
 EDGE_THRESHOLD = 0.05  # scene units (5 cm): a larger jump between 4-neighbours is an edge
 GRAZING_DEGREES = 75.0  # ray-to-normal angle beyond which a surface returns no depth
 HOLE_RATE = 0.02  # random dropouts at level 1
+SENSOR_HOLES = "sensor"  # the spec of a sensor's own holes (physical, level x its dropout rate)
+HOLE_SPECS = (SENSOR_HOLES, "none", "physical", "random:RATE", "physical+random:RATE")
+
+
+@dataclass(frozen=True)
+class HoleSpec:
+    """Which holes a simulated active sensor makes.
+
+    physical: the holes of the true depth (edges, grazing angles, range limits);
+    dropout: each pixel's probability of a random dropout, or None for the sensor's own
+        (its ``hole_rate`` times the noise level).
+    """
+
+    physical: bool = True
+    dropout: float | None = None
+
+    def __post_init__(self):
+        if self.dropout is not None and not (
+                isinstance(self.dropout, (int, float)) and 0.0 <= self.dropout <= 1.0):
+            raise ValueError(f"a random dropout rate is a probability in [0, 1], "
+                             f"got {self.dropout!r}")
+
+    @property
+    def own(self) -> bool:
+        """The sensor's own holes (nothing changed)."""
+        return self.physical and self.dropout is None
+
+    def dropout_rate(self, sensor_rate: float, level: float) -> float:
+        """The dropout probability per pixel: the given one, or ``level * sensor_rate``."""
+        return level * sensor_rate if self.dropout is None else float(self.dropout)
+
+
+def parse_holes(spec: str) -> HoleSpec:
+    """The :class:`HoleSpec` a text names: ``sensor`` (the sensor's own holes),
+    ``none``, ``physical`` (edges, grazing angles, range limits), ``random:RATE`` (random
+    dropouts only, RATE in [0, 1]: e.g. ``random:0.05``) or ``physical+random:RATE``;
+    ValueError naming the forms otherwise."""
+    forms = ", ".join(HOLE_SPECS)
+    if not isinstance(spec, str):
+        raise ValueError(f"holes must be text, one of {forms}; got {spec!r}")
+    if spec == SENSOR_HOLES:
+        return HoleSpec()
+    if spec in ("none", "physical"):
+        return HoleSpec(physical=spec == "physical", dropout=0.0)
+    head, _, rate = spec.partition("random:")
+    if head not in ("", "physical+") or not rate:
+        raise ValueError(f"unknown holes {spec!r}: use one of {forms} (RATE a probability "
+                         f"in [0, 1], e.g. random:0.05)")
+    try:
+        value = float(rate)
+    except ValueError:
+        value = math.nan
+    if not 0.0 <= value <= 1.0:  # NaN fails too
+        raise ValueError(f"holes {spec!r}: the random dropout RATE must be a probability in "
+                         f"[0, 1], e.g. random:0.05; got {rate!r}")
+    return HoleSpec(physical=head == "physical+", dropout=value)
+
+
+def refuse_holes(sensor: str, spec: HoleSpec) -> None:
+    """ValueError if ``spec`` asks a sensor that makes no holes (exact, mono) for some."""
+    if not spec.own:
+        raise ValueError(f"the {sensor} sensor makes no holes, so they cannot be set; hole "
+                         f"settings apply to the active sensors (vbgs.sensors.HOLED_SENSORS)")
 
 
 def valid(depth: np.ndarray) -> np.ndarray:

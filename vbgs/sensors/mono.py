@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vbgs.sensors.base import check_depth, check_level
-from vbgs.sensors.holes import EDGE_THRESHOLD, depth_edges, valid
+from vbgs.sensors.holes import EDGE_THRESHOLD, HoleSpec, depth_edges, refuse_holes, valid
 
 FAR_FACTOR = 1.5  # depth given to pixels without depth: this times the frame's max depth
 SCALE_DRIFT = 0.03  # std of the per-frame scale error
@@ -135,9 +135,11 @@ class Mono:
         bleeding, a loss of resolution, left out)."""
         return self.relative_sigma(level) * np.asarray(z, np.float64)
 
-    def simulate(self, depth, camera, rng: np.random.Generator,
-                 level: float = 1.0) -> np.ndarray:
-        """Predicted depth ``[h, w]`` float32, positive on every pixel."""
+    def simulate(self, depth, camera, rng: np.random.Generator, level: float = 1.0,
+                 hole_spec: HoleSpec = HoleSpec()) -> np.ndarray:
+        """Predicted depth ``[h, w]`` float32, positive on every pixel (a depth network
+        leaves no holes: ``hole_spec`` must be the sensor's own)."""
+        refuse_holes(self.name, hole_spec)
         level = check_level(level)
         depth = check_depth(depth, camera)
         median = float(np.median(depth[valid(depth)])) if valid(depth).any() else 0.0
