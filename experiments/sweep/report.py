@@ -26,6 +26,7 @@ from experiments.sweep.plots import (
     plot_psnr_vs_seconds,
     plot_renders,
 )
+from experiments.sweep.robustness import plot_robustness, write_robustness_table
 from experiments.sweep.rules import apply_rules
 from experiments.sweep.tasks import TASKS
 from vbgs.io_atomic import write_atomic, write_text_atomic
@@ -223,6 +224,21 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
     return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
+def robustness_header(plan: dict) -> list[str]:
+    """The lines above ``robustness.md``'s tables: what ran, where, and how to read it."""
+    lines = [f"# Robustness to depth noise and holes: {plan.get('name', '?')}", ""]
+    if plan.get("description"):
+        lines += [plan["description"], ""]
+    if plan.get("machine"):
+        lines += [f"Measured on: {plan['machine']}", ""]
+    return lines + [
+        "Each value is the mean over the cells of a condition (seeds); every cell is a row "
+        "of cells.csv and tables.md. Columns: `noise X` is the simulated sensor's noise at "
+        "level X without holes; `random R %` and `physical` (depth edges, grazing angles, "
+        "range limits) are holes without noise; `own holes` are the sensor's as simulated "
+        "by default. The figure is robustness.png."]
+
+
 def write_report(out: Path) -> dict:
     """Write cells.csv, tables.md and the figures into the sweep folder ``out``."""
     out = Path(out)
@@ -241,9 +257,12 @@ def write_report(out: Path) -> dict:
                                                                 out / "psnr_vs_seconds.png"),
         "forgetting curves": plot_forgetting(records, out / "forgetting.png"),
         "renders": plot_renders(ok, style, out, out / "renders.png"),
+        "PSNR against sensor noise and holes": plot_robustness(ok, out / "robustness.png"),
     }
+    robustness = write_robustness_table(ok, out / "robustness.md", robustness_header(plan))
     tables = write_tables(df, records, plan, figures, out / "tables.md", unreadable)
     files = [out / "cells.csv", tables] + [f for f, _ in figures.values() if f]
+    files += [robustness] if robustness else []
     return {"results": str(out), "cells": len(df), "ok": int((df.status == "ok").sum()),
             "failed": int((df.status != "ok").sum()), "tables": str(tables),
             "csv": str(out / "cells.csv"), "figures": [str(f) for f in files[2:]],
