@@ -216,7 +216,8 @@ def _fit_scene(args) -> dict:
                      depth_align=args.depth_align, background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
-                     sensor_holes=args.sensor_holes, sensor=args.sensor, poses=args.poses, drift=args.drift,
+                     sensor_holes=args.sensor_holes, sensor=args.sensor, poses=args.poses,
+                     drift=args.drift,
                      **_calibration(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views

@@ -207,7 +207,8 @@ def robustness_table(df: pd.DataFrame) -> str | None:
     for scene, part in cells.groupby("dataset", sort=True):
         row = {"scene": scene}
         for name, (level, holes) in zip(names, conditions, strict=True):
-            row[name] = f"{_share(part[(part.sensor_level == level) & (part.sensor_holes == holes)]):.1f}"
+            chosen = (part["sensor_level"] == level) & (part["sensor_holes"] == holes)
+            row[name] = f"{_share(part[chosen]):.1f}"
         shares.append(row)
     sections += ["### Training depth missing (% of the pixels with depth)", "",
                  pd.DataFrame(shares).to_markdown(index=False), ""]

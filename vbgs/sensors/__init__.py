@@ -85,6 +85,7 @@ def simulate(name: str, depth, camera, *, rng: np.random.Generator | None = None
     return model.simulate(depth, camera, rng, check_level(level), holes)
 
 
-__all__ = ["HOLED_SENSORS", "SENSORS", "SENSOR_HOLES", "SENSOR_NAMES", "DepthSensor", "Exact", "HoleSpec",
-           "Kinect", "Mono", "RealSense", "check_level", "parse_holes", "refuse_holes", "kinect_sigma_z", "kinect_step", "realsense_sigma_z", "sensor",
+__all__ = ["HOLED_SENSORS", "SENSORS", "SENSOR_HOLES", "SENSOR_NAMES", "DepthSensor", "Exact",
+           "HoleSpec", "Kinect", "Mono", "RealSense", "check_level", "kinect_sigma_z",
+           "kinect_step", "parse_holes", "realsense_sigma_z", "refuse_holes", "sensor",
            "simulate"]
