@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from depth.presets import KINDS as DEPTH_KINDS
 from experiments.init_schemes import INIT_HELP, INITS
 from vbgs.data.streams import ORDERS
-from vbgs.sensors import SENSOR_HOLES, SENSOR_NAMES
+from vbgs.sensors import HOLED_SENSORS, SENSOR_HOLES, SENSOR_NAMES
+from vbgs.sensors.holes import HOLE_RATE
 
 
 @dataclass(frozen=True)
@@ -81,9 +82,9 @@ POSES = Choice(("given", "track", "odometry"), "given",
                "(the guess from a drifting odometry, --drift, then registered); VBGS only")
 # the simulated sensor's holes (vbgs.sensors.holes.parse_holes reads the text)
 SENSOR_HOLES_DEFAULT = SENSOR_HOLES
-SENSOR_HOLES_HELP = ("holes of the simulated sensor (kinect, realsense) on the training "
-                     "frames: sensor (its own: edges, grazing angles, range limits and "
-                     "random dropouts at level x 0.02), none, physical (the first three), "
+SENSOR_HOLES_HELP = (f"holes of the simulated sensor ({', '.join(HOLED_SENSORS)}) on the "
+                     "training frames: sensor (its own: edges, grazing angles, range limits and "
+                     f"random dropouts at level x {HOLE_RATE:g}), none, physical (the first three), "
                      "random:RATE (random dropouts only, e.g. random:0.05, whatever the "
                      "level) or physical+random:RATE; the noise drawn is the same whatever "
                      "the holes")
