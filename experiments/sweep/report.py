@@ -6,7 +6,9 @@ the ELBO trace or the forgetting curve stay in ``cells/<key>.json``.
 
 ``tables.md`` gives PSNR / SSIM / depth L1 (and, where cells report them, forgetting =
 PSNR of the early views when seen minus at the end, seconds per frame, peak memory and
-replay-buffer size) as mean ± std over seeds (n = number of seeds), one table per task,
+replay-buffer size, and the continual-learning metrics of cells with a matrix:
+average final PSNR, forgetting and backward transfer, :mod:`experiments.continual`)
+as mean ± std over seeds (n = number of seeds), one table per task,
 one row per combination of the other settings. A setting a
 cell does not have (``assign`` for a batch fit, say) shows as "—".
 """
@@ -20,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.sweep.cells import cell_path, load_record
+from experiments.sweep.cl_report import plot_cl_matrices, write_cl_matrix
 from experiments.sweep.plots import (
     plot_forgetting,
     plot_psnr_vs_components,
@@ -34,7 +37,9 @@ from vbgs.io_atomic import write_atomic, write_text_atomic
 GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
                "replay", "estep", "depth")
 METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("lpips", "LPIPS"), ("depth_l1", "depth L1"),
-           ("forgetting_db", "forgetting (dB)"), ("seconds", "fit s"),
+           ("forgetting_db", "forgetting (dB)"), ("cl_avg_final_psnr", "CL final PSNR (dB)"),
+           ("cl_forgetting", "CL forgetting (dB)"), ("cl_backward_transfer", "CL BWT (dB)"),
+           ("seconds", "fit s"),
            ("seconds_per_frame", "s/frame"), ("peak_memory_mb", "peak MB"),
            ("replay_mb", "replay MB"), ("components_used", "used"),
            ("ate_rmse", "ATE RMSE"), ("odometry_ate_rmse", "odometry ATE"))
@@ -224,7 +229,8 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
 
 
 def write_report(out: Path) -> dict:
-    """Write cells.csv, tables.md and the figures into the sweep folder ``out``."""
+    """Write cells.csv, tables.md, the figures and (cells with a continual-learning
+    matrix) cl_matrix.csv into the sweep folder ``out``."""
     out = Path(out)
     records, plan, unreadable = load_records(out)
     df = cells_frame(records)
@@ -241,11 +247,14 @@ def write_report(out: Path) -> dict:
                                                                 out / "psnr_vs_seconds.png"),
         "forgetting curves": plot_forgetting(records, out / "forgetting.png"),
         "renders": plot_renders(ok, style, out, out / "renders.png"),
+        "continual-learning matrices": plot_cl_matrices(records, out / "cl_matrix.png"),
     }
+    cl_csv, _ = write_cl_matrix(records, out / "cl_matrix.csv")
     tables = write_tables(df, records, plan, figures, out / "tables.md", unreadable)
     files = [out / "cells.csv", tables] + [f for f, _ in figures.values() if f]
     return {"results": str(out), "cells": len(df), "ok": int((df.status == "ok").sum()),
             "failed": int((df.status != "ok").sum()), "tables": str(tables),
             "csv": str(out / "cells.csv"), "figures": [str(f) for f in files[2:]],
+            "cl_matrix_csv": str(cl_csv) if cl_csv else None,
             "notes": [note for f, note in figures.values() if not f],
             "unreadable": [str(p) for p in unreadable]}
