@@ -16,6 +16,7 @@ from vbgs.io_atomic import write_atomic
 
 CL_SCORES = ("cl_avg_final_psnr", "cl_forgetting", "cl_backward_transfer")
 PANEL_INCHES = 3.9  # each panel's width and height
+LEAD_COLUMNS = ("key", "task", "dataset", "method", "replay", "seed")  # cl_matrix.csv, first
 
 
 def _with_matrix(records: list[dict]) -> list[dict]:
@@ -34,7 +35,11 @@ def cl_matrix_rows(records: list[dict]) -> pd.DataFrame:
                 rows.append({"key": r["key"], **r["settings"], "after_segment": i,
                              "frames_seen": result["cl_segment_ends"][i], "segment": j,
                              "seen": j <= i, "psnr": value})
-    return pd.DataFrame(rows)
+    frame = pd.DataFrame(rows)
+    matrix = ["after_segment", "frames_seen", "segment", "seen", "psnr"]
+    lead = [c for c in LEAD_COLUMNS if c in frame]
+    rest = sorted(set(frame.columns) - set(lead) - set(matrix))
+    return frame[lead + rest + matrix] if rows else frame
 
 
 def write_cl_matrix(records: list[dict], path: Path):
