@@ -28,6 +28,9 @@ RULES = {
          f"{_FOR_STEPPED} under --protocol static; {_VBGS_STREAMS}"),
         ("protocol", "--protocol static", lambda a: a.method in _STEPPED or
          a.protocol != "static", f"{_FOR_STEPPED}; VBGS always streams, each frame once"),
+        ("cl_segments", "--cl-segments", lambda a: a.method not in _STEPPED or
+         a.protocol != "static", "measures the matrix along a stream of frames; --protocol "
+         "static has none (every frame from the start)"),
         ("opacity", "--opacity", lambda a: a.opacity_rule == "constant",
          "sets the opacity of --opacity-rule constant; under the default rule (evidence) each "
          "splat's opacity comes from the rays that hit or pass it; add --opacity-rule constant"),

@@ -14,7 +14,9 @@ how it is scored, and the typed record of a run.
   EARLY_FRACTION of the streamed frames; their mean PSNR is measured right after
   those frames were learned (``early_psnr_when_seen``), at the end
   (``early_psnr_at_end``) and along the stream (``forgetting_curve``): the forgetting
-  they suffer.
+  they suffer. With ``task.cl_segments = S`` it also measures the continual-learning
+  matrix of the stream's S segments and its metrics (:mod:`experiments.continual`) at the
+  same checkpoints: one render per view serves both.
 * :func:`static_protocol`: a learner that can ``train(frames, n_steps)`` takes
   ``task.steps`` steps on all training frames, then is scored (no forgetting metrics).
 * Final metrics are over all test views: PSNR, SSIM, depth L1 (where the ground truth
@@ -37,6 +39,13 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from experiments.continual import FIELDS as CL_FIELDS
+from experiments.continual import (
+    ContinualScores,
+    continual_scores,
+    nearest_test_views,
+    stream_segments,
+)
 from experiments.init_schemes import oracle_start
 from experiments.progress import progress as progress_bar
 from vbgs.compilation import compile_seconds
@@ -103,6 +112,9 @@ class SceneResult:
     # of ``seconds``, the compilation (or compile-cache loads) inside the timed training;
     # counted once vbgs.compilation.CompileTimer listens (the CLI's runs), else 0
     seconds_compiling: float = 0.0
+    # the continual-learning matrix and metrics (JSON: cl_*); None under the static
+    # protocol or without task.cl_segments
+    continual: ContinualScores | None = None
 
     METRICS = ("oracle_start", "psnr", "ssim", "depth_l1", "seconds", "seconds_compiling",
                "seconds_per_frame",
@@ -116,7 +128,9 @@ class SceneResult:
         metrics = {name: getattr(self, name) for name in self.METRICS}
         if not images:
             metrics.pop("images")
-        return {**self.settings, **self.depth, **metrics, **self.details}
+        continual = (self.continual.to_dict() if self.continual is not None
+                     else dict.fromkeys(CL_FIELDS))
+        return {**self.settings, **self.depth, **metrics, **continual, **self.details}
 
 
 def task_settings(task) -> dict:
@@ -159,10 +173,7 @@ def peak_memory_mb() -> float:
 def early_views(scene: Scene, order: np.ndarray) -> list[int]:
     """Test views nearest (camera centre) to the first EARLY_FRACTION of the stream."""
     n_early = max(1, int(round(EARLY_FRACTION * len(order))))
-    early_pos = np.stack([scene.train[i].camera.position for i in order[:n_early]])
-    test_pos = np.stack([f.camera.position for f in scene.test])
-    nearest = np.linalg.norm(test_pos[:, None] - early_pos[None], axis=-1).argmin(0)
-    return sorted(set(int(i) for i in nearest))
+    return nearest_test_views(scene, order[:n_early])
 
 
 
@@ -201,23 +212,35 @@ def _final(scene: Scene, learner: Learner, background, ply: str | None
 def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = False,
                     ply: str | None = None) -> SceneResult:
     """Feed the training frames to ``learner`` one at a time in the task's order,
-    tracking the early views, then score every test view (see the module docstring)."""
+    tracking the early views (and the segments' views with ``task.cl_segments``), then
+    score every test view (see the module docstring)."""
     order = stream_order(len(scene.train), task.order, seed=task.seed)
     early_idx = early_views(scene, order)
-    early = [scene.test[i] for i in early_idx]
     n_early = max(1, int(round(EARLY_FRACTION * len(order))))
     checkpoints = set(np.linspace(n_early, len(order), CURVE_POINTS).round().astype(int))
-    curve, frame_seconds, compiling = [], [], 0.0
+    segments = stream_segments(scene, order, task.cl_segments) if task.cl_segments else None
+    curve, frame_seconds, compiling, rows, cl_seconds = [], [], 0.0, [], 0.0
     for step, frame, background in stream_frames(task, scene, order, progress=progress):
         t0, c0 = time.perf_counter(), compile_seconds()
         learner.learn(frame, background)
         frame_seconds.append(time.perf_counter() - t0)
         compiling += compile_seconds() - c0
         diagnose(learner, frame)
-        if step in checkpoints:
-            curve.append([step, evaluate(learner.splats(), early, background,
-                                         learner.blur).psnr])
+        cl_views = segments.views_at(step) if segments else []
+        if step in checkpoints or cl_views:
+            t0 = time.perf_counter()
+            shown = sorted(set(early_idx if step in checkpoints else []) | set(cl_views))
+            scored = evaluate(learner.splats(), [scene.test[i] for i in shown], background,
+                              learner.blur)
+            view_psnr = dict(zip(shown, scored.view_psnr, strict=True))
+            if step in checkpoints:
+                curve.append([step, float(np.mean([view_psnr[i] for i in early_idx]))])
+            if cl_views:
+                rows.append(segments.row(view_psnr))
+                cl_seconds += time.perf_counter() - t0
     final, used = _final(scene, learner, background, ply)
+    if segments:  # the last row: the final evaluation of every test view
+        rows.append(segments.row(dict(enumerate(final.view_psnr))))
     steady = frame_seconds[COMPILE_FRAMES:] or frame_seconds
     return SceneResult(
         settings=task_settings(task), psnr=final.psnr, ssim=final.ssim,
@@ -227,7 +250,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         early_psnr_when_seen=curve[0][1], early_psnr_at_end=curve[-1][1],
         forgetting_curve=curve, dropped=final.dropped, background_rgb=background.tolist(),
         uncovered=final.uncovered, images={"target": [f.rgb for f in scene.test], "render": final.renders},
-        oracle_start=oracle_start(task.init), seconds_compiling=compiling)
+        oracle_start=oracle_start(task.init), seconds_compiling=compiling,
+        continual=continual_scores(segments, rows, cl_seconds) if segments else None)
 
 
 PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates

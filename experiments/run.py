@@ -31,6 +31,7 @@ from experiments.cli_common import (
 from experiments.inapplicable import given_flags, refuse_inapplicable, watched
 from experiments.settings import (
     ASSIGN,
+    CL_SEGMENTS_DEFAULT,
     COLOUR_RULE,
     DEPTH_KIND,
     DRIFT_DEFAULT,
@@ -125,6 +126,11 @@ def _add_fit_scene(sub):
                    help="vbgs-polish: weight of the posterior's anchor on the polished "
                         "splats (0: a free polish; default: 0.01 continual, 0 static)")
     add_choice(p, "--protocol", PROTOCOL)
+    p.add_argument("--cl-segments", type=int, nargs="?", const=CL_SEGMENTS_DEFAULT, default=0,
+                   metavar="S",
+                   help=f"continual protocol: PSNR on each of S stream segments' test views "
+                        f"after each segment (JSON cl_matrix) and its average final PSNR, "
+                        f"forgetting and backward transfer (no S: {CL_SEGMENTS_DEFAULT})")
     p.add_argument("--depth-model", metavar="ONNX", help="estimate depth from RGB with this model")
     add_choice(p, "--depth-kind", DEPTH_KIND)
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
@@ -211,7 +217,8 @@ def _fit_scene(args) -> dict:
                      size=args.size, order=args.order, assign=args.assign, estep=args.estep,
                      candidates=args.candidates, init=args.init, seed=args.seed,
                      replay=args.replay, steps_per_frame=args.steps_per_frame, steps=args.steps,
-                     protocol=args.protocol, depth_model=args.depth_model,
+                     protocol=args.protocol, cl_segments=args.cl_segments,
+                     depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
                      depth_align=args.depth_align, background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,

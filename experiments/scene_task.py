@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.check import check_calibration, warn_inconsistent, within_trained_span
+from experiments.continual import check_segments
 from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
@@ -103,6 +104,9 @@ class SceneTask:
     steps_per_frame: int = 50
     steps: int = 3000
     protocol: str = PROTOCOL.default
+    # the continual-learning matrix over this many consecutive segments of the stream
+    # (experiments.continual; 0: not measured; continual protocol only)
+    cl_segments: int = 0
     # vbgs-polish only: weight of the posterior's anchor; None: by protocol
     # (experiments.learners.polish_learner.anchor_weight)
     polish_anchor: float | None = None
@@ -143,6 +147,7 @@ class SceneTask:
         if self.simulate_sensor != "exact" and self.depth_model:
             raise ValueError(f"simulate_sensor {self.simulate_sensor!r} and depth_model both "
                              f"replace the training depth; give one of them")
+        check_segments(self.cl_segments, self.frames)
         oracle_start(self.init)  # a known scheme
         check_calibration(self)
         check_poses(self)

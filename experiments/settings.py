@@ -90,6 +90,9 @@ SENSOR_HOLES_HELP = (f"holes of the simulated sensor ({', '.join(HOLED_SENSORS)}
                      "the holes")
 DRIFT_DEFAULT = "0.01,0.5"  # --drift: metres and degrees per frame (vbgs.tracking.drift)
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
+# --cl-segments with no number: the stream cut into this many segments for the
+# continual-learning matrix (experiments.continual); without the flag it is not measured
+CL_SEGMENTS_DEFAULT = 5
 
 
 def add_choice(parser, flag: str, choice: Choice, help: str | None = None) -> None:

@@ -6,7 +6,9 @@ the ELBO trace or the forgetting curve stay in ``cells/<key>.json``.
 
 ``tables.md`` gives PSNR / SSIM / depth L1 (and, where cells report them, forgetting =
 PSNR of the early views when seen minus at the end, seconds per frame, peak memory and
-replay-buffer size) as mean ± std over seeds (n = number of seeds), one table per task,
+replay-buffer size, and the continual-learning metrics of cells with a matrix:
+average final PSNR, forgetting and backward transfer, :mod:`experiments.continual`)
+as mean ± std over seeds (n = number of seeds), one table per task,
 one row per combination of the other settings. A setting a
 cell does not have (``assign`` for a batch fit, say) shows as "—".
 """
@@ -20,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.sweep.cells import cell_path, load_record
+from experiments.sweep.cl_report import plot_cl_matrices, write_cl_matrix
 from experiments.sweep.plots import (
     plot_forgetting,
     plot_psnr_vs_components,
@@ -35,7 +38,9 @@ from vbgs.io_atomic import write_atomic, write_text_atomic
 GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
                "replay", "estep", "depth")
 METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("lpips", "LPIPS"), ("depth_l1", "depth L1"),
-           ("forgetting_db", "forgetting (dB)"), ("seconds", "fit s"),
+           ("forgetting_db", "forgetting (dB)"), ("cl_avg_final_psnr", "CL final PSNR (dB)"),
+           ("cl_forgetting", "CL forgetting (dB)"), ("cl_backward_transfer", "CL BWT (dB)"),
+           ("seconds", "fit s"),
            ("seconds_per_frame", "s/frame"), ("peak_memory_mb", "peak MB"),
            ("replay_mb", "replay MB"), ("components_used", "used"),
            ("ate_rmse", "ATE RMSE"), ("odometry_ate_rmse", "odometry ATE"))
@@ -240,7 +245,8 @@ def robustness_header(plan: dict) -> list[str]:
 
 
 def write_report(out: Path) -> dict:
-    """Write cells.csv, tables.md and the figures into the sweep folder ``out``."""
+    """Write cells.csv, tables.md, the figures and (cells with a continual-learning
+    matrix) cl_matrix.csv into the sweep folder ``out``."""
     out = Path(out)
     records, plan, unreadable = load_records(out)
     df = cells_frame(records)
@@ -258,13 +264,16 @@ def write_report(out: Path) -> dict:
         "forgetting curves": plot_forgetting(records, out / "forgetting.png"),
         "renders": plot_renders(ok, style, out, out / "renders.png"),
         "PSNR against sensor noise and holes": plot_robustness(ok, out / "robustness.png"),
+        "continual-learning matrices": plot_cl_matrices(records, out / "cl_matrix.png"),
     }
     robustness = write_robustness_table(ok, out / "robustness.md", robustness_header(plan))
+    cl_csv, _ = write_cl_matrix(records, out / "cl_matrix.csv")
     tables = write_tables(df, records, plan, figures, out / "tables.md", unreadable)
     files = [out / "cells.csv", tables] + [f for f, _ in figures.values() if f]
     files += [robustness] if robustness else []
     return {"results": str(out), "cells": len(df), "ok": int((df.status == "ok").sum()),
             "failed": int((df.status != "ok").sum()), "tables": str(tables),
             "csv": str(out / "cells.csv"), "figures": [str(f) for f in files[2:]],
+            "cl_matrix_csv": str(cl_csv) if cl_csv else None,
             "notes": [note for f, note in figures.values() if not f],
             "unreadable": [str(p) for p in unreadable]}

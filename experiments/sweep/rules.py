@@ -69,6 +69,8 @@ RULES: tuple[Rule, ...] = (
          "optimiser steps belong to the gradient learners (gradient, vbgs-polish)"),
     Rule("protocol", lambda s: not _steps(s), DROP,
          "VBGS always streams (the protocol choice is the gradient learners')"),
+    Rule("cl_segments", lambda s: _steps(s) and s.get("protocol") == "static", DROP,
+         "the continual-learning matrix is measured along a stream; static has none"),
     Rule("order", _batch_image, DROP, "a batch image fit sees all pixels at once"),
     Rule("assign", _batch_image, DROP, "a batch image fit iterates CAVI on all pixels"),
     Rule("patch", _batch_image, DROP, "patches exist only in patch streams"),

@@ -32,6 +32,7 @@ class Evaluation(NamedTuple):
     # the share of the views' pixels with ground-truth depth (a surface is there) that
     # the splats leave uncovered (alpha < UNCOVERED_ALPHA): ground drawn as background
     uncovered: float = float("nan")
+    view_psnr: tuple = ()  # each view's PSNR, in the order of the views given (psnr: their mean)
 
 
 # A pixel is uncovered when the splats' accumulated opacity stays below this.
@@ -59,8 +60,8 @@ def render_view(splats: Splats, frame: Frame, background, blur: float = BLUR_VAR
 
 def evaluate(splats: Splats, frames: list[Frame], background, blur: float = BLUR_VARIANCE
              ) -> Evaluation:
-    """Mean PSNR, SSIM and depth L1 over ``frames``, plus the renders and the share of
-    surface pixels left uncovered."""
+    """Mean PSNR, SSIM and depth L1 over ``frames``, plus the renders, the share of
+    surface pixels left uncovered and each view's PSNR."""
     if not frames:
         raise ValueError("no views to score")
     scores, renders, dropped, surface, uncovered = [], [], 0, 0, 0
@@ -76,4 +77,5 @@ def evaluate(splats: Splats, frames: list[Frame], background, blur: float = BLUR
     psnrs, ssims, l1s = np.asarray(scores).T
     return Evaluation(float(psnrs.mean()), float(ssims.mean()),
                       float(np.nanmean(l1s)) if np.isfinite(l1s).any() else float("nan"),
-                      dropped, renders, uncovered / surface if surface else float("nan"))
+                      dropped, renders, uncovered / surface if surface else float("nan"),
+                      tuple(float(p) for p in psnrs))
