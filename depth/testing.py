@@ -9,8 +9,9 @@ Every builder returns an ``onnx.ModelProto``; pass ``model.SerializeToString()``
 - :func:`channel_sum_model`: ``depth = sum_c w_c x_c + bias`` per pixel (exact, so
   layout, resizing, normalisation and batching can be checked by hand);
 - broken models the adapter must refuse;
-- :func:`depth_lookup_model`: returns a stored, distorted depth of the stored RGB
-  frame nearest to the input, for RGB-only end-to-end runs on synthetic scenes.
+- :func:`lookup_model`: returns the stored output of the stored RGB frame nearest to
+  the input; :func:`depth_lookup_model` stores a distorted true depth, for RGB-only
+  end-to-end runs on synthetic scenes.
 """
 
 from __future__ import annotations
@@ -195,19 +196,28 @@ def depth_lookup_model(
     *,
     space: str = "inverse",
 ) -> onnx.ModelProto:
-    """A "depth network" that has memorised ``m`` RGB-D frames.
+    """A "depth network" that has memorised ``m`` RGB-D frames: :func:`lookup_model` of
+    their distorted depth (:func:`distorted_depth`)."""
+    return lookup_model(rgb_frames, distorted_depth(depth_frames, scale, shift, noise_std,
+                                                    seed, space))
+
+
+def lookup_model(rgb_frames: np.ndarray, table: np.ndarray) -> onnx.ModelProto:
+    """A "depth network" that has memorised ``m`` frames and their outputs.
 
     Input ``x [N, 3, h, w]`` (NCHW, RGB in [0, 1], no normalisation; h, w fixed).
     For each image it finds the stored frame nearest in L2,
     ``k = argmin_j sum_{c,i,j'} (x - rgb_j)^2`` (ReduceSum, ArgMin), and outputs
-    the stored distorted depth of frame k (Gather), see :func:`distorted_depth`.
+    ``table[k]`` (Gather); ``rgb_frames [m, h, w, 3]``, ``table [m, h, w]``.
     """
     rgb = np.asarray(rgb_frames)
     if not np.issubdtype(rgb.dtype, np.floating) or rgb.min() < 0.0 or rgb.max() > 1.0:
         raise ValueError("rgb_frames must be float [m, h, w, 3] in [0, 1]")
     rgb = rgb.astype(np.float32)
     _, h, w, _ = rgb.shape
-    table = distorted_depth(depth_frames, scale, shift, noise_std, seed, space)
+    table = np.asarray(table, np.float32)
+    if table.shape != rgb.shape[:3]:
+        raise ValueError(f"table {table.shape} must be [m, h, w] = {rgb.shape[:3]}")
     inits = [
         _const("stored_rgb", np.ascontiguousarray(rgb.transpose(0, 3, 1, 2))),  # [m,3,h,w]
         _const("table", table),  # [m,h,w]

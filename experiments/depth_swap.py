@@ -1,50 +1,73 @@
-"""Replace a scene's sensor depth by monocular estimates (RGB-only input).
+"""Training depth from an ONNX depth model, estimated as the frames arrive (RGB-only input).
 
-The estimates come from a user-supplied ONNX model through :class:`depth.OnnxDepth`.
-Inverse or relative predictions are made metric by one global alignment fitted
-against the first training frame's sensor depth at a sparse random subset of its
-pixels (``REFERENCE_FRACTION``), the way a robot would calibrate once on a few
-measured points. Test views keep their ground truth: evaluation stays honest.
+:class:`EstimatedDepth` sits between the scene's frames and the stream protocol
+(``stream_protocol(..., arrive=...)``): each arriving frame goes through the model
+(:class:`depth.OnnxDepth`) and :mod:`depth.stream`, which aligns the predictions to
+metric depth from the frames that have arrived (the views' multi-view consistency,
+or a few frames of sensor depth) and cuts the network's far field and depth edges
+out of the surface. The frames come out with that depth, in arrival order; the
+first few may come out together, once the alignment could be read from them. Test and
+validation views keep their depth (an RGB-only folder's have none: RGB scores only).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
+
 import numpy as np
 
-from depth import OnnxDepth, align, apply
-from depth.align import DEFAULT_METHOD
-from vbgs.data.scene import Scene
-
-REFERENCE_FRACTION = 0.01  # share of the first frame's valid pixels used to align
+from depth import OnnxDepth
+from depth.stream import StreamConfig, StreamState, arrive, check_config, finish, init
+from vbgs.data.scene import Frame
 
 
-def estimate_scene_depth(scene: Scene, model_path: str, *, kind: str = "inverse",
-                         preset: str | None = None, align_method: str = "auto",
-                         seed: int = 0) -> tuple[Scene, dict]:
-    """The scene with estimated depth on its training frames, and a report of the
-    alignment (scale, shift, residual) and of the estimates' error (mean absolute
-    relative error against the sensor depth, where that is valid)."""
-    net = OnnxDepth(model_path, kind=kind, preset=preset)
-    predictions = net.predict(np.stack([f.rgb for f in scene.train]))  # [n, h, w]
-    method = DEFAULT_METHOD[net.kind] if align_method == "auto" else align_method
-    reference = scene.train[0].depth
-    valid = np.flatnonzero(reference.ravel() > 0)
-    rng = np.random.default_rng(seed)
-    picked = rng.choice(valid, max(8, int(REFERENCE_FRACTION * len(valid))), replace=False)
-    fit = align(predictions[0], reference, picked, method=method, seed=seed)
-    train, errors = [], []
-    for frame, pred in zip(scene.train, predictions, strict=True):
-        est = apply(fit, pred).astype(np.float32)
-        ok = (frame.depth > 0) & (est > 0)
-        if ok.any():
-            errors.append(np.mean(np.abs(est[ok] - frame.depth[ok]) / frame.depth[ok]))
-        train.append(frame._replace(depth=est))
-    report = {
-        "depth_source": "estimated",
-        "depth_align_method": method,
-        "depth_align_scale": float(fit.scale),
-        "depth_align_shift": float(fit.shift),
-        "depth_align_residual": float(fit.residual),
-        "depth_abs_rel": float(np.mean(errors)) if errors else float("nan"),
-    }
-    return scene._replace(train=train), report
+class EstimatedDepth:
+    """``arrivals(frames) -> frames``: the frames with the model's metric depth, read
+    lazily (a frame is pulled only when the stream reaches it). ``report()`` after
+    the stream: how it was aligned and, where frames had sensor depth, the estimate's
+    error against it."""
+
+    def __init__(self, model_path: str, config: StreamConfig, *, preset: str | None = None,
+                 positions: list[int] | None = None):
+        self.net = OnnxDepth(model_path, kind=config.kind, preset=preset)
+        self.config = check_config(config._replace(kind=self.net.kind))
+        self.positions = positions  # arrival position -> training frame index, for the report
+        self.state: StreamState = init()
+        self.errors: list[float] = []
+        self.cut = [0, 0]  # pixels made depth-less, pixels released
+
+    def __call__(self, frames: Iterable[Frame]) -> Iterator[Frame]:
+        self.state = init()
+        for frame in frames:
+            prediction = self.net.predict(frame.rgb)  # [h, w]
+            self.state, ready = arrive(self.state, frame, prediction, self.config)
+            yield from self._released(ready)
+        self.state, ready = finish(self.state, self.config)
+        yield from self._released(ready)
+
+    def _released(self, ready) -> Iterator[Frame]:
+        for frame, depth in ready:
+            sensor = np.asarray(frame.depth)
+            ok = (sensor > 0) & (depth > 0)
+            if ok.any():
+                self.errors.append(float(np.mean(np.abs(depth[ok] - sensor[ok]) / sensor[ok])))
+            self.cut[0] += int(np.count_nonzero(depth == 0))
+            self.cut[1] += depth.size
+            yield frame._replace(depth=depth)
+
+    def report(self) -> dict:
+        """The run's depth record (flat keys, as the sweep's tables read them)."""
+        fit, on = self.state.alignment, self.state.aligned_on
+        if self.positions is not None:
+            on = tuple(int(self.positions[p]) for p in on)
+        return {
+            "depth_source": "estimated",
+            "depth_reference": self.state.reference,
+            "depth_aligned_on": list(on),  # training frame indices the alignment read
+            "depth_align_scale": float(fit.scale) if fit else float("nan"),
+            "depth_align_shift": float(fit.shift) if fit else float("nan"),
+            "depth_align_space": fit.space if fit else None,
+            "depth_align_residual": float(fit.residual) if fit else float("nan"),
+            "depth_abs_rel": float(np.mean(self.errors)) if self.errors else float("nan"),
+            "depth_not_surface": self.cut[0] / self.cut[1] if self.cut[1] else 0.0,
+        }

@@ -43,6 +43,9 @@ RULES = {
         ("depth_align", "--depth-align", lambda a: bool(a.depth_model),
          "aligns the depth of --depth-model ONNX; without a model the folder's own depth is "
          "used"),
+        ("depth_reference", "--depth-reference", lambda a: bool(a.depth_model),
+         "says what aligns the depth of --depth-model ONNX; without a model the folder's own "
+         "depth is used"),
     ),
 }
 

@@ -92,7 +92,7 @@ class SceneResult:
     settings: Mapping[str, Any]  # the task's fields (see task_settings)
     psnr: float
     ssim: float
-    depth_l1: float
+    depth_l1: float | None  # None: no test view has depth (an RGB-only folder)
     seconds: float  # training time, all frames
     seconds_per_frame: float  # steady state (compilation left out) or seconds / frames
     peak_memory_mb: float
@@ -188,13 +188,18 @@ def evaluate_validation(splats: Splats, scene: Scene, background, blur: float = 
     return evaluate(splats, scene.val, background, blur)
 
 
-def stream_frames(task, scene: Scene, order: np.ndarray, *, progress: bool = False):
+def stream_frames(task, scene: Scene, order: np.ndarray, *, progress: bool = False,
+                  arrive=None):
     """Yield ``(step, frame, background)`` for the training frames in ``order`` (step
     counts from 1), the background estimated from the frames that have arrived (or
-    fixed by the task, see :func:`scene_background`)."""
+    fixed by the task, see :func:`scene_background`). ``arrive``: frames -> frames, a
+    lazy stage the frames pass through as they arrive (estimated depth)."""
     estimate = bg.empty()
-    for step, i in enumerate(progress_bar(order, desc="frames", unit="frame", enabled=progress), 1):
-        frame = scene.train[i]
+    frames = (scene.train[i] for i in order)
+    if arrive is not None:
+        frames = arrive(frames)
+    bar = progress_bar(frames, total=len(order), desc="frames", unit="frame", enabled=progress)
+    for step, frame in enumerate(bar, 1):
         estimate = bg.observe(estimate, frame.rgb, frame.depth, holes=measured(task))
         yield step, frame, scene_background(task, estimate)
 
@@ -210,7 +215,7 @@ def _final(scene: Scene, learner: Learner, background, ply: str | None
 
 
 def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = False,
-                    ply: str | None = None) -> SceneResult:
+                    ply: str | None = None, arrive=None) -> SceneResult:
     """Feed the training frames to ``learner`` one at a time in the task's order,
     tracking the early views (and the segments' views with ``task.cl_segments``), then
     score every test view (see the module docstring)."""
@@ -220,7 +225,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
     checkpoints = set(np.linspace(n_early, len(order), CURVE_POINTS).round().astype(int))
     segments = stream_segments(scene, order, task.cl_segments) if task.cl_segments else None
     curve, frame_seconds, compiling, rows, cl_seconds = [], [], 0.0, [], 0.0
-    for step, frame, background in stream_frames(task, scene, order, progress=progress):
+    for step, frame, background in stream_frames(task, scene, order, progress=progress,
+                                                 arrive=arrive):
         t0, c0 = time.perf_counter(), compile_seconds()
         learner.learn(frame, background)
         frame_seconds.append(time.perf_counter() - t0)

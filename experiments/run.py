@@ -34,6 +34,7 @@ from experiments.settings import (
     CL_SEGMENTS_DEFAULT,
     COLOUR_RULE,
     DEPTH_KIND,
+    DEPTH_REFERENCE,
     DRIFT_DEFAULT,
     ESTEP,
     FORMAT,
@@ -135,7 +136,9 @@ def _add_fit_scene(sub):
     add_choice(p, "--depth-kind", DEPTH_KIND)
     p.add_argument("--depth-preset", default=None, help="depth model family preset")
     p.add_argument("--depth-align", default="auto",
-                   help="auto | none | median | scale-shift | scale-shift-inverse")
+                   help="auto | none | median | scale-shift | scale-shift-inverse "
+                        "(--depth-reference sensor)")
+    add_choice(p, "--depth-reference", DEPTH_REFERENCE)
     # checked by SceneTask, not argparse: a bad name is refused in one line
     p.add_argument("--simulate-sensor", default=SENSOR.default,
                    metavar="{" + ",".join(SENSOR.values) + "}", help=SENSOR.help)
@@ -220,7 +223,8 @@ def _fit_scene(args) -> dict:
                      protocol=args.protocol, cl_segments=args.cl_segments,
                      depth_model=args.depth_model,
                      depth_kind=args.depth_kind, depth_preset=args.depth_preset,
-                     depth_align=args.depth_align, background=args.background,
+                     depth_align=args.depth_align, depth_reference=args.depth_reference,
+                     background=args.background,
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
                      sensor_holes=args.sensor_holes, sensor=args.sensor, poses=args.poses,
@@ -369,7 +373,7 @@ def _depth_study(args) -> dict:
     require_onnx()  # before any work
 
     task_kw = dict(scene=args.scene, components=args.components, frames=args.frames,
-                   size=args.size, init="data", steps_per_frame=args.steps_per_frame)
+                   size=args.size, steps_per_frame=args.steps_per_frame)
     rows = run_depth_study(args.out, methods=args.methods, progress=True,
                            **task_kw)
     paths = write_table(rows, args.out, "depth_study",

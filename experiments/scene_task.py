@@ -18,12 +18,13 @@ from experiments.continual import check_segments
 from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
-from experiments.sensor_swap import simulate_training_depth
+from experiments.sensor_swap import learned_surface, simulate_training_depth
 from experiments.tracking import TrackedLearner, check_poses
 from experiments.settings import (
     ASSIGN,
     COLOUR_RULE,
     DEPTH_KIND,
+    DEPTH_REFERENCE,
     DRIFT_DEFAULT,
     ESTEP,
     FORMAT,
@@ -40,6 +41,7 @@ from experiments.settings import (
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene
+from vbgs.data.streams import stream_order
 from vbgs.data.synthetic import SCENES
 from vbgs.inference import model
 from vbgs.io_atomic import write_atomic
@@ -80,6 +82,7 @@ class SceneTask:
     depth_kind: str = DEPTH_KIND.default
     depth_preset: str | None = None
     depth_align: str = "auto"
+    depth_reference: str = DEPTH_REFERENCE.default  # what aligns the model (depth.stream)
     # a depth sensor simulated on the training frames only (vbgs.sensors; test and
     # validation views keep their exact depth) and its noise multiplier (0: exact values)
     simulate_sensor: str = SENSOR.default
@@ -126,6 +129,7 @@ class SceneTask:
         for name, choice in (("method", METHOD), ("protocol", PROTOCOL), ("order", ORDER),
                              ("assign", ASSIGN), ("estep", ESTEP), ("format", FORMAT),
                              ("depth_kind", DEPTH_KIND), ("opacity_rule", OPACITY_RULE),
+                             ("depth_reference", DEPTH_REFERENCE),
                              ("colour_rule", COLOUR_RULE), ("simulate_sensor", SENSOR),
                              ("sensor", MEASURED_BY)):
             choice.check(name, getattr(self, name))
@@ -148,6 +152,10 @@ class SceneTask:
             raise ValueError(f"simulate_sensor {self.simulate_sensor!r} and depth_model both "
                              f"replace the training depth; give one of them")
         check_segments(self.cl_segments, self.frames)
+        if self.depth_model and self.init != "stream":
+            raise ValueError(f"init {self.init!r} reads the whole stream's points before it "
+                             f"starts, but with a depth_model the depth exists only as "
+                             f"frames arrive; use init 'stream'")
         oracle_start(self.init)  # a known scheme
         check_calibration(self)
         check_poses(self)
@@ -172,6 +180,9 @@ def load_task_scene(task: SceneTask) -> Scene:
         return load_scene(task.scene, size=task.size, n_train=task.frames, n_test=task.n_test,
                           seed=task.seed, n_val=task.n_val)
     given = {k: v for k in ("intrinsics", "depth_scale") if (v := getattr(task, k)) is not None}
+    if task.depth_model and Path(task.scene).is_dir() and (
+            task.format or detect_format(task.scene)) == "blender":
+        given["require_depth"] = False  # RGB-only: the depth model gives it as frames arrive
     scene = load_scene(task.scene, format=task.format, size=task.size, **given)
     refuse_bad_cameras(scene.train + scene.test + scene.val,
                        scene.record.get("depth_scale"), f"scene {task.scene!r}")
@@ -180,25 +191,48 @@ def load_task_scene(task: SceneTask) -> Scene:
                            val=scene.val[: task.n_val])
     if Path(task.scene).is_dir():  # a dataset folder (a real scene by name is one view)
         fmt = task.format or detect_format(task.scene)
-        warn_inconsistent(scene, fmt, task.scene)
+        if any(np.any(f.depth > 0) for f in scene.train):  # RGB-only: nothing to compare
+            warn_inconsistent(scene, fmt, task.scene)
         scene = scene._replace(record={"format": fmt, **scene.record})
     return scene
 
 
 def prepare_scene(task) -> tuple[Scene, dict]:
-    """The task's scene, with estimated depth on its training frames if the task names
-    a depth model, else with the depth of its simulated sensor there (exact: the
-    scene's own); the report of either is returned alongside. Test and validation
-    views keep their depth."""
+    """The task's scene with the depth of its simulated sensor on its training frames
+    (exact: the scene's own), cut to what the learner's sensor model takes as surface,
+    and the report. A task with a depth model gets its training depth as the frames
+    arrive (:func:`depth_arrivals`), not here. Test and validation views keep their
+    depth."""
     scene = load_task_scene(task)
-    if not task.depth_model:
-        return simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,
-                                       task.seed, task.sensor_holes)
-    from experiments.depth_swap import estimate_scene_depth
+    if task.depth_model:
+        return scene, {}
+    scene, report = simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,
+                                            task.seed, task.sensor_holes)
+    return learned_surface(scene, report, task.sensor, task.sensor_level)
 
-    return estimate_scene_depth(scene, task.depth_model, kind=task.depth_kind,
-                                preset=task.depth_preset, align_method=task.depth_align,
-                                seed=task.seed)
+
+def depth_arrivals(task, scene: Scene, order):
+    """The stage that gives the arriving training frames the depth model's metric depth
+    (:class:`experiments.depth_swap.EstimatedDepth`), or None without a depth model."""
+    if not task.depth_model:
+        return None
+    from depth.stream import StreamConfig
+    from experiments.depth_swap import EstimatedDepth
+
+    config = StreamConfig(kind=task.depth_kind, method=task.depth_align,
+                          reference=task.depth_reference, seed=task.seed)
+    return EstimatedDepth(task.depth_model, config, preset=task.depth_preset,
+                          positions=[int(i) for i in order])
+
+
+def warn_rgb_only_tests(scene: Scene) -> bool:
+    """Say on stderr, once, when no test view has depth (an RGB-only folder): the views
+    are scored on RGB alone and depth L1 is absent. True when so."""
+    if any(np.any(f.depth > 0) for f in scene.test):
+        return False
+    print(f"note: none of the {len(scene.test)} test views has depth: they are scored on "
+          f"RGB alone (PSNR, SSIM); depth_l1 is absent", file=sys.stderr)
+    return True
 
 
 def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None) -> SceneResult:
@@ -214,18 +248,29 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
     if len(scene.train) == 1:
         print(f"warning: scene {task.scene!r} has one training frame: a map from one view "
               f"scores poorly on held-out views seen from elsewhere", file=sys.stderr)
+    rgb_only_tests = warn_rgb_only_tests(scene)
+    static = task.protocol == "static" and "static" in learner_cls.PROTOCOLS
+    order = (np.arange(len(scene.train)) if static
+             else stream_order(len(scene.train), task.order, seed=task.seed))
+    arrivals = depth_arrivals(task, scene, order)
+    if static and arrivals is not None:  # all frames at once: their depth, in file order
+        scene = scene._replace(train=list(arrivals(iter(scene.train))))
     learner = learner_cls(task, scene)
     if task.poses != "given":  # fed the poses it tracks (the first given)
         learner = TrackedLearner(learner, task, scene)
-    if task.protocol == "static" and "static" in learner_cls.PROTOCOLS:
+    if static:
         result = static_protocol(task, scene, learner, learner.static_frames(scene),
                                  progress=progress, ply=ply)
     else:
-        result = stream_protocol(task, scene, learner, progress=progress, ply=ply)
+        result = stream_protocol(task, scene, learner, progress=progress, ply=ply,
+                                 arrive=arrivals)
+    if arrivals is not None:
+        depth_report = arrivals.report()
     details = learner.details(result)
     warn_unlearned(details.get("points_unlearned", 0.0), task)
     warn_uncovered(result.uncovered)
     return replace(result, depth=depth_report, details=details,
+                   depth_l1=None if rgb_only_tests else result.depth_l1,
                    settings={**result.settings, **what_ran(task, scene)})
 
 

@@ -45,6 +45,22 @@ def simulate_training_depth(scene: Scene, sensor: str, level: float = 1.0,
     return scene._replace(train=train), report
 
 
+def learned_surface(scene: Scene, report: dict, sensor: str, level: float = 1.0
+                    ) -> tuple[Scene, dict]:
+    """The scene with each training frame's depth cut to what sensor ``sensor`` says is
+    surface (``SENSORS[sensor].surface``: a depth network's far field and the depth it
+    bled across edges are not), and the report with the share of the training pixels
+    with depth so cut (``depth_not_surface``). Each frame's cut reads its own depth only.
+    """
+    model = SENSORS[sensor]
+    train = [f._replace(depth=model.surface(f.depth, f.camera, level)) for f in scene.train]
+    cut = sum(int(np.count_nonzero((f.depth > 0) & (g.depth == 0)))
+              for f, g in zip(scene.train, train, strict=True))
+    with_depth = sum(int(np.count_nonzero(f.depth > 0)) for f in scene.train)
+    return (scene._replace(train=train),
+            {**report, "depth_not_surface": cut / with_depth if with_depth else 0.0})
+
+
 def sensor_report(sensor: str, level: float, holes: int, with_depth: int,
                   errors: np.ndarray) -> dict:
     """The record the run's JSON shows (flat keys, as the sweep's tables read them)."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from depth.presets import KINDS as DEPTH_KINDS
+from depth.stream import REFERENCES as DEPTH_REFERENCES
 from experiments.init_schemes import INIT_HELP, INITS
 from vbgs.data.streams import ORDERS
 from vbgs.sensors import HOLED_SENSORS, SENSOR_HOLES, SENSOR_NAMES
@@ -67,6 +68,11 @@ COLOUR_RULE = Choice(("posterior", "fit"), "posterior",
                      "training pixels (fit: +0.12 dB on validation views, about twice the "
                      "time per frame)")
 DEPTH_KIND = Choice(DEPTH_KINDS, "inverse", "what the depth model outputs")
+DEPTH_REFERENCE = Choice(DEPTH_REFERENCES, "auto",
+                         "what aligns the depth model's output to metric depth, read from "
+                         "arrived frames only: views (multi-view consistency of the first "
+                         "frames, with their poses), sensor (the first frame with sensor "
+                         "depth), auto (sensor if the first frame has depth, else views)")
 SENSOR = Choice(SENSOR_NAMES, "exact",
                 "depth sensor simulated on the training frames (vbgs.sensors): exact, a "
                 "kinect v1, a realsense active stereo or a mono depth network; test and "

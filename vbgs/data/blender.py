@@ -74,8 +74,9 @@ def _depth_beside(image: Path, depth_scale: float, require: bool, shape) -> np.n
     if require:
         raise FileNotFoundError(
             f"no depth for {image}: expected {png.name} (16-bit, millimetres) or {npy.name} "
-            f"(metres) beside it; estimate depth with `python -m depth`, or pass "
-            f"require_depth=False to load with all depth missing"
+            f"(metres) beside it; for an RGB-only folder give fit-scene --depth-model "
+            f"MODEL.onnx (depth estimated as frames arrive), or write depth files with "
+            f"`python -m depth` (in code: load_blender(..., require_depth=False))"
         )
     return np.zeros(shape, np.float32)
 

@@ -55,6 +55,10 @@ class Exact:
         check_depth(depth, camera)
         return np.array(depth, np.float32)
 
+    def surface(self, depth, camera=None, level: float = 1.0) -> np.ndarray:
+        """All of it: the depth as given (float32)."""
+        return np.asarray(depth, np.float32)
+
 
 SENSORS: dict[str, DepthSensor] = {m.name: m for m in (Exact(), Kinect(), RealSense(), Mono())}
 SENSOR_NAMES: tuple[str, ...] = tuple(SENSORS)

@@ -44,6 +44,10 @@ class ActiveSensor:
     def _measure(self, z: np.ndarray, camera, rng, level: float) -> np.ndarray:
         raise NotImplementedError
 
+    def surface(self, depth, camera=None, level: float = 1.0) -> np.ndarray:
+        """All of it: the depth as measured (float32); holes are 0 already."""
+        return np.asarray(depth, np.float32)
+
     def simulate(self, depth, camera, rng: np.random.Generator, level: float = 1.0,
                  hole_spec: HoleSpec = HoleSpec()) -> np.ndarray:
         """Measured depth ``[h, w]`` float32: the true depth with this sensor's noise,

@@ -27,6 +27,13 @@ class DepthSensor(Protocol):
 
     def sigma_z(self, z, camera=None, level: float = 1.0) -> np.ndarray: ...
 
+    def surface(self, depth: np.ndarray, camera, level: float = 1.0) -> np.ndarray:
+        """The part of a depth map ``[h, w]`` this sensor measured that is surface,
+        float32, the rest 0 (no depth): what a learner should take as surface. An active
+        sensor's depth is all surface (its holes are 0 already); a depth network's
+        far field and the depth it bled across edges are not."""
+        ...
+
     def simulate(self, depth: np.ndarray, camera, rng: np.random.Generator,
                  level: float = 1.0, hole_spec: HoleSpec = HoleSpec()) -> np.ndarray: ...
 

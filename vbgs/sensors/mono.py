@@ -25,6 +25,15 @@ range such networks' relative errors are reported in, not a fit to one network:
   (5 %); its RMS is about ``level * WARP / 2``.
 
 There are no holes. Level 0 returns the filled true depth.
+
+What a learner takes as surface (:meth:`Mono.surface`) is less: the far field
+(:func:`vbgs.sensors.far_field.far_field`: the sky and empty background a network gives
+depth to) and the depth edges of the depth map as given
+(:func:`vbgs.sensors.holes.depth_edges`; depth bled across an edge is a steep ramp, so
+the test finds the ramp itself) are made depth-less. Left in, the first becomes a shell
+of splats around the scene and the second a fringe of splats behind every silhouette.
+(Cutting a further band of 1 px around the edges lost more surface than fringe: 15.2
+against 16.4 dB on the object at 64 px, 5000 components, 20 frames.)
 """
 
 from __future__ import annotations
@@ -34,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vbgs.sensors.base import check_depth, check_level
+from vbgs.sensors.far_field import far_field
 from vbgs.sensors.holes import EDGE_THRESHOLD, HoleSpec, depth_edges, refuse_holes, valid
 
 FAR_FACTOR = 1.5  # depth given to pixels without depth: this times the frame's max depth
@@ -134,6 +144,15 @@ class Mono:
         drift, a fraction of the median depth, counted as a fraction of ``z``; edge
         bleeding, a loss of resolution, left out)."""
         return self.relative_sigma(level) * np.asarray(z, np.float64)
+
+    def surface(self, depth, camera, level: float = 1.0) -> np.ndarray:
+        """``depth [h, w]`` (float32) with its far field and its depth edges made
+        depth-less (0): the part of a network's depth that is surface (module
+        docstring). ``level`` is not read: what is cut depends on the depth alone."""
+        check_level(level)
+        depth = check_depth(depth, camera)
+        cut = far_field(depth) | depth_edges(depth, self.edge_threshold, camera)
+        return np.where(cut, 0.0, depth).astype(np.float32)
 
     def simulate(self, depth, camera, rng: np.random.Generator, level: float = 1.0,
                  hole_spec: HoleSpec = HoleSpec()) -> np.ndarray:
