@@ -81,7 +81,7 @@ def train_arrays(task, frame: Frame):
     """The frame as the step takes it; under a measured depth (``task.sensor``) its
     depth term weighted by the sensor's noise (:mod:`vbgs.baseline.loss`)."""
     sensor = task_sensor(task)
-    if sensor.exact:
+    if not sensor.noisy:  # no noise to weigh by (exact, or level 0)
         return frame_arrays(frame)
     return frame_arrays(frame, depth_weights(frame.depth, frame.camera, sensor.model,
                                              sensor.level))

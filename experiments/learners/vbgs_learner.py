@@ -92,7 +92,7 @@ class VbgsLearner:
         if state.mixture is None:
             raise ValueError("the map has seen no frame yet: give the first pose")
         ray = None
-        if not sensor.exact:  # the noise in the camera frame: the pose is what is sought
+        if sensor.noisy:  # the noise in the camera frame: the pose is what is sought
             camera = frame.camera._replace(pose=np.eye(4))
             ray = point_rays(camera, frame.depth, sensor.model, sensor.level)
         found = register.target(state.mixture.posterior, state.mixture.prior)

@@ -125,8 +125,17 @@ class SensorConfig:
 
     @property
     def exact(self) -> bool:
-        """The depth is taken as it is: no noise, and no holes in surfaces."""
-        return self.model == "exact" or self.level == 0
+        """The depth is the surface's: no noise, and a pixel without depth shows nothing.
+        Any other sensor leaves holes in surfaces, at every level (its holes are physical,
+        :mod:`vbgs.sensors.holes`): only :func:`vbgs.render.background.empty_pixels` are
+        empty."""
+        return self.model == "exact"
+
+    @property
+    def noisy(self) -> bool:
+        """The depth values carry the sensor's noise (level > 0): each point's noise
+        along its ray enters the update (:mod:`vbgs.mapping.measurement`)."""
+        return self.model != "exact" and self.level > 0
 
 
 @dataclass(frozen=True)
@@ -193,7 +202,7 @@ class Config:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
-        if not self.sensor.exact and self.estep != "sparse":
+        if self.sensor.noisy and self.estep != "sparse":
             raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
                              f"estep='sparse': its noise is modelled in the sparse E-step")
 

@@ -126,8 +126,8 @@ def update(state: MapState, frame: Frame, config: Config,
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
     sensor = config.sensor
-    ray = None if sensor.exact else point_rays(frame.camera, frame.depth, sensor.model,
-                                                sensor.level)
+    ray = point_rays(frame.camera, frame.depth, sensor.model, sensor.level) \
+        if sensor.noisy else None
     footprint = point_footprints(frame.camera, frame.depth) if state.growing else None
     state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
     state = _sync_stepper(state, slots, config)
@@ -139,8 +139,8 @@ def update(state: MapState, frame: Frame, config: Config,
     if config.render.opacity_rule == "evidence":  # against the model that assigns
         geometry = (state.geometry if config.assign == "prior"
                     else mixture_geometry(state.mixture.posterior))
-        variance = None if sensor.exact else depth_variance(geometry[0], frame.camera,
-                                                            sensor.model, sensor.level)
+        variance = depth_variance(geometry[0], frame.camera, sensor.model, sensor.level) \
+            if sensor.noisy else None
         evidence = opacity.observe(evidence, *geometry, frame.camera, frame.depth,
                                    pass_sigmas=config.evidence.pass_sigmas,
                                    sensor_var=variance,
@@ -250,7 +250,7 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
 def _measured(mixture: model.State, config: Config) -> model.State:
     """A fresh mixture state whose statistics carry the noise moments when the depth is
     measured (the same structure from the first frame on: no second compilation)."""
-    if config.sensor.exact:
+    if not config.sensor.noisy:
         return mixture
     prior = mixture.prior
     return mixture._replace(stats=expfam.zero_stats(prior.n_components, prior.dim,

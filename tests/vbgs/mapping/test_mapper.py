@@ -139,7 +139,11 @@ def test_a_measured_depth_is_a_sensor_the_config_knows():
         mapping.SensorConfig("lidar")
     with pytest.raises(ValueError, match="needs estep='sparse'"):
         mapping.Config(estep="dense", sensor=mapping.SensorConfig("kinect"))
-    assert mapping.SensorConfig("kinect", level=0).exact and mapping.SensorConfig().exact
+    assert mapping.SensorConfig().exact and not mapping.SensorConfig().noisy
+    # level 0: exact values, but the sensor's holes are still holes in surfaces
+    level0 = mapping.SensorConfig("kinect", level=0)
+    assert not level0.exact and not level0.noisy and mapping.SensorConfig("kinect").noisy
+    mapping.Config(estep="dense", sensor=level0)  # no noise to model: any E-step
 
 
 def test_point_rays_lie_along_the_rays_with_the_sensor_sigma(scene):
@@ -196,3 +200,19 @@ def test_a_spent_budget_merges_neighbours_so_new_ground_is_learned():
     assert int(grow.is_active(a.mixture.prior).sum()) <= 400
     assert np.isclose(float(np.asarray(a.mixture.stats.count).sum()),
                       a.n_points - a.n_unlearned, rtol=1e-3)  # every learned point counted
+
+
+def test_holes_lower_no_opacity_at_noise_level_zero(scene):
+    """A sensor at level 0 reports exact values but still leaves holes in surfaces (its
+    edges, grazing angles, range): those are not passes. Taken as exact depth (every
+    depth-less pixel empty) the holes cut the opacity of the components they cover."""
+    holed = [f._replace(depth=np.where(np.arange(f.depth.size).reshape(f.depth.shape) % 7 == 0,
+                                       0.0, f.depth).astype(np.float32)) for f in scene.train]
+    median = {}
+    for name in ("exact", "kinect"):
+        config = mapping.Config(components=K, sensor=mapping.SensorConfig(name, level=0.0))
+        for label, frames in (("whole", scene.train), ("holed", holed)):
+            splats = mapping.splats(stream(config, frames), config, drop_unused=True)
+            median[name, label] = float(np.median(np.asarray(splats.opacities)))
+    assert median["exact", "holed"] < median["exact", "whole"] - 0.05
+    assert median["kinect", "holed"] > median["kinect", "whole"] - 0.02
