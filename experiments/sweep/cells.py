@@ -1,7 +1,10 @@
 """Cells: grid expansion, stable keys, running one cell, and storing its result.
 
-A cell's key hashes its sorted settings and the installed ``vbgs`` version, so the
-same settings under the same code version find their earlier result. Results live in
+A cell's key hashes its sorted settings and the code's version (:func:`package_version`:
+the installed ``vbgs`` version and a fingerprint of the source of ``vbgs``, ``depth``
+and ``experiments``), so the same settings under the same code find their earlier
+result, and a cell made by other code is never resumed as if it were this code's (the
+release number alone stayed 0.1.0 while the learner changed under it). Results live in
 the sweep's folder as ``cells/<key>.json`` (written through a temporary file and
 ``os.replace``, :mod:`vbgs.io_atomic`, so a file that exists is complete) and its images as
 ``renders/<key>.png`` (the render) and ``renders/<key>.<name>.png`` (the target, ...).
@@ -10,7 +13,9 @@ The JSON is written last: it marks the cell finished.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib
 import importlib.metadata
 import itertools
 import json
@@ -30,11 +35,27 @@ from experiments.sweep.rules import apply_rules
 from vbgs.io_atomic import write_atomic, write_text_atomic
 
 
+@functools.cache
 def package_version() -> str:
+    """``<release>+src.<hash>``: the installed release and the first 12 hex digits of a
+    SHA-256 over the ``.py`` files of the packages that make a result (path and
+    content, in path order). Any change to their code gives new cell keys."""
     try:
-        return importlib.metadata.version("vbgs")
+        release = importlib.metadata.version("vbgs")
     except importlib.metadata.PackageNotFoundError:
-        return "unknown"
+        release = "unknown"
+    return f"{release}+src.{source_fingerprint()}"
+
+
+def source_fingerprint(packages=("vbgs", "depth", "experiments")) -> str:
+    """12 hex digits of a SHA-256 over the ``.py`` files under each package's folder."""
+    digest = hashlib.sha256()
+    for name in packages:
+        root = Path(importlib.import_module(name).__file__).parent
+        for path in sorted(root.rglob("*.py")):
+            digest.update(f"{name}/{path.relative_to(root).as_posix()}\0".encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
 
 
 @dataclass(frozen=True)

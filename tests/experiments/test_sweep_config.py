@@ -163,3 +163,23 @@ def test_bundled_configs_by_name(tmp_path):
     assert _config_path("paper") == CONFIGS / "paper.toml"
     own = tmp_path / "mine.toml"
     assert _config_path(str(own)) == own
+
+
+def test_the_code_version_changes_with_the_source(tmp_path, monkeypatch):
+    """Cells made by other code are not resumed: the version in every key fingerprints
+    the packages' sources, not only the release number (which stayed 0.1.0)."""
+    import sys
+
+    from experiments.sweep.cells import source_fingerprint
+
+    pkg = tmp_path / "fakepkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("A = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    before = source_fingerprint(("fakepkg",))
+    assert before == source_fingerprint(("fakepkg",)) and len(before) == 12
+    (pkg / "__init__.py").write_text("A = 2\n")
+    assert source_fingerprint(("fakepkg",)) != before
+    (pkg / "more.py").write_text("")
+    sys.modules.pop("fakepkg", None)
+    assert len({before, source_fingerprint(("fakepkg",))}) == 2
