@@ -1,0 +1,67 @@
+"""A frame's point budget: at most ``budget.points`` points learned per frame, chosen
+before any expensive work, with the statistics kept unbiased.
+
+A depth sensor's frame (640 x 480: 307k points) carries far more points than a map's
+components need once a surface is seen: every point costs its unprojection, candidate
+search and E-step, while a component's posterior, once it has a few hundred points'
+worth of statistics, hardly moves. The frame is thinned by **systematic sampling with a
+random start**: every ``s``-th pixel along each image axis, from an offset ``(oy, ox)``
+drawn uniformly in ``[0, s)^2`` per frame under the map's key, ``s`` the smallest stride
+whose grid of kept pixels fits the budget (:func:`stride`). Why this rule:
+
+* it is decided from the frame's size alone, before unprojection: the work of a frame
+  is bounded whatever it shows, and the kept count never exceeds the budget, so the
+  compiled step's padded size is fixed for a stream (no recompilation per frame);
+* each pixel is kept with probability exactly ``1 / s^2``, so weighting each kept point
+  by ``s^2`` (``budget.weighted``) makes every sufficient statistic, ``sum_n r_nk
+  phi(x_n)``, an unbiased estimate of the whole frame's (Horvitz-Thompson); the
+  posterior's counts stay those of learning every point, so the prior weighs as much
+  as it did (unweighted, the prior would count ``s^2`` times more);
+* the kept pixels are still a lattice (a pixel grid of step ``s``), so the growth rule's
+  covered area (:func:`vbgs.inference.grow.covered_area`: points x squared spacing) is
+  the frame's own, and its cells the same as at full resolution.
+
+Pixels already explained within their noise could be skipped instead; deciding that
+needs each pixel scored against the map (a projection of the components, or the
+E-step itself), i.e. the expensive work this is meant to avoid. With ``points = 0``
+(the default) every valid pixel is learned, bit for bit as before; frames whose pixel
+count is within the budget are not thinned either.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import numpy as np
+
+from vbgs.render.camera import valid_depth
+
+
+def stride(width: int, height: int, points: int) -> int:
+    """The smallest ``s >= 1`` with ``ceil(width / s) * ceil(height / s) <= points``: the
+    kept pixels of any offset fit the budget (1 when ``points`` is 0: no budget)."""
+    if points <= 0:
+        return 1
+    s = max(1, math.isqrt(max(width * height // points, 1)))
+    while math.ceil(width / s) * math.ceil(height / s) > points:
+        s += 1
+    return s
+
+
+def thin(depth: np.ndarray, points: int, *, key: jax.Array,
+         weighted: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """``depth [h, w]`` with every pixel off the sampled lattice set to 0 (missing), and
+    each kept valid point's weight ``[n]`` in the order
+    :func:`vbgs.render.camera.unproject` returns them (``s^2``; ones when not
+    ``weighted``). A frame within the budget comes back as it is, with weight None."""
+    depth = np.asarray(depth)
+    h, w = depth.shape
+    s = stride(w, h, points)
+    if s == 1:
+        return depth, None
+    oy, ox = (int(v) for v in jax.random.randint(key, (2,), 0, s))
+    out = np.zeros_like(depth)
+    out[oy::s, ox::s] = depth[oy::s, ox::s]
+    n = int(np.count_nonzero(valid_depth(out)))
+    return out, np.full(n, float(s * s) if weighted else 1.0, np.float32)
