@@ -571,7 +571,7 @@ def _add_bench(sub):
                    help="image: CAVI per iteration; estep: dense vs sparse per frame; "
                         "stream: seconds per streamed frame end to end, with a profile; "
                         "raster: 3-D rasterizer; depth: ONNX adapter throughput")
-    p.add_argument("--sizes", type=int, nargs="+", default=None,
+    p.add_argument("--sizes", type=size_arg, nargs="+", default=None,
                    help="image sizes (image: 64 128, raster: 128 256, estep: 128)")
     p.add_argument("--components", type=int, nargs="+", default=None,
                    help="component counts (image: 500..8000, estep: 20000 50000)")
@@ -605,10 +605,11 @@ def _bench(args) -> dict:
         rows = bench.bench_estep(components, size=sizes[0], progress=progress)
     elif args.target == "stream":
         from experiments import bench_stream
+        from vbgs.data.scene import size_text
 
         rows = bench_stream.bench_stream(tuple(args.components or (20000, 50000, 100000)),
                                          tuple(args.scenes), frames=args.frames,
-                                         size=(args.sizes or [128])[0], search=args.search,
+                                         sizes=tuple(sizes), search=args.search,
                                          progress=progress)
         devices = []
         if args.devices:
@@ -619,7 +620,8 @@ def _bench(args) -> dict:
                                   (args.sizes or [128])[0], args.search)
         command = " ".join(["python -m experiments.run bench stream --components",
                             *map(str, components), "--scenes", *args.scenes, "--frames",
-                            str(args.frames), "--sizes", str(sizes[0]), "--search", args.search]
+                            str(args.frames), "--sizes", *map(size_text, sizes),
+                            "--search", args.search]
                            + (["--devices", *map(str, args.devices)] if args.devices else []))
         name = bench_stream.table_name()
         paths = bench.write_table(rows, args.out, name, command=command)

@@ -60,7 +60,18 @@ def thin(depth: np.ndarray, points: int, *, key: jax.Array,
     s = stride(w, h, points)
     if s == 1:
         return depth, None
-    oy, ox = (int(v) for v in jax.random.randint(key, (2,), 0, s))
+    offset = tuple(int(v) for v in jax.random.randint(key, (2,), 0, s))
+    return lattice(depth, s, offset, weighted=weighted)
+
+
+def lattice(depth: np.ndarray, s: int, offset: tuple[int, int], *, weighted: bool = True
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """``depth [h, w]`` kept at rows ``oy, oy + s, ...`` and columns ``ox, ox + s, ...``
+    (``offset = (oy, ox)``), 0 elsewhere, and the kept valid points' weights ``[n]``:
+    ``s^2`` (each pixel's inverse chance of being kept), or ones."""
+    oy, ox = offset
+    if not (0 <= oy < s and 0 <= ox < s):
+        raise ValueError(f"the offset {offset} must lie in [0, {s}) on both axes")
     out = np.zeros_like(depth)
     out[oy::s, ox::s] = depth[oy::s, ox::s]
     n = int(np.count_nonzero(valid_depth(out)))
