@@ -52,7 +52,7 @@ from vbgs.data.scene import Frame
 from vbgs.inference import expfam, grow, merge, model
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.stepper import Stepper
-from vbgs.mapping import budget
+from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
 from vbgs.render import colour_fit, opacity
@@ -231,10 +231,10 @@ def _within_budget(state: MapState, frame: Frame, config: Config
     the kept points' weights; the frame's own depth and None within the budget."""
     b = config.budget
     cam = frame.camera
-    if budget.stride(int(cam.width), int(cam.height), b.points) == 1:
+    if stride(int(cam.width), int(cam.height), b.points) == 1:
         return state, frame.depth, None
     key, sub = jax.random.split(state.key)
-    depth, weight = budget.thin(frame.depth, b.points, key=sub, weighted=b.weighted)
+    depth, weight = thin(frame.depth, b.points, key=sub, weighted=b.weighted)
     return state._replace(key=key), depth, weight
 
 
