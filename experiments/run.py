@@ -110,7 +110,7 @@ def _add_fit_scene(sub):
     p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
-                        "a random offset, each weighted s^2 (vbgs.mapping.budget; 0: all)")
+                        "a random offset (vbgs.mapping.budget; 0: all)")
     add_choice(p, "--order", ORDER)
     add_choice(p, "--assign", ASSIGN)
     add_choice(p, "--estep", ESTEP)

@@ -1,5 +1,5 @@
 """A frame's point budget: at most ``budget.points`` points learned per frame, chosen
-before any expensive work, with the statistics kept unbiased.
+before any expensive work.
 
 A depth sensor's frame (640 x 480: 307k points) carries far more points than a map's
 components need once a surface is seen: every point costs its unprojection, candidate
@@ -14,26 +14,26 @@ whose grid of kept pixels fits the budget (:func:`stride`). Why this rule:
   compiled step's padded size is fixed for a stream (no recompilation per frame);
 * each pixel is kept with probability exactly ``1 / s^2``, so weighting each kept point
   by ``s^2`` (``budget.weighted``) makes every sufficient statistic, ``sum_n r_nk
-  phi(x_n)``, an unbiased estimate of the whole frame's (Horvitz-Thompson); the
-  posterior's counts stay those of learning every point, so the prior weighs as much
-  as it did (unweighted, the prior would count ``s^2`` times more);
+  phi(x_n)``, an unbiased estimate of the whole frame's (Horvitz-Thompson; tested);
 * the kept pixels are still a lattice (a pixel grid of step ``s``), so the growth rule's
   covered area (:func:`vbgs.inference.grow.covered_area`: points x squared spacing) is
   the frame's own, and its cells the same as at full resolution.
+
+Unbiased sums do not make a better posterior when a component gets only a point or two
+of a frame: a weighted point counts ``s^2`` points of scatter that was never seen, and
+the component's covariance collapses onto it. Unweighted (:data:`WEIGHTED`, the
+default), the thinned frame counts as fewer points and the prior keeps its say. Chosen
+on validation views (``results/tuning/budget``: the room at 640 x 480, 100k components,
+18 frames, 2 validation views): every point 22.30 dB; 20k points a frame (stride 4)
+22.34 dB unweighted, 19.36 dB weighted; 80k (stride 2) 23.03 dB unweighted, 22.71 dB
+weighted. The budget bounds the cost; it cannot go far below a few points per
+component and frame.
 
 Pixels already explained within their noise could be skipped instead; deciding that
 needs each pixel scored against the map (a projection of the components, or the
 E-step itself), i.e. the expensive work this is meant to avoid. With ``points = 0``
 (the default) every valid pixel is learned, bit for bit as before; frames whose pixel
 count is within the budget are not thinned either.
-
-Unbiased sums do not make an unbiased posterior when a component gets only a point or
-two of a frame: a weighted point then counts ``s^2`` points of scatter that was never
-seen, and the covariance collapses (measured: the room, 640 x 480, 100k components,
-18 frames; test views, reported only: every point 21.42 dB; 80k points a frame, stride
-2, weighted 21.53 dB; 20k points, stride 4, weighted 18.21 dB with 29% of the surface
-uncovered, unweighted 20.67 dB). The budget must leave each component a few points a
-frame: it bounds the cost, it does not remove the need for points per component.
 """
 
 from __future__ import annotations
@@ -44,6 +44,9 @@ import jax
 import numpy as np
 
 from vbgs.render.camera import valid_depth
+
+# Kept points count 1 each, not s^2 (module docstring: chosen on validation views).
+WEIGHTED = False
 
 
 def stride(width: int, height: int, points: int) -> int:
@@ -58,7 +61,7 @@ def stride(width: int, height: int, points: int) -> int:
 
 
 def thin(depth: np.ndarray, points: int, *, key: jax.Array,
-         weighted: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+         weighted: bool = WEIGHTED) -> tuple[np.ndarray, np.ndarray | None]:
     """``depth [h, w]`` with every pixel off the sampled lattice set to 0 (missing), and
     each kept valid point's weight ``[n]`` in the order
     :func:`vbgs.render.camera.unproject` returns them (``s^2``; ones when not
@@ -72,8 +75,8 @@ def thin(depth: np.ndarray, points: int, *, key: jax.Array,
     return lattice(depth, s, offset, weighted=weighted)
 
 
-def lattice(depth: np.ndarray, s: int, offset: tuple[int, int], *, weighted: bool = True
-            ) -> tuple[np.ndarray, np.ndarray]:
+def lattice(depth: np.ndarray, s: int, offset: tuple[int, int], *,
+            weighted: bool = WEIGHTED) -> tuple[np.ndarray, np.ndarray]:
     """``depth [h, w]`` kept at rows ``oy, oy + s, ...`` and columns ``ox, ox + s, ...``
     (``offset = (oy, ox)``), 0 elsewhere, and the kept valid points' weights ``[n]``:
     ``s^2`` (each pixel's inverse chance of being kept), or ones."""

@@ -17,6 +17,7 @@ from typing import Any
 from vbgs.inference import grow
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
+from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
 from vbgs.sensors import SENSOR_NAMES
@@ -167,11 +168,11 @@ class BudgetConfig:
     points: the most points one frame gives (every ``s``-th pixel along each axis from a
         random offset); 0: every valid pixel;
     weighted: each kept point counts ``s^2`` (the statistics an unbiased estimate of the
-        whole frame's) rather than 1.
+        whole frame's) rather than 1 (the default: better on validation views).
     """
 
     points: int = 0
-    weighted: bool = True
+    weighted: bool = BUDGET_WEIGHTED
 
     def __post_init__(self):
         if not isinstance(self.points, int) or isinstance(self.points, bool) or self.points < 0:

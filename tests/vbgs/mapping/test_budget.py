@@ -34,7 +34,7 @@ def test_stride_fits_the_budget():
 
 def test_thin_keeps_a_lattice_within_the_budget():
     f = plane_frame()
-    depth, weight = budget.thin(f.depth, 400, key=jax.random.key(0))
+    depth, weight = budget.thin(f.depth, 400, key=jax.random.key(0), weighted=True)
     s = budget.stride(W, H, 400)
     assert s == 2 and len(weight) == np.count_nonzero(depth) <= 400
     np.testing.assert_array_equal(weight, 4.0)
@@ -57,7 +57,7 @@ def test_weighted_statistics_are_unbiased_on_a_plane():
     prior = model.init(xyz, rgb, 6, key=jax.random.key(1), scheme="data")
     full = _stats(prior, f, f.depth, None)
     s = 3
-    runs = [_stats(prior, f, *budget.lattice(f.depth, s, (oy, ox)))
+    runs = [_stats(prior, f, *budget.lattice(f.depth, s, (oy, ox), weighted=True))
             for oy in range(s) for ox in range(s)]
     for name in ("count", "sum_x", "sum_xx", "sum_c"):
         mean = np.mean([np.asarray(getattr(r, name)) for r in runs], 0)
