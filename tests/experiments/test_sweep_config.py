@@ -85,7 +85,10 @@ def test_bad_values_name_the_key(grid, message):
          "fixed.size: [fixed] takes single values"),
         ({"name": "t", "fixed": {"size": -1}, "grid": [{"task": "image",
                                                         "dataset": "astronaut"}]},
-         "fixed.size: must be a positive integer"),
+         "fixed.size: size -1: the side must be at least 1 pixel"),
+        ({"name": "t", "fixed": {"size": "640x"}, "grid": [{"task": "scene",
+                                                            "dataset": "room"}]},
+         "fixed.size: size '640x' is not a size"),
         ({"name": "t", "grid": [{"dataset": "astronaut"}]}, "grid[0]: missing key 'task'"),
     ],
 )
@@ -163,3 +166,10 @@ def test_bundled_configs_by_name(tmp_path):
     assert _config_path("paper") == CONFIGS / "paper.toml"
     own = tmp_path / "mine.toml"
     assert _config_path(str(own)) == own
+
+
+def test_a_scene_size_is_a_wxh_string():
+    """``size = "640x480"`` (a string: a TOML list would be a grid of sizes)."""
+    config = parse_config({"name": "t", "fixed": {"size": "48x32"},
+                           "grid": [{"task": "scene", "dataset": "room"}]}, "ok.toml")
+    assert config.grids[0].as_dict()["size"] == ("48x32",)
