@@ -22,6 +22,13 @@ from vbgs.compilation import CompileTimer
 from vbgs.inference import candidates, grid, model, stepper
 
 PROFILE_REPEATS = 3
+# Frames of more pixels than this are a sensor's (640 x 480): their rows stream
+# LARGE_FRAMES frames of the first scene at the largest component count only (the ray
+# caster renders a 640 x 480 frame in seconds on 2 cores), every point and then within
+# LARGE_BUDGET points a frame (vbgs.mapping.budget).
+LARGE_PIXELS = 4 * 128 * 128
+LARGE_FRAMES = 10
+LARGE_BUDGET = 20000
 
 
 def table_name() -> str:
@@ -40,9 +47,13 @@ def _prior(scene, k: int, seed: int = 0):
 
 
 def stream_row(scene, prior, estep: str, *, frames: int, search: str = "auto",
-               assign: str = "prior") -> dict:
-    """Stream ``frames`` frames through a fresh stepper; timings of one row."""
-    from experiments.protocol import frame_points, peak_memory_mb
+               assign: str = "prior", budget_points: int = 0) -> dict:
+    """Stream ``frames`` frames through a fresh stepper; timings of one row.
+    ``budget_points``: each frame thinned to at most this many points, weighted
+    (:mod:`vbgs.mapping.budget`; 0: every point), the thinning timed with the frame."""
+    from experiments.protocol import peak_memory_mb
+    from vbgs.mapping import budget
+    from vbgs.render.camera import unproject
 
     timer = CompileTimer()
     with timer:
@@ -52,12 +63,15 @@ def stream_row(scene, prior, estep: str, *, frames: int, search: str = "auto",
         setup = time.perf_counter() - t0
     setup -= timer.seconds  # the prior terms' compilation counts as compilation
     state, compile_s, steady, counts = model.start(prior), timer.seconds, [], []
+    key = jax.random.key(0)
     for frame in scene.train[:frames]:
+        key, sub = jax.random.split(key)
         timer = CompileTimer()
         with timer:
             t0 = time.perf_counter()
-            xyz, rgb = frame_points(frame)
-            state, _ = step(state, xyz, rgb)
+            depth, weight = budget.thin(frame.depth, budget_points, key=sub)
+            xyz, rgb = unproject(frame.camera, frame.rgb, depth)
+            state, _ = step(state, xyz, rgb, weight=weight)
             jax.block_until_ready(state.stats.count)
             seconds = time.perf_counter() - t0
         counts.append(len(xyz))
@@ -66,7 +80,7 @@ def stream_row(scene, prior, estep: str, *, frames: int, search: str = "auto",
         else:
             steady.append(seconds)
     return {"assign": assign, "estep": estep, "search": step.search if estep == "sparse" else "-",
-            "frames": len(counts), "points_per_frame": int(np.mean(counts)),
+            "budget": budget_points, "frames": len(counts), "points_per_frame": int(np.mean(counts)),
             "padded": step.size, "setup_s": setup, "compile_s": compile_s,
             "s_per_frame": float(np.mean(steady)) if steady else float("nan"),
             "total_s": setup + compile_s + float(np.sum(steady)),
@@ -138,28 +152,47 @@ def profile_frame(scene, prior, *, search: str = "auto") -> list[dict]:
 
 def bench_stream(components=(20000, 50000, 100000), scenes=("object", "room"),
                  esteps=("dense", "sparse"), *, frames: int = 60, dense_frames: int = 8,
-                 size: int = 128, search: str = "auto", dense_max: int = 50000,
+                 sizes=(128,), search: str = "auto", dense_max: int = 50000,
                  progress: bool = False) -> list[dict]:
-    """Rows of :func:`stream_row` for each scene, component count and E-step. The dense
-    E-step streams only ``dense_frames`` frames and only up to ``dense_max`` components
-    (it costs ``n x k`` per frame)."""
+    """Rows of :func:`stream_row` for each size, scene, component count and E-step. The
+    dense E-step streams only ``dense_frames`` frames and only up to ``dense_max``
+    components (it costs ``n x k`` per frame). A size of more than :data:`LARGE_PIXELS`
+    pixels (``"640x480"``, :func:`vbgs.data.scene.parse_size`) gives the rows of
+    :func:`large_cells` instead."""
     from vbgs.data.formats import load_scene
+    from vbgs.data.scene import size_pixels, size_text
 
-    rows = []
-    cells = [(s, k, e) for s in scenes for k in components for e in esteps
-             if e == "sparse" or k <= dense_max]
-    loaded, priors = {}, {}
-    for scene_name, k, estep in progress_bar(cells, desc="bench stream", unit="cell", enabled=progress):
-        if scene_name not in loaded:
-            loaded[scene_name] = load_scene(scene_name, size=size, n_train=frames, n_test=1,
-                                            seed=0)
-        scene = loaded[scene_name]
-        if (scene_name, k) not in priors:
-            priors = {(scene_name, k): _prior(scene, k)}
-        row = stream_row(scene, priors[(scene_name, k)], estep,
-                         frames=frames if estep == "sparse" else dense_frames, search=search)
-        rows.append({"scene": scene_name, "size": size, "components": k, **row})
+    cells = []
+    for size in sizes:
+        if size_pixels(size) > LARGE_PIXELS:
+            cells += large_cells(size, components, scenes, frames)
+        else:
+            cells += [(size, s, k, e, 0, frames if e == "sparse" else dense_frames)
+                      for s in scenes for k in components for e in esteps
+                      if e == "sparse" or k <= dense_max]
+    rows, loaded, priors = [], {}, {}
+    for size, scene_name, k, estep, points, n in progress_bar(
+            cells, desc="bench stream", unit="cell", enabled=progress):
+        n_train = min(frames, LARGE_FRAMES) if size_pixels(size) > LARGE_PIXELS else frames
+        if (size, scene_name) not in loaded:
+            loaded = {(size, scene_name): load_scene(scene_name, size=size, n_train=n_train,
+                                                     n_test=1, seed=0)}
+        scene = loaded[(size, scene_name)]
+        if (size, scene_name, k) not in priors:
+            priors = {(size, scene_name, k): _prior(scene, k)}
+        row = stream_row(scene, priors[(size, scene_name, k)], estep, frames=n, search=search,
+                         budget_points=points)
+        rows.append({"scene": scene_name, "size": size_text(size), "components": k, **row})
     return rows
+
+
+def large_cells(size, components, scenes, frames: int) -> list[tuple]:
+    """The cells of a sensor-sized frame: the last scene (the room by default: every
+    pixel has depth), the largest component count, the sparse E-step, at most
+    :data:`LARGE_FRAMES` frames, every point and then :data:`LARGE_BUDGET` points."""
+    n = min(frames, LARGE_FRAMES)
+    return [(size, scenes[-1], max(components), "sparse", points, n)
+            for points in (0, LARGE_BUDGET)]
 
 
 def speedups(rows: list[dict]) -> list[dict]:

@@ -69,6 +69,35 @@ def check_fewer_components(components: int, points: int, what: str, fix: str) ->
         )
 
 
+SIZE_HELP = ("frame size: one number (a synthetic scene's square side, a dataset's longer "
+             "side) or WIDTHxHEIGHT, e.g. 640x480 (the field of view is horizontal)")
+
+
+def size_arg(text: str):
+    """``--size``: one number (a square synthetic frame, a dataset's longer side) or
+    WIDTHxHEIGHT (:func:`vbgs.data.scene.parse_size`); argparse shows the reason."""
+    import argparse
+
+    from vbgs.data.scene import parse_size
+
+    try:
+        return parse_size(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def check_scene_components(components: int, frames: int, size) -> None:
+    """:func:`check_fewer_components` for a stream of at most ``frames`` frames of
+    ``size`` (:func:`vbgs.data.scene.parse_size`)."""
+    from vbgs.data.scene import size_pixels, size_text
+
+    text = size_text(size)
+    shown = text if "x" in text else f"{text}x{text}"
+    check_fewer_components(components, frames * size_pixels(size),
+                           f"at most {frames} frames x {shown}",
+                           "use fewer --components, a larger --size or more --frames")
+
+
 def meaningless_score_warning(result: dict) -> str | None:
     """A warning line when a result's score means nothing (no component was used)."""
     if result.get("components_used") == 0:

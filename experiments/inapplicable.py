@@ -31,6 +31,9 @@ RULES = {
         ("cl_segments", "--cl-segments", lambda a: a.method not in _STEPPED or
          a.protocol != "static", "measures the matrix along a stream of frames; --protocol "
          "static has none (every frame from the start)"),
+        ("budget_points", "--budget-points", lambda a: a.method != "gradient",
+         "thins the frames VBGS learns (vbgs.mapping.budget); the gradient baseline samples "
+         "its own pixels each step"),
         ("opacity", "--opacity", lambda a: a.opacity_rule == "constant",
          "sets the opacity of --opacity-rule constant; under the default rule (evidence) each "
          "splat's opacity comes from the rays that hit or pass it; add --opacity-rule constant"),

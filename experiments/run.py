@@ -21,12 +21,15 @@ import argparse
 import sys
 
 from experiments.cli_common import (
+    SIZE_HELP,
     check_fewer_components,
     check_output_file,
+    check_scene_components,
     fail,
     interrupted,
     meaningless_score_warning,
     print_result,
+    size_arg,
 )
 from experiments.inapplicable import given_flags, refuse_inapplicable, watched
 from experiments.settings import (
@@ -105,7 +108,10 @@ def _add_fit_scene(sub):
     p.add_argument("--components", type=int, default=20000, help="components / splat capacity")
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
-    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)
+    p.add_argument("--budget-points", type=int, default=0, metavar="N",
+                   help="VBGS learns at most N points a frame: every s-th pixel per axis from "
+                        "a random offset (vbgs.mapping.budget; 0: all)")
     add_choice(p, "--order", ORDER)
     add_choice(p, "--assign", ASSIGN)
     add_choice(p, "--estep", ESTEP)
@@ -211,6 +217,7 @@ def _check(args) -> dict:
 
 def _fit_scene(args) -> dict:
     from experiments.scene_task import SceneTask, run_scene, save_views
+    from vbgs.mapping import BudgetConfig
 
     render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale),
                                 ("splat_blur", args.splat_blur),
@@ -228,7 +235,7 @@ def _fit_scene(args) -> dict:
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
                      sensor_holes=args.sensor_holes, sensor=args.sensor, poses=args.poses,
-                     drift=args.drift,
+                     drift=args.drift, budget=BudgetConfig(points=args.budget_points),
                      **_calibration(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
@@ -239,9 +246,7 @@ def _fit_scene(args) -> dict:
     check_output_file(args.plot, "--plot", ".png")
     if args.plot and args.poses == "given":
         raise ValueError("--plot draws the tracked trajectory: give --poses track or odometry")
-    check_fewer_components(args.components, args.frames * args.size**2,
-                           f"at most {args.frames} frames x {args.size}x{args.size}",
-                           "use fewer --components, a larger --size or more --frames")
+    check_scene_components(args.components, args.frames, args.size)
     if args.anchor is not None and args.method != "vbgs-polish":
         raise ValueError(f"--anchor weighs the polish of --method vbgs-polish; "
                          f"--method {args.method} has none: drop --anchor")
@@ -273,7 +278,7 @@ def _add_tune(sub):
     p.add_argument("--components", type=int, default=20000)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--val-views", type=int, default=4, help="validation views (at most)")
-    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)
     add_choice(p, "--order", ORDER)
     add_choice(p, "--assign", ASSIGN)
     add_choice(p, "--init", INIT)
@@ -301,6 +306,7 @@ def _tune(args) -> dict:
         tune,
         write_tuning,
     )
+    from vbgs.data.scene import size_text
 
     if args.val_views < 1:
         raise ValueError(f"--val-views must be at least 1 (settings are chosen on them), "
@@ -315,13 +321,11 @@ def _tune(args) -> dict:
                        assign=args.assign, init=args.init, seed=args.seed,
                        background=args.background) for scene in args.scene]
     grid = parse_grid(args.grid, tasks[0])  # bad grids fail before any work
-    check_fewer_components(args.components, args.frames * args.size**2,
-                           f"at most {args.frames} frames x {args.size}x{args.size}",
-                           "use fewer --components, a larger --size or more --frames")
+    check_scene_components(args.components, args.frames, args.size)
     argv = ["tune", "--scene", *args.scene, *(["--format", args.format] if args.format else []),
             "--method", args.method, "--components", str(args.components),
             "--frames", str(args.frames), "--val-views", str(args.val_views),
-            "--size", str(args.size), "--order", args.order, "--assign", args.assign,
+            "--size", size_text(args.size), "--order", args.order, "--assign", args.assign,
             "--init", args.init, "--seed", str(args.seed), "--background", args.background,
             "--grid", *args.grid, "--out", args.out]
     per_scene, files, stream = {}, [], f"({args.order}, {args.assign} assignment)"
@@ -389,7 +393,7 @@ def _add_oracle(sub):
                    help="object | room | walk | motorcycle (one real RGB-D view) | a dataset folder")
     add_choice(p, "--format", FORMAT)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
-    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)
     p.add_argument("--view", type=int, default=0, help="source training frame")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
@@ -414,7 +418,7 @@ def _add_diagnostic_scene(p) -> None:
     p.add_argument("--components", type=int, default=20000)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
-    p.add_argument("--size", type=int, default=128, help="image size (longer side)")
+    p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)
     add_choice(p, "--init", INIT)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
@@ -432,9 +436,7 @@ def _diagnostic_task(args, count: str, **settings):
     task = SceneTask(scene=args.scene, format=args.format, components=args.components,
                      frames=args.frames, n_test=args.test_views, n_val=0, size=args.size,
                      init=args.init, seed=args.seed, **settings)
-    check_fewer_components(args.components, args.frames * args.size**2,
-                           f"at most {args.frames} frames x {args.size}x{args.size}",
-                           "use fewer --components, a larger --size or more --frames")
+    check_scene_components(args.components, args.frames, args.size)
     return task
 
 
@@ -573,7 +575,7 @@ def _add_bench(sub):
                    help="image: CAVI per iteration; estep: dense vs sparse per frame; "
                         "stream: seconds per streamed frame end to end, with a profile; "
                         "raster: 3-D rasterizer; depth: ONNX adapter throughput")
-    p.add_argument("--sizes", type=int, nargs="+", default=None,
+    p.add_argument("--sizes", type=size_arg, nargs="+", default=None,
                    help="image sizes (image: 64 128, raster: 128 256, estep: 128)")
     p.add_argument("--components", type=int, nargs="+", default=None,
                    help="component counts (image: 500..8000, estep: 20000 50000)")
@@ -607,10 +609,11 @@ def _bench(args) -> dict:
         rows = bench.bench_estep(components, size=sizes[0], progress=progress)
     elif args.target == "stream":
         from experiments import bench_stream
+        from vbgs.data.scene import size_text
 
         rows = bench_stream.bench_stream(tuple(args.components or (20000, 50000, 100000)),
                                          tuple(args.scenes), frames=args.frames,
-                                         size=(args.sizes or [128])[0], search=args.search,
+                                         sizes=tuple(sizes), search=args.search,
                                          progress=progress)
         devices = []
         if args.devices:
@@ -621,7 +624,8 @@ def _bench(args) -> dict:
                                   (args.sizes or [128])[0], args.search)
         command = " ".join(["python -m experiments.run bench stream --components",
                             *map(str, components), "--scenes", *args.scenes, "--frames",
-                            str(args.frames), "--sizes", str(sizes[0]), "--search", args.search]
+                            str(args.frames), "--sizes", *map(size_text, sizes),
+                            "--search", args.search]
                            + (["--devices", *map(str, args.devices)] if args.devices else []))
         name = bench_stream.table_name()
         paths = bench.write_table(rows, args.out, name, command=command)

@@ -40,12 +40,12 @@ from experiments.settings import (
 )
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
-from vbgs.data.scene import Scene
+from vbgs.data.scene import Scene, parse_size
 from vbgs.data.streams import stream_order
 from vbgs.data.synthetic import SCENES
 from vbgs.inference import model
 from vbgs.io_atomic import write_atomic
-from vbgs.mapping import EvidenceConfig, GrowthConfig
+from vbgs.mapping import BudgetConfig, EvidenceConfig, GrowthConfig
 from vbgs.render.background import parse_background
 from vbgs.render.colour_fit import RIDGE as COLOUR_RIDGE
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
@@ -63,7 +63,7 @@ class SceneTask:
     frames: int = 60
     n_test: int = 8
     n_val: int = 4  # validation views (tuning only: never scored by the protocol)
-    size: int = 128
+    size: int | tuple[int, int] = 128  # a square side, or (width, height): parse_size
     order: str = ORDER.default
     assign: str = ASSIGN.default
     estep: str = ESTEP.default
@@ -118,9 +118,15 @@ class SceneTask:
     prior: model.PriorConfig = model.SURFACE_PRIOR
     growth: GrowthConfig = field(default_factory=GrowthConfig)
     evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
+    # a frame's point budget (vbgs.mapping.budget): --budget-points, budget.points in tune
+    budget: BudgetConfig = field(default_factory=BudgetConfig)
 
     def __post_init__(self):
-        for name in ("components", "frames", "size", "steps_per_frame", "steps"):
+        try:  # "640x480" (a TOML string) or [640, 480] become (640, 480)
+            object.__setattr__(self, "size", parse_size(self.size))
+        except ValueError as err:
+            raise ValueError(f"size: {err}") from None
+        for name in ("components", "frames", "steps_per_frame", "steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")

@@ -49,7 +49,7 @@ FIT_FIELDS = frozenset({
     "scene", "format", "method", "components", "frames", "n_test", "n_val", "size", "order",
     "assign", "estep", "candidates", "init", "seed", "depth_model", "depth_kind",
     "depth_preset", "depth_align", "background", "replay", "steps_per_frame", "steps",
-    "protocol", "prior", "growth", "evidence", "opacity_rule",
+    "protocol", "prior", "growth", "evidence", "budget", "opacity_rule",
 })
 
 # Render settings whose data a learner gathers while learning, under one value only (the
@@ -63,7 +63,7 @@ GATHERED = {"colour_rule": "fit"}
 SOLVE_ONLY = frozenset({"colour_ridge"})
 # Task fields holding a nested config of method constants, reached as ``NAME.FIELD``: model
 # hyperparameters, learned anew for each value.
-NESTED = ("prior", "growth", "evidence")
+NESTED = ("prior", "growth", "evidence", "budget")
 
 
 def is_nested_setting(name: str) -> bool:

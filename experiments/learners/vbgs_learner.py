@@ -31,7 +31,7 @@ def task_config(task) -> mapping.Config:
     return mapping.Config(components=task.components, assign=task.assign, estep=task.estep,
                           candidates=task.candidates, prior=task.prior, growth=task.growth,
                           evidence=task.evidence, render=render,
-                          sensor=task_sensor(task))
+                          sensor=task_sensor(task), budget=task.budget)
 
 
 class VbgsLearner:

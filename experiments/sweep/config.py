@@ -93,6 +93,17 @@ def _sensor_level(value) -> str | None:
     return None
 
 
+def _size(value) -> str | None:
+    """The problem :func:`vbgs.data.scene.parse_size` finds in a size, or None."""
+    from vbgs.data.scene import parse_size  # imported here, as in _replay
+
+    try:
+        parse_size(value)
+    except ValueError as err:
+        return str(err)
+    return None
+
+
 @dataclass(frozen=True)
 class Spec:
     """What values a setting accepts."""
@@ -109,7 +120,8 @@ SETTINGS: dict[str, Spec] = {
     "task": Spec(_STR, "which task runs the cell", tuple(TASKS)),
     "dataset": Spec(_STR, "photo name, synthetic scene (object, room, walk) or a dataset path"),
     "method": Spec(_STR, METHOD.help, METHOD.values),
-    "size": Spec(_INT, "image side / frame width in pixels", minimum=1),
+    "size": Spec((int, str), "image side in pixels, or a scene's frames as \"WxH\" "
+                 "(\"640x480\"; a list would be a grid of sizes)", check=_size),
     "components": Spec(_INT, "mixture components (capacity)", minimum=1),
     "iters": Spec(_INT, "CAVI iterations of a batch image fit", minimum=1),
     "init": Spec(_STR, "component initialisation (data, random: oracle starts on a stream)",

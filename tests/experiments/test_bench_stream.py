@@ -5,7 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from experiments.bench_stream import _prior, device_rows, speedups, stream_row
+from experiments.bench_stream import (
+    LARGE_BUDGET,
+    _prior,
+    device_rows,
+    large_cells,
+    speedups,
+    stream_row,
+)
 from vbgs.data.synthetic import object_scene
 
 
@@ -17,6 +24,19 @@ def test_stream_row_counts_every_frame_and_pads_above_the_points():
     assert row["padded"] >= row["points_per_frame"] > 0
     assert row["total_s"] >= row["setup_s"] + row["compile_s"]
     assert math.isfinite(row["s_per_frame"]) or row["compile_s"] > 0
+
+
+def test_a_budget_bounds_the_points_of_every_frame():
+    scene = object_scene(size=24, n_train=3, n_test=1, seed=0)
+    row = stream_row(scene, _prior(scene, 200), "sparse", frames=3, search="kdtree",
+                     budget_points=100)  # every 3rd pixel a side: at most 8 x 8
+    assert row["budget"] == 100 and 0 < row["points_per_frame"] <= 64
+
+
+def test_sensor_sized_frames_get_their_own_rows():
+    cells = large_cells((640, 480), (20000, 100000), ("object", "room"), 60)
+    assert cells == [((640, 480), "room", 100000, "sparse", 0, 10),
+                     ((640, 480), "room", 100000, "sparse", LARGE_BUDGET, 10)]
 
 
 def test_speedups_pair_sparse_with_dense():

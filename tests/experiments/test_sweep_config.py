@@ -85,7 +85,10 @@ def test_bad_values_name_the_key(grid, message):
          "fixed.size: [fixed] takes single values"),
         ({"name": "t", "fixed": {"size": -1}, "grid": [{"task": "image",
                                                         "dataset": "astronaut"}]},
-         "fixed.size: must be a positive integer"),
+         "fixed.size: size -1: the side must be at least 1 pixel"),
+        ({"name": "t", "fixed": {"size": "640x"}, "grid": [{"task": "scene",
+                                                            "dataset": "room"}]},
+         "fixed.size: size '640x' is not a size"),
         ({"name": "t", "grid": [{"dataset": "astronaut"}]}, "grid[0]: missing key 'task'"),
     ],
 )
@@ -183,3 +186,10 @@ def test_the_code_version_changes_with_the_source(tmp_path, monkeypatch):
     (pkg / "more.py").write_text("")
     sys.modules.pop("fakepkg", None)
     assert len({before, source_fingerprint(("fakepkg",))}) == 2
+
+
+def test_a_scene_size_is_a_wxh_string():
+    """``size = "640x480"`` (a string: a TOML list would be a grid of sizes)."""
+    config = parse_config({"name": "t", "fixed": {"size": "48x32"},
+                           "grid": [{"task": "scene", "dataset": "room"}]}, "ok.toml")
+    assert config.grids[0].as_dict()["size"] == ("48x32",)

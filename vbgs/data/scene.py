@@ -221,6 +221,46 @@ def hold_out_validation(frames: list, every: int | None) -> tuple[list, list]:
     ]
 
 
+def parse_size(size) -> int | tuple[int, int]:
+    """A frame size as given on a command line or in a TOML file: ``"640x480"`` (or
+    ``"640X480"``, a ``[640, 480]`` pair) is ``(width, height)``; a single number
+    (``128``, ``"128"``) stays a number (a square synthetic frame, a dataset's longer
+    side: :func:`target_size`). Both sides must be positive integers."""
+    what = f"size {size!r}"
+    if isinstance(size, str):
+        parts = size.strip().lower().split("x")
+        if len(parts) not in (1, 2) or not all(p.strip().isdigit() for p in parts):
+            raise ValueError(f"{what} is not a size: give one number (128: square) or "
+                             f"WIDTHxHEIGHT (640x480)")
+        size = int(parts[0]) if len(parts) == 1 else tuple(int(p) for p in parts)
+    if isinstance(size, (list, tuple)):
+        if len(size) != 2 or not all(isinstance(v, (int, np.integer)) and not isinstance(
+                v, bool) for v in size):
+            raise ValueError(f"{what} is not a size: a pair must be two integers "
+                             f"(width, height), e.g. (640, 480)")
+        if min(size) < 1:
+            raise ValueError(f"{what}: width and height must be at least 1 pixel")
+        return int(size[0]), int(size[1])
+    if not isinstance(size, (int, np.integer)) or isinstance(size, bool):
+        raise ValueError(f"{what} is not a size: give one number (128: square) or "
+                         f"WIDTHxHEIGHT (640x480)")
+    if size < 1:
+        raise ValueError(f"{what}: the side must be at least 1 pixel")
+    return int(size)
+
+
+def size_pixels(size) -> int:
+    """Pixels of a frame of ``size`` (:func:`parse_size`; a number is a square side)."""
+    size = parse_size(size)
+    return size * size if isinstance(size, int) else size[0] * size[1]
+
+
+def size_text(size) -> str:
+    """``size`` as :func:`parse_size` reads it back: ``"128"`` or ``"640x480"``."""
+    size = parse_size(size)
+    return str(size) if isinstance(size, int) else f"{size[0]}x{size[1]}"
+
+
 def target_size(width: int, height: int, size) -> tuple[int, int]:
     """Output ``(width, height)`` for a requested ``size``.
 

@@ -265,16 +265,21 @@ class Stepper:
         d = self.prior.dim
         return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
 
-    def __call__(self, state: State, xyz, rgb, ray=None, reach=None) -> tuple[State, StepInfo]:
+    def __call__(self, state: State, xyz, rgb, ray=None, reach=None, weight=None
+                 ) -> tuple[State, StepInfo]:
         """Learn the batch ``xyz [n, d]``, ``rgb [n, 3]``; ``ray [n, d]``: measured
         points' noise along their rays (sparse E-step; :func:`vbgs.inference.model.update`);
         ``reach [n]``: each point's own reach, in place of the stepper's (a point seen
-        coarsely reaches as far as the coarse components it may fall to)."""
+        coarsely reaches as far as the coarse components it may fall to); ``weight [n]``:
+        each point's weight in the statistics (a thinned frame's, :mod:`vbgs.mapping.budget`;
+        None: 1)."""
         xyz, rgb = model.check_points_host(xyz, rgb)
         if xyz.shape[1] != self.prior.dim:
             raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
         size = self.padded_size(xyz.shape[0])
         x, c, w = model.padded_batch(xyz, rgb, self._origin, size, self.prior.alpha.dtype)
+        if weight is not None:
+            w[:xyz.shape[0]] = weight
         cand, learned = None, None
         if self.estep == "sparse" and self.spec is None:
             n = xyz.shape[0]

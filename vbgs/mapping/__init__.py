@@ -3,6 +3,7 @@
 binds them (see :mod:`vbgs.mapping.mapper`)."""
 
 from vbgs.mapping.config import (
+    BudgetConfig,
     Config,
     EvidenceConfig,
     GrowthConfig,
@@ -24,6 +25,6 @@ from vbgs.mapping.mapper import (
     update,
 )
 
-__all__ = ["Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState", "Mapper",
+__all__ = ["BudgetConfig", "Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState", "Mapper",
            "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted", "grow_components", "init", "mapper", "splats",
            "update", "with_dotted"]

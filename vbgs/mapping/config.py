@@ -17,6 +17,7 @@ from typing import Any
 from vbgs.inference import grow
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
+from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
 from vbgs.sensors import SENSOR_NAMES
@@ -169,6 +170,27 @@ class RenderConfig:
                              f"px², got {self.splat_blur!r}")
 
 
+@dataclass(frozen=True)
+class BudgetConfig:
+    """A frame's point budget (:mod:`vbgs.mapping.budget`).
+
+    points: the most points one frame gives (every ``s``-th pixel along each axis from a
+        random offset); 0: every valid pixel;
+    weighted: each kept point counts ``s^2`` (the statistics an unbiased estimate of the
+        whole frame's) rather than 1 (the default: better on validation views).
+    """
+
+    points: int = 0
+    weighted: bool = BUDGET_WEIGHTED
+
+    def __post_init__(self):
+        if not isinstance(self.points, int) or isinstance(self.points, bool) or self.points < 0:
+            raise ValueError(f"budget.points must be an integer >= 0 (0: every point), got "
+                             f"{self.points!r}")
+        if not isinstance(self.weighted, bool):
+            raise ValueError(f"budget.weighted must be true or false, got {self.weighted!r}")
+
+
 def _choice(name: str, value, choices: tuple[str, ...]) -> None:
     if value not in choices:
         raise ValueError(f"{name} must be one of {', '.join(choices)}; got {value!r}")
@@ -182,7 +204,7 @@ class Config:
     assign: responsibilities under the fixed ``prior`` (a stream equals one batch when
         the reference does not grow) or the current ``posterior``;
     estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
-    prior, growth, evidence, render, sensor: the nested groups above.
+    prior, growth, evidence, render, sensor, budget: the nested groups above.
     """
 
     components: int = 20000
@@ -194,6 +216,7 @@ class Config:
     evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
     sensor: SensorConfig = field(default_factory=SensorConfig)
+    budget: BudgetConfig = field(default_factory=BudgetConfig)
 
     def __post_init__(self):
         for name in ("components", "candidates"):

@@ -52,6 +52,7 @@ from vbgs.data.scene import Frame
 from vbgs.inference import expfam, grow, merge, model
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.stepper import Stepper
+from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
 from vbgs.render import colour_fit, opacity
@@ -122,13 +123,13 @@ def update(state: MapState, frame: Frame, config: Config,
     """Learn one arriving frame (the steps of the module docstring). ``background``
     ([3] or None: black) is what the frame's pixels without a splat show; only the
     colour fit reads it (pixels without depth are not points)."""
-    xyz, rgb = unproject(frame.camera, frame.rgb, frame.depth)
+    state, depth, weight = _within_budget(state, frame, config)
+    xyz, rgb = unproject(frame.camera, frame.rgb, depth)
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
     sensor = config.sensor
-    ray = point_rays(frame.camera, frame.depth, sensor.model, sensor.level) \
-        if sensor.noisy else None
-    footprint = point_footprints(frame.camera, frame.depth) if state.growing else None
+    ray = point_rays(frame.camera, depth, sensor.model, sensor.level) if sensor.noisy else None
+    footprint = point_footprints(frame.camera, depth) if state.growing else None
     state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
     state = _sync_stepper(state, slots, config)
     reach = None  # each point's own, when far ground has coarse cells
@@ -146,7 +147,7 @@ def update(state: MapState, frame: Frame, config: Config,
                                    sensor_var=variance,
                                    empty=empty_pixels(frame.depth, holes=not sensor.exact))
     before = state.mixture.posterior
-    mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach)
+    mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight)
     n = len(xyz)
     if step.learned is not None:  # points beyond reach were left out
         xyz, rgb = xyz[step.learned], rgb[step.learned]
@@ -220,6 +221,20 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
                               ray=ray, levels=levels)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
+
+
+def _within_budget(state: MapState, frame: Frame, config: Config
+                   ) -> tuple[MapState, np.ndarray, np.ndarray | None]:
+    """The frame's depth thinned to ``budget.points`` points (:mod:`vbgs.mapping.budget`;
+    the offset drawn under the state's key, split only when the frame is thinned) and
+    the kept points' weights; the frame's own depth and None within the budget."""
+    b = config.budget
+    cam = frame.camera
+    if stride(int(cam.width), int(cam.height), b.points) == 1:
+        return state, frame.depth, None
+    key, sub = jax.random.split(state.key)
+    depth, weight = thin(frame.depth, b.points, key=sub, weighted=b.weighted)
+    return state._replace(key=key), depth, weight
 
 
 def _make_room(state: MapState, xyz, ray, levels, config: Config
