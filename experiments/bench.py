@@ -133,7 +133,7 @@ def bench_estep(components, *, size: int = 128, frames: int = 60, timing_frames:
     """Dense against sparse E-step on the object scene: seconds per frame (warm), the
     held-out PSNR of the full stream (data init, prior assignment) and the splat-tile
     overlaps its test renders dropped."""
-    from experiments.learners import VbgsLearner
+    from experiments.learners.start import scene_prior
     from experiments.protocol import frame_points
     from experiments.scene_task import SceneTask, run_scene
     from vbgs.data.synthetic import object_scene
@@ -143,7 +143,7 @@ def bench_estep(components, *, size: int = 128, frames: int = 60, timing_frames:
     rows = []
     for k in progress_bar(components, desc="bench estep", unit="cell", enabled=progress):
         task = SceneTask(components=k, size=size, frames=frames, init="data")
-        prior = VbgsLearner(task, scene).prior
+        prior = scene_prior(task, scene)  # the data start a VBGS learner maps from
         row = {"size": size, "components": k,
                "points_per_frame": int(np.mean([len(p[0]) for p in points]))}
         for estep in ("dense", "sparse"):

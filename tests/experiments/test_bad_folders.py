@@ -93,18 +93,28 @@ def test_a_broken_folder_is_refused_in_one_line(folder, tmp_path, capsys, name, 
     assert message in json.loads(out.strip().splitlines()[-1])["error"]
 
 
-def test_the_clean_folder_runs(folder, capsys):
-    assert main(["fit-scene", "--scene", str(folder), "--components", "50", "--size", "24",
-                 "--json"]) == 0
-    assert np.isfinite(json.loads(capsys.readouterr().out.strip().splitlines()[-1])["psnr"])
+@pytest.fixture(scope="module")
+def clean_run(folder):
+    """fit-scene on the clean folder, once for the tests below: exit code and JSON record."""
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["fit-scene", "--scene", str(folder), "--components", "50", "--size",
+                     "24", "--frames", "60", "--json"])
+    return code, json.loads(out.getvalue().strip().splitlines()[-1])
 
 
-def test_the_record_says_what_ran_not_what_was_asked(folder, capsys):
+def test_the_clean_folder_runs(clean_run):
+    code, r = clean_run
+    assert code == 0 and np.isfinite(r["psnr"])
+
+
+def test_the_record_says_what_ran_not_what_was_asked(clean_run):
     """The folder holds 4 training, 2 test and 4 validation views: asked for 60 and 8
     (and 4), the JSON reports 4 and 2 (and 4), and what was asked beside those that
     differ."""
-    assert main(["fit-scene", "--scene", str(folder), "--components", "50", "--size", "24",
-                 "--frames", "60", "--json"]) == 0
-    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    _, r = clean_run
     assert (r["frames"], r["n_test"], r["n_val"]) == (4, 2, 4)
     assert (r["frames_asked"], r["n_test_asked"]) == (60, 8) and "n_val_asked" not in r

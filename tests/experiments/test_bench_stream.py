@@ -1,6 +1,8 @@
 """bench stream: one row streams every frame once and accounts for each of them."""
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,14 +18,26 @@ from experiments.bench_stream import (
 from vbgs.data.synthetic import object_scene
 
 
-def test_stream_row_counts_every_frame_and_pads_above_the_points():
-    scene = object_scene(size=24, n_train=4, n_test=1, seed=0)
-    prior = _prior(scene, 300)
-    row = stream_row(scene, prior, "sparse", frames=4, search="kdtree")
-    assert row["frames"] == 4 and row["search"] == "kdtree"
+def test_bench_stream_command_counts_every_frame_and_pads_above_the_points(tmp_path, capsys):
+    """``bench stream`` end to end, tiny: each row streams every frame once (the sparse
+    row all 4, the dense row its at most 8), pads above the points, and the tables and
+    the one-frame profile are written."""
+    from experiments.run import main
+
+    assert main(["bench", "stream", "--components", "300", "--scenes", "object", "--frames",
+                 "4", "--sizes", "24", "--search", "kdtree", "--out", str(tmp_path),
+                 "--json"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    rows = {r["estep"]: r for r in out["rows"]}
+    assert set(rows) == {"dense", "sparse"}
+    row = rows["sparse"]
+    assert row["frames"] == 4 and row["search"] == "kdtree" and row["components"] == 300
     assert row["padded"] >= row["points_per_frame"] > 0
     assert row["total_s"] >= row["setup_s"] + row["compile_s"]
     assert math.isfinite(row["s_per_frame"]) or row["compile_s"] > 0
+    assert len(out["speedups"]) == 1 and out["profile"]
+    names = {Path(f).name for f in out["files"]}
+    assert {"bench_stream.csv", "bench_stream.md", "bench_stream_profile.csv"} <= names
 
 
 def test_a_budget_bounds_the_points_of_every_frame():

@@ -54,17 +54,20 @@ def test_a_refinement_moves_only_what_it_names_and_fits_the_frames_better(learne
 
 def test_render_bound_command_scores_each_refinement(capsys):
     """Each refinement frees more of the splats, so the held-out PSNR rises along them:
-    measured 18.54 (VBGS), 18.60 (colours), 19.45 (+ opacities), 20.30 dB (everything)."""
-    argv = ["render-bound", "--components", "300", "--frames", "4", "--size", "24",
-            "--test-views", "2", "--steps", "30", "--json"]
+    measured 18.44 (VBGS), 18.56 (colours), 19.87 (+ opacities), 21.07 dB (everything).
+    TINY's settings and the tests' step count: the learner and two of the refinements are
+    compiled already."""
+    argv = ["render-bound", "--components", str(TINY.components), "--frames",
+            str(TINY.frames), "--size", str(TINY.size), "--test-views", str(TINY.n_test),
+            "--steps", "40", "--json"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     names = ("vbgs", "colours", "colours_opacities", "everything")
     scores = [out[f"{name}_psnr"] for name in names]
     assert scores == sorted(scores) and scores[-1] > scores[0] + 1.2
-    assert scores[0] == pytest.approx(18.54, abs=0.5)
+    assert scores[0] == pytest.approx(18.44, abs=0.5)
     assert all(0.0 < out[f"{name}_ssim"] <= 1.0 for name in names)
-    assert out["steps"] == 30 and out["everything_seconds"] > 0
+    assert out["steps"] == 40 and out["everything_seconds"] > 0
 
 
 def test_render_bound_refuses_bad_input_before_any_work(capsys, monkeypatch):

@@ -66,7 +66,8 @@ def test_scene_fit_at_128_px(tmp_path):
                "sparse", "--ply", str(ply), "--json")
     assert run.returncode == 0, run.stderr[-2000:]
     r = json.loads(run.stdout.strip().splitlines()[-1])
-    # measured 25.08 dB, SSIM 0.886, depth L1 0.041, 19994 components drawn
-    # (results/example/object.json: the same settings, stream init)
-    assert r["psnr"] > 24.3 and r["ssim"] > 0.875 and r["depth_l1"] < 0.046
-    assert r["components_used"] > 19900 and ply.stat().st_size > 1_000_000
+    # results/example/object.json (the same settings, stream init; made again with the
+    # growth changes, 891a0ff): 25.71 dB, SSIM 0.893, depth L1 0.029, 19844 components
+    # drawn (this test still said 25.08 dB and 19994 components, and failed on 19842)
+    assert r["psnr"] > 24.7 and r["ssim"] > 0.88 and r["depth_l1"] < 0.035
+    assert r["components_used"] > 19700 and ply.stat().st_size > 1_000_000

@@ -251,15 +251,15 @@ def test_scene_cells_through_a_stand_in_scene_task(tmp_path, monkeypatch, capsys
     config.write_text('name = "scene"\n[fixed]\nsize = 16\niters = 2\n[[grid]]\n'
                       'task = ["scene", "image"]\ndataset = ["object", "coffee"]\n'
                       'method = ["vbgs", "gradient"]\nreplay = ["none", "fifo:4"]\n'
-                      'assign = ["prior", "posterior"]\ncomponents = [20, 30]\n'
-                      'seed = [0, 1]\n')
+                      'assign = ["prior", "posterior"]\ncomponents = 20\n'
+                      'seed = [0, 1]\n')  # one component count (20, as the other sweeps here)
     out = tmp_path / "res"
     assert main(["sweep", "--config", str(config), "--out", str(out), "--backend", "serial",
                  "--json"]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    # scene/object: (vbgs x assign(2) + gradient x replay(2)) x components(2) x seed(2);
-    # image/coffee: (vbgs + gradient), no replay, batch fit (no assign) x components(2) x seed(2)
-    assert summary["finished"] == 16 + 8 and summary["failed"] == 0
+    # scene/object: (vbgs x assign(2) + gradient x replay(2)) x seed(2);
+    # image/coffee: (vbgs + gradient), no replay, batch fit (no assign) x seed(2)
+    assert summary["finished"] == 8 + 4 and summary["failed"] == 0
     rows = _rows(out)
     assert {(r["task"], r["dataset"]) for r in rows} == {("scene", "object"),
                                                           ("image", "coffee")}

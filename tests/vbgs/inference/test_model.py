@@ -109,10 +109,12 @@ def test_local_cavi_never_lowers_the_batch_bound_and_one_step_is_the_old_update(
     xyz, rgb1 = batches[1]
     x, c, w = model.padded_batch(xyz, rgb1, prior.origin, len(xyz), np.float32)
     noise = model.PriorConfig().colour_noise
+    # one compilation for the six step counts (eagerly, each call compiled its own loop)
+    local_cavi = jax.jit(model.local_cavi, static_argnames=("colour_noise", "chunk"))
     bounds = []
     for steps in range(1, 7):
-        batch, lse, q, j = model.local_cavi(state, x, c, w, None, noise, len(xyz), steps,
-                                            -np.inf)
+        batch, lse, q, j = local_cavi(state, x, c, w, None, colour_noise=noise,
+                                      chunk=len(xyz), max_iters=steps, tol=-np.inf)
         assert int(j) == steps
         bounds.append(float(lse.sum() - model.kl(q, state.posterior, noise)))
     assert np.all(np.diff(bounds) >= -1e-4 * np.abs(bounds[:-1])), bounds

@@ -4,11 +4,17 @@ On NVIDIA GPUs a float32 ``dot_general`` at default precision rounds both operan
 10-bit mantissa (TF32) and accumulates in float32. :func:`emulated_tf32` patches JAX's
 ``dot_general`` so that, inside the ``with`` block, every product that does not ask for
 ``Precision.HIGHEST`` rounds its float32 operands the same way first.
+
+Each block traces afresh and its traces are never reused outside it: a JAX user context
+(part of every jit cache key) takes a new value per block. ``jax.clear_caches()`` did
+the same, but threw away every executable the test session had compiled (in the whole
+suite, the first clear alone took longer than these tests).
 """
 
 from __future__ import annotations
 
 import contextlib
+import itertools
 
 import jax
 import jax.numpy as jnp
@@ -32,6 +38,10 @@ def _is_full(precision) -> bool:
     return precision in full
 
 
+_block = jax.make_user_context(default_value=None)  # None outside every block
+_blocks = itertools.count(1)
+
+
 @contextlib.contextmanager
 def emulated_tf32():
     """Inside the block, default-precision float32 products see TF32-rounded operands."""
@@ -42,10 +52,9 @@ def emulated_tf32():
             lhs, rhs = round_tf32(jnp.asarray(lhs)), round_tf32(jnp.asarray(rhs))
         return original(lhs, rhs, dimension_numbers, precision, *args, **kwargs)
 
-    jax.clear_caches()
     _lax.dot_general = dot_general
     try:
-        yield
+        with _block(next(_blocks)):  # this block's own traces (a test may patch more)
+            yield
     finally:
         _lax.dot_general = original
-        jax.clear_caches()
