@@ -12,8 +12,10 @@ defaults:
 
 ``extent`` is the scene size that makes the position rate unit-free; for scenes use
 :func:`camera_extent` (3DGS: 1.1 × the largest distance of a camera centre from their
-mean). 3DGS decays over 30k steps; a short CPU run should set ``lr_decay_steps`` to the
-number of steps it will take, so the schedule keeps its shape.
+mean). The schedule is a function of the step alone: ``T`` is a constant of the config
+(3DGS: 30k steps), never the length of the run, which a continual learner cannot know.
+The step count ``t`` is the optimiser state's (a traced array), so one compiled step
+serves runs of every length.
 
 The step takes the frame and its camera as arrays (``rgb, depth, fx, fy, cx, cy,
 pose``): only the image size is static, so one compiled step serves every frame of a
