@@ -60,8 +60,9 @@ TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
 # the object scene (64 px, 5k splats, 30 frames, 600 static steps): weight 0.1 vs 0 gave
 # PSNR 21.44 vs 21.32 and depth L1 0.077 vs 0.093.
 SCENE_DEPTH_WEIGHT = 0.1
-# Steps over which the position rate decays 100-fold (3DGS: 30k): a constant of the
-# schedule, not the run's length (one default continual run: 60 frames x 50 steps).
+# Steps over which the position rate decays 100-fold (3DGS: 30k over its 30k steps): a
+# constant of the schedule, not the run's length, which a continual learner cannot know.
+# Not tuned: the length of one default continual run (60 frames x 50 steps).
 SCENE_LR_DECAY_STEPS = 3000
 DEFAULT_CONFIG = TrainConfig(depth_weight=SCENE_DEPTH_WEIGHT,
                              lr_decay_steps=SCENE_LR_DECAY_STEPS)
@@ -105,7 +106,7 @@ class GradientLearner:
     def __init__(self, task, scene: Scene, config: TrainConfig | None = None):
         self.task = task
         config = task.baseline if config is None else config
-        self.config = replace(config, lr_decay_steps=total_steps(task, scene))
+        self.config = config  # its schedule reads the step, never the stream's length
         self.key = init_key(task)
         self.replay = parse_replay(task.replay, seed=task.seed)
         self.losses: list[np.ndarray] = []
