@@ -47,7 +47,7 @@ from vbgs.baseline import (
     reset_moments,
     to_splats,
 )
-from vbgs.baseline.densify import DEAD_OPACITY
+from vbgs.baseline.densify import DEAD_OPACITY, DensifyConfig
 from vbgs.baseline.params import place
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference import grow
@@ -66,8 +66,16 @@ SCENE_DEPTH_WEIGHT = 0.1
 # constant of the schedule, not the run's length, which a continual learner cannot know.
 # Not tuned: the length of one default continual run (60 frames x 50 steps).
 SCENE_LR_DECAY_STEPS = 3000
+# Steps between relocations of dead splats (vbgs.baseline.densify; the image task keeps
+# DensifyConfig's 100). Chosen on validation views: results/tuning/baseline-densify
+# (python -m experiments.run tune --scene object room --method gradient --components 5000
+# --size 64 --init data --protocol static --steps 600 --grid baseline.densify.every=50,100,200
+# --out results/tuning/baseline-densify): 200 gave 25.82 dB mean, 50 25.75, 100 25.65; the
+# gain is the object's (+0.40 dB; room -0.05) and not monotone in the spacing.
+SCENE_DENSIFY_EVERY = 200
 DEFAULT_CONFIG = TrainConfig(depth_weight=SCENE_DEPTH_WEIGHT,
-                             lr_decay_steps=SCENE_LR_DECAY_STEPS)
+                             lr_decay_steps=SCENE_LR_DECAY_STEPS,
+                             densify=DensifyConfig(every=SCENE_DENSIFY_EVERY))
 # The splats start isotropic at sigma = START_COV_SCALE * ell (half the cell each covers,
 # the general prior's scale, vbgs.inference.model.PriorConfig), whatever covariance the task's prior
 # gives VBGS's model (tuned for VBGS, flattened along surfaces: vbgs.inference.model.SURFACE_PRIOR).
