@@ -23,7 +23,11 @@ The method's other constants, the task's nested configs (``prior``: the
 :class:`vbgs.mapping.Config`), are tuned on the same views by dotted name: a grid entry
 ``prior.cov_scale=0.2,0.3,0.5``, ``growth.reach_cells=1.5,2,3`` or
 ``evidence.pass_sigmas=1,2,3`` changes the fit, so the stream is learned once per value,
-and every render setting of the grid is scored on each of those streams.
+and every render setting of the grid is scored on each of those streams. The gradient
+baseline's constants are the task's ``baseline`` (:class:`vbgs.baseline.TrainConfig`),
+reached the same way (``baseline.lr_means``, ``baseline.depth_weight``,
+``baseline.densify.every``); under ``--protocol static`` its run is ``task.steps`` steps
+on all training frames, as :func:`experiments.protocol.static_protocol` trains it.
 """
 
 from __future__ import annotations
