@@ -71,7 +71,9 @@ SCENE_LR_DECAY_STEPS = 3000
 # (python -m experiments.run tune --scene object room --method gradient --components 5000
 # --size 64 --init data --protocol static --steps 600 --grid baseline.densify.every=50,100,200
 # --out results/tuning/baseline-densify): 200 gave 25.82 dB mean, 50 25.75, 100 25.65; the
-# gain is the object's (+0.40 dB; room -0.05) and not monotone in the spacing.
+# gain is the object's (+0.40 dB; room -0.05) and not monotone in the spacing. Under seed
+# 1 (results/tuning/baseline-densify-seed1) 200 again led 100: 26.25 vs 26.05 dB mean
+# (object +0.56, room -0.16); one seed to the next moves a scene by up to 1 dB.
 SCENE_DENSIFY_EVERY = 200
 DEFAULT_CONFIG = TrainConfig(depth_weight=SCENE_DEPTH_WEIGHT,
                              lr_decay_steps=SCENE_LR_DECAY_STEPS,
