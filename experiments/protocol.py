@@ -136,7 +136,7 @@ class SceneResult:
 def task_settings(task) -> dict:
     """The task's settings as a flat dict (hyperparameter objects left out)."""
     settings = asdict(task)
-    for nested in ("prior", "growth", "evidence"):
+    for nested in ("prior", "growth", "evidence", "baseline"):
         settings.pop(nested, None)
     return settings
 
@@ -146,6 +146,15 @@ def scene_background(task, estimate: bg.BackgroundEstimate) -> np.ndarray:
     is an RGB triple, else the estimate from the frames seen so far."""
     fixed = bg.parse_background(task.background)
     return fixed if fixed is not None else bg.colour(estimate)
+
+
+def static_background(task, scene: Scene) -> np.ndarray:
+    """The background ``[3]`` of the static protocol: the task's, or the estimate from all
+    training frames (a static learner sees them all before it starts)."""
+    estimate = bg.empty()
+    for frame in scene.train:
+        estimate = bg.observe(estimate, frame.rgb, frame.depth, holes=measured(task))
+    return scene_background(task, estimate)
 
 
 def task_sensor(task) -> SensorConfig:
@@ -269,10 +278,7 @@ def static_protocol(task, scene: Scene, learner, frames: list, *, progress: bool
     ``frames`` (in the learner's own form; the background estimated from all of them),
     then score the test views. No forgetting metrics; ``seconds_per_frame`` is the
     training time over the number of training frames."""
-    estimate = bg.empty()
-    for frame in scene.train:
-        estimate = bg.observe(estimate, frame.rgb, frame.depth, holes=measured(task))
-    background = scene_background(task, estimate)
+    background = static_background(task, scene)
     bar = progress_bar(total=task.steps, desc="steps", unit="step", enabled=progress)
     start, c0 = time.perf_counter(), compile_seconds()
     for done in range(0, task.steps, PROGRESS_BLOCK):

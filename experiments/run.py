@@ -284,6 +284,13 @@ def _add_tune(sub):
     add_choice(p, "--init", INIT)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--background", default="auto", help="auto or R,G,B in [0, 1]")
+    add_choice(p, "--protocol", PROTOCOL)
+    p.add_argument("--steps", type=int, default=3000,
+                   help="gradient: steps on all frames (static protocol)")
+    p.add_argument("--steps-per-frame", type=int, default=50,
+                   help="gradient: steps per arriving frame (continual)")
+    p.add_argument("--replay", default=REPLAY_DEFAULT,
+                   help="gradient (continual): none | fifo:K | reservoir:K | full")
     p.add_argument("--grid", nargs="+", default=DEFAULT_GRID, metavar="NAME=V1,V2",
                    help="render settings (task fields) and their values, e.g. "
                         "splat_scale=0.5,0.7,1.0 opacity=0.5,0.9; model hyperparameters as "
@@ -319,7 +326,9 @@ def _tune(args) -> dict:
                        components=args.components, frames=args.frames, n_test=1,
                        n_val=args.val_views, size=args.size, order=args.order,
                        assign=args.assign, init=args.init, seed=args.seed,
-                       background=args.background) for scene in args.scene]
+                       background=args.background, protocol=args.protocol, steps=args.steps,
+                       steps_per_frame=args.steps_per_frame, replay=args.replay)
+             for scene in args.scene]
     grid = parse_grid(args.grid, tasks[0])  # bad grids fail before any work
     check_scene_components(args.components, args.frames, args.size)
     argv = ["tune", "--scene", *args.scene, *(["--format", args.format] if args.format else []),
@@ -327,12 +336,20 @@ def _tune(args) -> dict:
             "--frames", str(args.frames), "--val-views", str(args.val_views),
             "--size", size_text(args.size), "--order", args.order, "--assign", args.assign,
             "--init", args.init, "--seed", str(args.seed), "--background", args.background,
+            *(["--protocol", args.protocol, "--steps", str(args.steps), "--steps-per-frame",
+               str(args.steps_per_frame), "--replay", args.replay]
+              if args.method == "gradient" else []),
             "--grid", *args.grid, "--out", args.out]
-    per_scene, files, stream = {}, [], f"({args.order}, {args.assign} assignment)"
+    per_scene, files, stream = {}, [], f"streamed once ({args.order}, {args.assign} assignment)"
+    if args.method == "gradient":
+        stream = (f"learned by the gradient baseline in {args.steps} steps on all of them"
+                  if args.protocol == "static" else
+                  f"streamed once (gradient baseline, {args.steps_per_frame} steps per "
+                  f"frame, replay {args.replay})")
     for task, name in zip(tasks, names, strict=True):
         scene = load_task_scene(task)
         rows = tune(task, scene, grid, progress=True)
-        about = (f"{len(scene.train)} training frames streamed once {stream}; scores are "
+        about = (f"{len(scene.train)} training frames {stream}; scores are "
                  f"means over {len(scene.val)} validation views (no test view is rendered). "
                  f"Best first.")
         per_scene[name], inert = rows, inert_parameters(rows, grid)
@@ -340,8 +357,8 @@ def _tune(args) -> dict:
     if len(per_scene) > 1:  # one setting for every scene: the best mean
         rows = mean_over_scenes(per_scene, grid)
         about = (f"Validation PSNR, SSIM and depth L1 of each setting averaged over the scenes "
-                 f"{', '.join(per_scene)} (their own tables beside this one), each streamed "
-                 f"once {stream}. Best mean PSNR first: the setting to use for all of them.")
+                 f"{', '.join(per_scene)} (their own tables beside this one), each "
+                 f"{stream}. Best mean PSNR first: the setting to use for all of them.")
         inert = inert_parameters(rows, grid)
         files += write_tuning(rows, args.out, "mean", command_line(argv), _inert_note(about, inert))
     best = {k: v for k, v in rows[0].items() if k not in inert}  # inert values mean nothing

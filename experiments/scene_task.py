@@ -17,6 +17,7 @@ from experiments.check import check_calibration, warn_inconsistent, within_train
 from experiments.continual import check_segments
 from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
+from experiments.learners.gradient_learner import DEFAULT_CONFIG as BASELINE_CONFIG
 from experiments.protocol import SceneResult, static_protocol, stream_protocol
 from experiments.sensor_swap import learned_surface, simulate_training_depth
 from experiments.tracking import TrackedLearner, check_poses
@@ -38,6 +39,7 @@ from experiments.settings import (
     SENSOR,
     SENSOR_HOLES_DEFAULT,
 )
+from vbgs.baseline import TrainConfig
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene, parse_size
@@ -120,6 +122,10 @@ class SceneTask:
     evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
     # a frame's point budget (vbgs.mapping.budget): --budget-points, budget.points in tune
     budget: BudgetConfig = field(default_factory=BudgetConfig)
+    # the gradient baseline's constants (vbgs.baseline.TrainConfig: learning rates, depth
+    # weight, densification), reached the same way (baseline.lr_means, baseline.depth_weight,
+    # baseline.densify.every); its defaults: experiments.learners.gradient_learner
+    baseline: TrainConfig = BASELINE_CONFIG
 
     def __post_init__(self):
         try:  # "640x480" (a TOML string) or [640, 480] become (640, 480)

@@ -23,7 +23,11 @@ The method's other constants, the task's nested configs (``prior``: the
 :class:`vbgs.mapping.Config`), are tuned on the same views by dotted name: a grid entry
 ``prior.cov_scale=0.2,0.3,0.5``, ``growth.reach_cells=1.5,2,3`` or
 ``evidence.pass_sigmas=1,2,3`` changes the fit, so the stream is learned once per value,
-and every render setting of the grid is scored on each of those streams.
+and every render setting of the grid is scored on each of those streams. The gradient
+baseline's constants are the task's ``baseline`` (:class:`vbgs.baseline.TrainConfig`),
+reached the same way (``baseline.lr_means``, ``baseline.depth_weight``,
+``baseline.densify.every``); under ``--protocol static`` its run is ``task.steps`` steps
+on all training frames, as :func:`experiments.protocol.static_protocol` trains it.
 """
 
 from __future__ import annotations
@@ -39,7 +43,12 @@ import pandas as pd
 
 from experiments.bench import machine
 from experiments.learners import LEARNERS
-from experiments.protocol import evaluate_validation, stream_frames
+from experiments.protocol import (
+    PROGRESS_BLOCK,
+    evaluate_validation,
+    static_background,
+    stream_frames,
+)
 from vbgs.data.streams import stream_order
 from vbgs.mapping import dotted_names, get_dotted, with_dotted
 
@@ -49,7 +58,7 @@ FIT_FIELDS = frozenset({
     "scene", "format", "method", "components", "frames", "n_test", "n_val", "size", "order",
     "assign", "estep", "candidates", "init", "seed", "depth_model", "depth_kind",
     "depth_preset", "depth_align", "background", "replay", "steps_per_frame", "steps",
-    "protocol", "prior", "growth", "evidence", "budget", "opacity_rule",
+    "protocol", "prior", "growth", "evidence", "budget", "baseline", "opacity_rule",
 })
 
 # Render settings whose data a learner gathers while learning, under one value only (the
@@ -62,8 +71,9 @@ GATHERED = {"colour_rule": "fit"}
 # Render settings that only the final solve reads, never what is gathered: no re-learning.
 SOLVE_ONLY = frozenset({"colour_ridge"})
 # Task fields holding a nested config of method constants, reached as ``NAME.FIELD``: model
-# hyperparameters, learned anew for each value.
-NESTED = ("prior", "growth", "evidence", "budget")
+# hyperparameters, learned anew for each value (``baseline``: the gradient baseline's
+# trainer, vbgs.baseline.TrainConfig, with its densification as ``baseline.densify.NAME``).
+NESTED = ("prior", "growth", "evidence", "budget", "baseline")
 
 
 def is_nested_setting(name: str) -> bool:
@@ -72,9 +82,9 @@ def is_nested_setting(name: str) -> bool:
     return name.partition(".")[0] in NESTED and "." in name
 
 
-def nested_names() -> list[str]:
-    """Every dotted name the grid accepts."""
-    return [n for n in dotted_names() if n.partition(".")[0] in NESTED]
+def nested_names(task) -> list[str]:
+    """Every dotted name the grid accepts: the leaf fields of the task's nested configs."""
+    return [n for n in dotted_names(task) if n.partition(".")[0] in NESTED]
 
 
 def with_setting(task, setting: dict):
@@ -104,7 +114,7 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
     """``["name=v1,v2", ...]`` -> ``{name: [v1, v2]}``, each value converted to the type
     of the task's current value of ``name`` (float when that is None)."""
     known = {f.name for f in fields(task)}
-    known_prior = set(nested_names())
+    known_prior = set(nested_names(task))
     grid: dict[str, list] = {}
     for spec in specs:
         name, sep, values = spec.partition("=")
@@ -153,8 +163,16 @@ def settings(grid: dict[str, list]) -> list[dict]:
 
 def learn_once(task, scene, *, progress: bool = False):
     """The task's learner after one pass of the training stream, and the background
-    estimated over it."""
+    estimated over it; under ``protocol="static"`` (a learner that trains on all frames,
+    the gradient baseline) after ``task.steps`` steps on all training frames, as
+    :func:`experiments.protocol.static_protocol` trains it."""
     learner = LEARNERS[task.method](task, scene)
+    if task.protocol == "static" and "static" in type(learner).PROTOCOLS:
+        background = static_background(task, scene)
+        frames = learner.static_frames(scene)
+        for done in range(0, task.steps, PROGRESS_BLOCK):
+            learner.train(frames, min(PROGRESS_BLOCK, task.steps - done), background)
+        return learner, background
     background = None
     order = stream_order(len(scene.train), task.order, seed=task.seed)
     for _, frame, background in stream_frames(task, scene, order, progress=progress):

@@ -74,6 +74,21 @@ def test_gradient_learner_starts_where_vbgs_starts():
                                rtol=1e-6)
 
 
+def test_learning_rate_schedule_is_per_step_not_per_stream():
+    """The schedule is the task's ``baseline`` config alone: a stream or a static run of
+    any step count gets the same schedule and (on one scene) the same compiled step."""
+    from dataclasses import replace
+
+    from experiments.learners.gradient_learner import DEFAULT_CONFIG
+    stream, static = tiny_task(steps_per_frame=9), tiny_task(protocol="static", steps=77)
+    scene_static, _ = prepare_scene(static)
+    a, b = GradientLearner(stream, scene_static), GradientLearner(static, scene_static)
+    assert a.config == b.config == DEFAULT_CONFIG
+    assert a.trainer.step_fn is b.trainer.step_fn  # one compile for both
+    tuned = replace(static, baseline=replace(DEFAULT_CONFIG, lr_means=3e-4))
+    assert GradientLearner(tuned, scene_static).config.lr_means == 3e-4
+
+
 @pytest.mark.parametrize("change, match", [
     (dict(protocol="batch"), "unknown protocol"), (dict(replay="fifo"), "needs a size"),
 ])

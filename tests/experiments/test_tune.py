@@ -107,6 +107,30 @@ def test_a_prior_value_equals_a_fresh_stream_under_that_prior():
     assert by_value[0.2] == pytest.approx(fresh.psnr, abs=1e-4)
 
 
+def test_the_gradient_baseline_is_tuned_static_by_its_dotted_constants():
+    """``baseline.NAME`` (the baseline's TrainConfig, densification included) is typed by
+    its field; under the static protocol each value's row equals a fresh static run."""
+    from experiments.learners import GradientLearner
+    from experiments.protocol import PROGRESS_BLOCK, static_background
+
+    task = replace(TINY, method="gradient", protocol="static", steps=PROGRESS_BLOCK + 5)
+    grid = parse_grid(["baseline.depth_weight=0,0.5", "baseline.densify.every=7"], task)
+    assert grid == {"baseline.depth_weight": [0.0, 0.5], "baseline.densify.every": [7]}
+    scene = load_task_scene(task)
+    rows = tune(task, scene, grid)
+    by_value = {r["baseline.depth_weight"]: r["val_psnr"] for r in rows}
+    assert by_value[0.0] != by_value[0.5]
+    fresh_task = tune_module.with_setting(task, {"baseline.depth_weight": 0.5,
+                                                 "baseline.densify.every": 7})
+    assert fresh_task.baseline.densify.every == 7 and fresh_task.baseline.depth_weight == 0.5
+    learner = GradientLearner(fresh_task, scene)
+    frames, background = learner.static_frames(scene), static_background(fresh_task, scene)
+    learner.train(frames, PROGRESS_BLOCK, background)
+    learner.train(frames, 5, background)
+    fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
+    assert by_value[0.5] == pytest.approx(fresh.psnr, abs=1e-4)
+
+
 def test_a_parameter_that_changes_no_score_is_named():
     grid = {"splat_scale": [0.5, 1.0], "opacity": [0.3, 0.9]}
     rows = [{"splat_scale": s, "opacity": o, "val_psnr": 20.0 + s}  # opacity: no effect

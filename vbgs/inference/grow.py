@@ -67,7 +67,10 @@ LEVELS = 4
 NORMAL_NEIGHBOURS = 12
 # Points farther than this many level-0 cells from every component are beyond the
 # model's reach (see reach_of): more than the cell diagonal sqrt(3), so ground the rule
-# has covered (a component in the point's own cell) is always within reach.
+# has covered (a component in the point's own cell) is always within reach. Chosen on
+# validation views: results/tuning/reach (python -m experiments.run tune --scene object
+# room walk --grid growth.reach_cells=1.5,2,3 --out results/tuning/reach): 1.5, 2 and 3
+# are within 0.01 dB of each other, so 2 is kept (confirmed, not re-chosen).
 REACH_CELLS = 2.0
 # Coarse levels far ground may use (point_levels): cells up to 2^5 = 32 times the
 # level-0 side, for ground seen 32 times more coarsely than the first frame's median

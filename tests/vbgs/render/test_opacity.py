@@ -87,10 +87,10 @@ def test_holes_in_a_surface_do_not_lower_opacity():
 
 
 def test_the_sensor_noise_widens_the_hit_band():
-    """A wall measured 6 cm behind a 2 cm thin component: a pass under exact depth
-    (beyond 2 sigma); a hit when the sensor's own sigma is 5 cm."""
+    """A wall measured PASS_SIGMAS + 1 sigma behind a 2 cm thin component: a pass under
+    exact depth; a hit when the sensor's own sigma is 5 cm."""
     cam, depth, means, covs = toy()
-    far = np.full_like(depth, 2.06)
+    far = np.full_like(depth, 2.0 + 0.02 * (opacity.PASS_SIGMAS + 1))
     exact = opacity.observe(opacity.no_evidence(4), means, covs, cam, far)
     noisy = opacity.observe(opacity.no_evidence(4), means, covs, cam, far,
                             sensor_var=np.full(4, 0.05**2))
