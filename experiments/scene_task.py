@@ -37,6 +37,7 @@ from experiments.settings import (
     SENSOR,
     SENSOR_HOLES_DEFAULT,
 )
+from vbgs.components import parse_components
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene
@@ -57,7 +58,7 @@ class SceneTask:
     scene: str = "object"
     format: str | None = FORMAT.default
     method: str = METHOD.default
-    components: int = 20000
+    components: int | str = 20000  # K, or "auto" / "auto:MAX" (vbgs.components)
     frames: int = 60
     n_test: int = 8
     n_val: int = 4  # validation views (tuning only: never scored by the protocol)
@@ -117,7 +118,14 @@ class SceneTask:
     evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
 
     def __post_init__(self):
-        for name in ("components", "frames", "size", "steps_per_frame", "steps"):
+        if parse_components(self.components)[0] and (self.method == "gradient"
+                                                     or self.init != "stream"):
+            which = (f"--method {self.method}" if self.method == "gradient"
+                     else f"--init {self.init}")
+            raise ValueError(f"components {self.components!r} is chosen by VBGS as frames "
+                             f"arrive (--init stream); {which} takes a number of "
+                             f"components: give one")
+        for name in ("frames", "size", "steps_per_frame", "steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -224,6 +232,7 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
         result = stream_protocol(task, scene, learner, progress=progress, ply=ply)
     details = learner.details(result)
     warn_unlearned(details.get("points_unlearned", 0.0), task)
+    warn_capped(details, task)
     warn_uncovered(result.uncovered)
     return replace(result, depth=depth_report, details=details,
                    settings={**result.settings, **what_ran(task, scene)})
@@ -255,6 +264,16 @@ def warn_unlearned(share: float, task) -> None:
               f"{task.components} components were spent before the stream reached that "
               f"ground, so the renders miss it; give more --components (the JSON's "
               f"points_unlearned says how much)", file=sys.stderr)
+
+
+def warn_capped(details: dict, task) -> None:
+    """Say on stderr when ``components = "auto"`` reached its most components: from then
+    on it merged the cheapest neighbours to make room, as a fixed K does."""
+    if details.get("components_capped"):
+        print(f"warning: --components {task.components} reached its ceiling of "
+              f"{details['components_capacity']} components; from then on the cheapest "
+              f"neighbours were merged to make room for new ground, so the count is the "
+              f"ceiling's, not the data's; give a higher ceiling (auto:MAX)", file=sys.stderr)
 
 
 # A share of the test views' surface pixels drawn as background above this is said.

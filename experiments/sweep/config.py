@@ -87,6 +87,17 @@ def _sensor_holes(value: str) -> str | None:
     return None
 
 
+def _components(value) -> str | None:
+    """The problem :func:`vbgs.components.parse_components` finds, or None."""
+    from vbgs.components import parse_components  # plain Python
+
+    try:
+        parse_components(value)
+    except ValueError as err:
+        return str(err)
+    return None
+
+
 def _sensor_level(value) -> str | None:
     if not (math.isfinite(value) and value >= 0):
         return "must be a finite number >= 0 (0: exact depth values, 1: the published model)"
@@ -110,7 +121,9 @@ SETTINGS: dict[str, Spec] = {
     "dataset": Spec(_STR, "photo name, synthetic scene (object, room, walk) or a dataset path"),
     "method": Spec(_STR, METHOD.help, METHOD.values),
     "size": Spec(_INT, "image side / frame width in pixels", minimum=1),
-    "components": Spec(_INT, "mixture components (capacity)", minimum=1),
+    "components": Spec((int, str), "mixture components: the capacity K, or \"auto\" / "
+                       "\"auto:MAX\" (chosen from the data, at most MAX)",
+                       check=_components),
     "iters": Spec(_INT, "CAVI iterations of a batch image fit", minimum=1),
     "init": Spec(_STR, "component initialisation (data, random: oracle starts on a stream)",
                  INIT.values),

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from vbgs.inference import grow
+from vbgs.components import AUTO_MERGE_EVERY, AUTO_POINTS, parse_components
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
 from vbgs.render import colour_fit, opacity
@@ -37,8 +38,6 @@ REFINE_SHARE = 0.05
 # stream meeting new ground every frame merges every few frames, not every frame (each
 # round searches every component's neighbours: 0.1-0.2 s at K = 20k).
 MERGE_AHEAD = 0.02
-
-
 def _positive(owner: str, name: str, value, *, upper: float | None = None) -> None:
     ok = isinstance(value, (int, float)) and math.isfinite(value) and value > 0
     if not ok or (upper is not None and value > upper):
@@ -57,7 +56,10 @@ class GrowthConfig:
     reach_cells: points farther than this many cells from every component are left
         out of the update (:func:`vbgs.inference.grow.reach_of`);
     coarse_levels: coarse cells (side ``cell * 2^j``, j at most this) for ground seen
-        coarsely (:func:`vbgs.inference.grow.point_levels`; 0: one cell side everywhere).
+        coarsely (:func:`vbgs.inference.grow.point_levels`; 0: one cell side everywhere);
+    auto_points, auto_merge_every: ``components="auto"`` only (``mapper._auto_room``):
+        first-frame points per level-0 cell (the resolution), frames between rounds of
+        merges scored by the bound.
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -69,9 +71,15 @@ class GrowthConfig:
     merge: bool = True
     merge_ahead: float = MERGE_AHEAD
     coarse_from: float = grow.COARSE_FROM
+    auto_points: float = AUTO_POINTS
+    auto_merge_every: int = AUTO_MERGE_EVERY
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
+        _positive("growth", "auto_points", self.auto_points)
+        if not isinstance(self.auto_merge_every, int) or self.auto_merge_every < 1:
+            raise ValueError(f"growth.auto_merge_every must be a positive integer (frames), "
+                             f"got {self.auto_merge_every!r}")
         _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
         _positive("growth", "reach_cells", self.reach_cells)
         if not (isinstance(self.refine_share, (int, float)) and 0 <= self.refine_share <= 1):
@@ -169,14 +177,16 @@ def _choice(name: str, value, choices: tuple[str, ...]) -> None:
 class Config:
     """Everything the scene learner needs besides the data and the key.
 
-    components: the capacity K (static shapes: a fixed number of slots);
+    components: the capacity K (static shapes: a fixed number of slots), or ``"auto"`` /
+        ``"auto:MAX"``: K chosen from the data (``mapper._auto_room``; slots grow in
+        buckets, at most MAX; :func:`vbgs.components.parse_components`);
     assign: responsibilities under the fixed ``prior`` (a stream equals one batch when
         the reference does not grow) or the current ``posterior``;
     estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
     prior, growth, evidence, render, sensor: the nested groups above.
     """
 
-    components: int = 20000
+    components: int | str = 20000
     assign: str = "prior"
     estep: str = "sparse"
     candidates: int = DEFAULT_CANDIDATES
@@ -187,15 +197,25 @@ class Config:
     sensor: SensorConfig = field(default_factory=SensorConfig)
 
     def __post_init__(self):
-        for name in ("components", "candidates"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        parse_components(self.components)
+        value = self.candidates
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise ValueError(f"candidates must be a positive integer, got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
         if not self.sensor.exact and self.estep != "sparse":
             raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
                              f"estep='sparse': its noise is modelled in the sparse E-step")
+
+    @property
+    def auto(self) -> bool:
+        """The component count is chosen from the data (``components="auto[:MAX]"``)."""
+        return parse_components(self.components)[0]
+
+    @property
+    def max_components(self) -> int:
+        """The capacity K, or under ``auto`` the most components it may use."""
+        return parse_components(self.components)[1]
 
 
 def dotted_names(config: Any = None, prefix: str = "") -> list[str]:
