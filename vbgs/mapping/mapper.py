@@ -32,6 +32,13 @@ RGB, z-depth):
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
 
+With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows at the
+resolution of the first frame's points (``growth.auto_points`` of them per cell), merges
+every few frames the neighbours whose merge raises the bound
+(:func:`vbgs.inference.merge.bound_pairs`) and grows the slots in buckets
+(:mod:`vbgs.inference.capacity`) up to MAX (``MapState.capped`` once reached); see
+``_auto_room``.
+
 The state is a NamedTuple and is never changed in place; it holds, beside arrays, the
 host-side objects a stream needs (the growth rule, and the stepper: the compiled update
 with the reference's terms, replaced when the reference grows). Under prior assignment
