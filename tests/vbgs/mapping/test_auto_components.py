@@ -36,6 +36,7 @@ def test_buckets_double_up_to_the_ceiling():
         [64, 64, 128, 256, 1000, 1000]
 
 
+@pytest.mark.slow
 def test_capacity_grows_in_buckets_without_a_compilation_per_frame(scene, monkeypatch):
     monkeypatch.setattr(MAPPER, "AUTO_BUCKET", 64)  # small buckets: several per stream
     config = mapping.Config(components="auto")
@@ -55,6 +56,7 @@ def test_capacity_grows_in_buckets_without_a_compilation_per_frame(scene, monkey
     assert stepper._step._cache_size() <= len(set(capacities)) + 1 < len(scene.train)
 
 
+@pytest.mark.slow
 def test_auto_reaches_its_ceiling_says_so_and_keeps_to_it(scene):
     config = mapping.Config(components="auto:300")
     state = mapping.init(config, key=jax.random.key(0))
