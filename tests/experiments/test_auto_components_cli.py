@@ -48,3 +48,20 @@ def test_sweep_accepts_auto_for_vbgs_scene_cells_only():
             assert "grid[0].components" in str(err) and words in str(err), err
         else:
             raise AssertionError(f"{bad!r} was accepted")
+
+
+def test_tables_and_plot_show_the_k_auto_chose(tmp_path):
+    import pandas as pd
+
+    from experiments.sweep.plots import plot_psnr_vs_components
+    from experiments.sweep.report import summary_table
+
+    df = pd.DataFrame([
+        {"task": "scene", "dataset": "object", "method": "vbgs", "components": k,
+         "psnr": p, "components_used": u, "components_chosen": c}
+        for k, p, u, c in (("auto", 24.0, 9009, 9012), (5000, 23.8, 4925, None),
+                           (20000, 25.7, 19842, None))])
+    table, _ = summary_table(df, ["dataset", "components"])
+    assert "K chosen" in table and "9012" in table and "| auto " in table
+    path, why = plot_psnr_vs_components(df, ["method"], tmp_path / "k.png")
+    assert why == "" and path.stat().st_size > 5_000
