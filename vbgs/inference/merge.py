@@ -48,7 +48,11 @@ is the data's verdict, both ways: one Gaussian explaining points that two explai
 better costs likelihood, and each component pays its own Occam factor (its KL to its
 prior, about ``(p/2) log N_k`` nats for p parameters) that a merge saves. So ``gain > 0``
 exactly when one component explains the pair's points better than two, by the bound;
-:func:`bound_pairs` takes such pairs, best first, disjoint.
+:func:`bound_pairs` takes such pairs, best first, disjoint. Measured on the object's
+validation views (128 px, 60 frames, ``auto`` at 2 points per cell: `python -m
+experiments.run tune --scene object --components auto --grid growth.merge=true,false`):
+24.55 dB with 9009 components drawn with these merges, 23.59 dB with 15196 without; the
+merges drop the components that births on sparse ground start and the data never back.
 
 Precision: costs are computed on the host in float64 (log-determinants of nearly flat
 3x3 covariances differ in their last float32 digits); the merged statistics are sums,

@@ -76,7 +76,11 @@ class GrowthConfig:
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
-        _positive("growth", "auto_points", self.auto_points)
+        if not (isinstance(self.auto_points, (int, float)) and math.isfinite(self.auto_points)
+                and self.auto_points >= 1):
+            raise ValueError(f"growth.auto_points must be a number >= 1 (a level-0 cell holds "
+                             f"at least one of the first frame's points; fewer asks for more "
+                             f"cells than there are points), got {self.auto_points!r}")
         if not isinstance(self.auto_merge_every, int) or self.auto_merge_every < 1:
             raise ValueError(f"growth.auto_merge_every must be a positive integer (frames), "
                              f"got {self.auto_merge_every!r}")
