@@ -88,13 +88,17 @@ def _sensor_holes(value: str) -> str | None:
 
 
 def _components(value) -> str | None:
-    """The problem :func:`vbgs.components.parse_components` finds, or None."""
+    """A count is checked by the minimum; text must be ``auto`` or ``auto:MAX``
+    (:func:`vbgs.components.parse_components`)."""
     from vbgs.components import parse_components  # plain Python
 
+    if not isinstance(value, str):
+        return None
     try:
         parse_components(value)
-    except ValueError as err:
-        return str(err)
+    except ValueError:
+        return ("must be an integer (without quotes), \"auto\" or \"auto:MAX\" "
+                "(MAX a positive integer)")
     return None
 
 
@@ -123,7 +127,7 @@ SETTINGS: dict[str, Spec] = {
     "size": Spec(_INT, "image side / frame width in pixels", minimum=1),
     "components": Spec((int, str), "mixture components: the capacity K, or \"auto\" / "
                        "\"auto:MAX\" (chosen from the data, at most MAX)",
-                       check=_components),
+                       minimum=1, check=_components),
     "iters": Spec(_INT, "CAVI iterations of a batch image fit", minimum=1),
     "init": Spec(_STR, "component initialisation (data, random: oracle starts on a stream)",
                  INIT.values),
@@ -220,7 +224,7 @@ def _check_value(key: str, value, spec: Spec, where: str) -> None:
     if spec.choices and value not in spec.choices:
         raise ConfigError(f"{where}: must be one of {', '.join(map(str, spec.choices))}, "
                           f"got {value!r}")
-    if spec.minimum is not None and value < spec.minimum:
+    if spec.minimum is not None and not isinstance(value, str) and value < spec.minimum:
         what = "positive" if spec.minimum == 1 else f">= {spec.minimum}"
         raise ConfigError(f"{where}: must be a {what} integer, got {value!r}")
     if spec.check is not None and (problem := spec.check(value)):

@@ -41,7 +41,7 @@ def test_sweep_accepts_auto_for_vbgs_scene_cells_only():
     assert {c["components"] for c in auto} == {"auto", "auto:9000"}
     assert all(c["task"] == "scene" and c.get("method", "vbgs") == "vbgs" for c in auto)
     assert any("components = \"auto\" is chosen by VBGS" in s.reason for s in plan.skipped)
-    for bad, words in (("auto:0", "auto:MAX"), ("abc", "'auto'"), (0, "positive integer")):
+    for bad, words in (("auto:0", "auto:MAX"), ("abc", "\"auto\""), (0, "positive integer")):
         try:
             parse_config(_grid([bad]))
         except ConfigError as err:
