@@ -15,8 +15,14 @@ AUTO_BUCKET = 4096
 # The most components "auto" may use without ":MAX" (a memory ceiling: a bucket size).
 AUTO_MAX_COMPONENTS = 131072
 # "auto": first-frame points per level-0 cell (the resolution, in the sensor's own
-# samples, that fixes the cell side in place of a share of K: mapper._auto_room).
-AUTO_POINTS = 2.0
+# samples, that fixes the cell side in place of a share of K: mapper._auto_room). Chosen
+# on VALIDATION views, the best mean over object, room and walk, by `python -m
+# experiments.run tune --scene object room walk --components auto --frames 60 --size 128
+# --grid growth.auto_points=1,2,4 --out results/tuning/components` (mean.md): mean PSNR
+# 21.89 / 21.83 / 20.15 dB at 4 / 2 / 1 (object 23.94 / 24.55 / 24.10 with 5153 / 9009 /
+# 15300 components; room 22.71 / 23.07 / 23.05 with 22.9k / 41.8k / 70.5k; walk 19.03 /
+# 17.87 / 13.29 with 13.4k / 36.9k / 131k: finer cells leave the walk's views holed).
+AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
 # bound_pairs); each round searches every component's neighbours (0.1-0.2 s at 20k).
 AUTO_MERGE_EVERY = 4
