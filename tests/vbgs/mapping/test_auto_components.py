@@ -47,23 +47,23 @@ def test_capacity_grows_in_buckets_without_a_compilation_per_frame(scene, monkey
         state, _ = mapping.update(state, frame, config)
         capacities.append(state.mixture.prior.n_components)
         active.append(int(grow.is_active(state.mixture.prior).sum()))
-    # measured: capacities 256, 512, 512, 1024 x5; 234 active after the first frame, 723
-    # at the end (the same 723 as with one bucket of 4096: empty slots change nothing)
+    # measured: capacities 256, 256, 512 x6; 152 active after the first frame, 399 at
+    # the end (the same 399 as with one bucket of 4096: empty slots change nothing)
     assert capacities == sorted(capacities) and len(set(capacities)) >= 2
     assert all(c in (64, 128, 256, 512, 1024) for c in capacities)
-    assert 500 < active[-1] <= capacities[-1] and not state.capped
+    assert 300 < active[-1] <= capacities[-1] and not state.capped
     # one compiled step per capacity (and point bucket), not one per frame
     assert stepper._step._cache_size() <= len(set(capacities)) + 1 < len(scene.train)
 
 
 @pytest.mark.slow
 def test_auto_reaches_its_ceiling_says_so_and_keeps_to_it(scene):
-    config = mapping.Config(components="auto:300")
+    config = mapping.Config(components="auto:200")
     state = mapping.init(config, key=jax.random.key(0))
-    for frame in scene.train[:3]:  # measured: 150 active after frame 0, 300 after frame 1
+    for frame in scene.train[:3]:  # measured: 100, 200, 200 active; capped on frame 2
         state, _ = mapping.update(state, frame, config)
-    assert state.capped and state.mixture.prior.n_components == 300
-    assert grow.is_active(state.mixture.prior).sum() <= 300
+    assert state.capped and state.mixture.prior.n_components == 200
+    assert grow.is_active(state.mixture.prior).sum() <= 200
 
 
 @pytest.mark.slow
@@ -75,6 +75,6 @@ def test_bound_merges_make_auto_smaller_than_births_alone(scene):
         for frame in scene.train:
             state, _ = mapping.update(state, frame, config)
         counts[merge] = int(grow.is_active(state.mixture.prior).sum())
-    # measured 723 with merges, 774 without
-    assert counts[True] < 0.95 * counts[False]
+    # measured 399 with merges, 423 without
+    assert counts[True] <= counts[False] - 15
     np.testing.assert_array_less(0, counts[True])
