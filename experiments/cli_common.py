@@ -60,8 +60,10 @@ def check_output_file(path: str | None, flag: str, suffix: str) -> Path | None:
 
 def check_fewer_components(components: int, points: int, what: str, fix: str) -> None:
     """Refuse at least as many components as data points: each point could get its own
-    component, so the fit is trivially exact and its score says nothing about the model."""
-    if components >= points:
+    component, so the fit is trivially exact and its score says nothing about the model.
+    ``auto`` counts (a string, :func:`vbgs.mapping.config.parse_components`) pass: the
+    data choose them, and their ceiling is only a ceiling."""
+    if isinstance(components, int) and components >= points:
         raise ValueError(
             f"--components {components} is not fewer than the {points} pixels to fit "
             f"({what}): each pixel could get its own component, so the score would mean "

@@ -55,6 +55,7 @@ from experiments.settings import (
     STREAM,
     add_choice,
 )
+from vbgs.components import AUTO_MAX_COMPONENTS, components_arg
 
 
 def _add_fit_image(sub):
@@ -105,7 +106,10 @@ def _add_fit_scene(sub):
     p.add_argument("--scene", default="object", help="object | room | walk | a dataset folder")
     add_choice(p, "--format", FORMAT)
     add_choice(p, "--method", METHOD)
-    p.add_argument("--components", type=int, default=20000, help="components / splat capacity")
+    p.add_argument("--components", type=components_arg, default=20000, metavar="K|auto[:MAX]",
+                   help="components / splat capacity K, or auto: the count chosen from the "
+                        "data (at most MAX, default %d; the JSON's components_chosen)"
+                        % AUTO_MAX_COMPONENTS)
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
     p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)
@@ -275,7 +279,7 @@ def _add_tune(sub):
                         "OUT/mean.csv ranks the settings by their mean over the scenes")
     add_choice(p, "--format", FORMAT)
     add_choice(p, "--method", METHOD)
-    p.add_argument("--components", type=int, default=20000)
+    p.add_argument("--components", type=components_arg, default=20000, metavar="K|auto[:MAX]")
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--val-views", type=int, default=4, help="validation views (at most)")
     p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)

@@ -40,6 +40,7 @@ from experiments.settings import (
     SENSOR_HOLES_DEFAULT,
 )
 from vbgs.baseline import TrainConfig
+from vbgs.components import parse_components
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene, parse_size
@@ -61,7 +62,7 @@ class SceneTask:
     scene: str = "object"
     format: str | None = FORMAT.default
     method: str = METHOD.default
-    components: int = 20000
+    components: int | str = 20000  # K, or "auto" / "auto:MAX" (vbgs.components)
     frames: int = 60
     n_test: int = 8
     n_val: int = 4  # validation views (tuning only: never scored by the protocol)
@@ -132,7 +133,14 @@ class SceneTask:
             object.__setattr__(self, "size", parse_size(self.size))
         except ValueError as err:
             raise ValueError(f"size: {err}") from None
-        for name in ("components", "frames", "steps_per_frame", "steps"):
+        if parse_components(self.components)[0] and (self.method == "gradient"
+                                                     or self.init != "stream"):
+            which = (f"--method {self.method}" if self.method == "gradient"
+                     else f"--init {self.init}")
+            raise ValueError(f"components {self.components!r} is chosen by VBGS as frames "
+                             f"arrive (--init stream); {which} takes a number of "
+                             f"components: give one")
+        for name in ("frames", "steps_per_frame", "steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -280,6 +288,7 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
         depth_report = arrivals.report()
     details = learner.details(result)
     warn_unlearned(details.get("points_unlearned", 0.0), task)
+    warn_capped(details, task)
     warn_uncovered(result.uncovered)
     return replace(result, depth=depth_report, details=details,
                    depth_l1=None if rgb_only_tests else result.depth_l1,
@@ -312,6 +321,16 @@ def warn_unlearned(share: float, task) -> None:
               f"{task.components} components were spent before the stream reached that "
               f"ground, so the renders miss it; give more --components (the JSON's "
               f"points_unlearned says how much)", file=sys.stderr)
+
+
+def warn_capped(details: dict, task) -> None:
+    """Say on stderr when ``components = "auto"`` reached its most components: from then
+    on it merged the cheapest neighbours to make room, as a fixed K does."""
+    if details.get("components_capped"):
+        print(f"warning: --components {task.components} reached its ceiling of "
+              f"{details['components_capacity']} components; from then on the cheapest "
+              f"neighbours were merged to make room for new ground, so the count is the "
+              f"ceiling's, not the data's; give a higher ceiling (auto:MAX)", file=sys.stderr)
 
 
 # A share of the test views' surface pixels drawn as background above this is said.

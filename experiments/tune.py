@@ -184,7 +184,7 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
     """Validation scores of every grid setting on one learned stream, best PSNR first.
 
     Each row: the setting, then ``val_psnr``, ``val_ssim``, ``val_depth_l1`` (means over
-    ``scene.val``)."""
+    ``scene.val``), and under ``components = "auto"`` the ``components_used`` it chose."""
     if not scene.val:
         raise ValueError(f"scene {scene.name!r} has no validation views to tune on; "
                          f"use --val-views >= 1")
@@ -203,8 +203,11 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
             view = copy.copy(learner)  # shares the learned state; only render settings differ
             view.task = with_setting(task, setting)
             ev = evaluate_validation(view.splats(), scene, background, view.blur)
+            # components = "auto": the count each setting chose (splats drawn) beside it
+            count = ({"components_used": view.splats(drop_unused=True).count}
+                     if isinstance(task.components, str) else {})
             rows.append({**setting, "val_psnr": ev.psnr, "val_ssim": ev.ssim,
-                         "val_depth_l1": ev.depth_l1})
+                         "val_depth_l1": ev.depth_l1, **count})
     return sorted(rows, key=lambda r: -np.nan_to_num(r["val_psnr"], nan=-np.inf))
 
 
@@ -232,13 +235,17 @@ def mean_over_scenes(per_scene: dict[str, list[dict]], grid: dict[str, list]) ->
     """One row per grid setting: its scores averaged over the scenes (``{name: rows}`` as
     :func:`tune` returns them), with each scene's PSNR beside them; best mean PSNR first."""
     tables = []
+    first = next(iter(per_scene.values()))
+    scores = [*SCORES, *(["components_used"] if first and "components_used" in first[0] else [])]
+    own = {"val_psnr": "psnr", "components_used": "components"}  # each scene's, beside
     for name, rows in per_scene.items():
         frame = pd.DataFrame(rows).set_index(list(grid))
-        tables.append(frame[list(SCORES)].rename(columns={"val_psnr": f"{name}_psnr"})
-                      .assign(val_psnr=frame["val_psnr"]))
+        tables.append(frame[scores].rename(columns={k: f"{name}_{v}" for k, v in own.items()})
+                      .assign(**{k: frame[k] for k in own if k in scores}))
     joined = pd.concat(tables, keys=list(per_scene), names=["scene"])
-    mean = joined.groupby(level=list(grid), sort=False)[list(SCORES)].mean()
-    each = pd.concat([t[[f"{n}_psnr"]] for n, t in zip(per_scene, tables, strict=True)], axis=1)
+    mean = joined.groupby(level=list(grid), sort=False)[scores].mean()
+    each = pd.concat([t[[f"{n}_{v}" for k, v in own.items() if k in scores]]
+                      for n, t in zip(per_scene, tables, strict=True)], axis=1)
     out = mean.join(each).reset_index()
     out = out.sort_values("val_psnr", ascending=False, key=lambda c: c.fillna(-np.inf))
     return out.to_dict("records")

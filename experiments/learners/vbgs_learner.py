@@ -16,6 +16,7 @@ from experiments.protocol import SceneResult, task_sensor
 from vbgs import mapping
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference.bound import StreamBound
+from vbgs.inference.grow import is_active
 from vbgs.mapping.measurement import point_rays
 from vbgs.render.splats import Splats
 from vbgs.tracking import register
@@ -81,6 +82,11 @@ class VbgsLearner:
         extra = {}
         if self.state.growing and self.config.estep == "sparse":
             extra["points_unlearned"] = self.state.points_unlearned
+        if self.config.auto and self.state.mixture is not None:  # the K the data chose
+            prior = self.state.mixture.prior
+            extra.update(components_chosen=int(is_active(prior).sum()),
+                         components_capacity=int(prior.n_components),
+                         components_capped=bool(self.state.capped))
         return {**self.bound.summary(), **extra}
 
     def locate(self, frame: Frame, guess, config: TrackConfig, seed: int = 0) -> Registration:

@@ -87,6 +87,21 @@ def _sensor_holes(value: str) -> str | None:
     return None
 
 
+def _components(value) -> str | None:
+    """A count is checked by the minimum; text must be ``auto`` or ``auto:MAX``
+    (:func:`vbgs.components.parse_components`)."""
+    from vbgs.components import parse_components  # plain Python
+
+    if not isinstance(value, str):
+        return None
+    try:
+        parse_components(value)
+    except ValueError:
+        return ("must be an integer (without quotes), \"auto\" or \"auto:MAX\" "
+                "(MAX a positive integer)")
+    return None
+
+
 def _sensor_level(value) -> str | None:
     if not (math.isfinite(value) and value >= 0):
         return "must be a finite number >= 0 (0: exact depth values, 1: the published model)"
@@ -122,7 +137,9 @@ SETTINGS: dict[str, Spec] = {
     "method": Spec(_STR, METHOD.help, METHOD.values),
     "size": Spec((int, str), "image side in pixels, or a scene's frames as \"WxH\" "
                  "(\"640x480\"; a list would be a grid of sizes)", check=_size),
-    "components": Spec(_INT, "mixture components (capacity)", minimum=1),
+    "components": Spec((int, str), "mixture components: the capacity K, or \"auto\" / "
+                       "\"auto:MAX\" (chosen from the data, at most MAX)",
+                       minimum=1, check=_components),
     "iters": Spec(_INT, "CAVI iterations of a batch image fit", minimum=1),
     "init": Spec(_STR, "component initialisation (data, random: oracle starts on a stream)",
                  INIT.values),
@@ -219,7 +236,7 @@ def _check_value(key: str, value, spec: Spec, where: str) -> None:
     if spec.choices and value not in spec.choices:
         raise ConfigError(f"{where}: must be one of {', '.join(map(str, spec.choices))}, "
                           f"got {value!r}")
-    if spec.minimum is not None and value < spec.minimum:
+    if spec.minimum is not None and not isinstance(value, str) and value < spec.minimum:
         what = "positive" if spec.minimum == 1 else f">= {spec.minimum}"
         raise ConfigError(f"{where}: must be a {what} integer, got {value!r}")
     if spec.check is not None and (problem := spec.check(value)):

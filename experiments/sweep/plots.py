@@ -84,17 +84,24 @@ def plot_psnr_vs_components(df: pd.DataFrame, style: list[str], path: Path):
     if df.empty or "components" not in df or "psnr" not in df:
         return None, "no finished cell has components and PSNR"
     cols = _line_columns(df, style)
-    df = df.assign(_label=_labels(df, cols))
+    # components = "auto" cells are drawn as stars at the count they chose
+    auto = df["components"].map(lambda k: isinstance(k, str))
+    x = df["components"].where(~auto, df.get("components_chosen"))
+    df = df.assign(_label=_labels(df, cols), _auto=auto,
+                   _k=pd.to_numeric(x, errors="coerce")).dropna(subset=["_k"])
     colours = _colours(df["_label"])
     panels = list(df.groupby(["task", "dataset"], sort=True))
     fig, axes = _panels(len(panels))
     for ax, ((task, dataset), part) in zip(axes, panels, strict=False):
-        for label, line in part.groupby("_label", sort=True):
-            stats = line.groupby("components")["psnr"].agg(["mean", "std", "count"])
+        for label, line in part[~part["_auto"]].groupby("_label", sort=True):
+            stats = line.groupby("_k")["psnr"].agg(["mean", "std", "count"])
             ax.errorbar(stats.index, stats["mean"], yerr=stats["std"].fillna(0), marker="o",
                         capsize=3, label=label, color=colours[label])
+        for label, line in part[part["_auto"]].groupby("_label", sort=True):
+            ax.scatter(line["_k"], line["psnr"], marker="*", s=120, color=colours[label],
+                       label=f"{label} (auto: K chosen)", zorder=3)
         ax.set_xscale("log", base=2)
-        ticks = sorted(part["components"].unique())
+        ticks = sorted(part.loc[~part["_auto"], "_k"].unique())
         ax.set_xticks(ticks, [str(int(t)) for t in ticks])
         ax.set_xlabel("components (count, log scale)")
         ax.set_ylabel("PSNR (dB)")

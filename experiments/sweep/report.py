@@ -43,6 +43,7 @@ METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("lpips", "LPIPS"), ("depth_
            ("seconds", "fit s"),
            ("seconds_per_frame", "s/frame"), ("peak_memory_mb", "peak MB"),
            ("replay_mb", "replay MB"), ("components_used", "used"),
+           ("components_chosen", "K chosen"),
            ("ate_rmse", "ATE RMSE"), ("odometry_ate_rmse", "odometry ATE"))
 NOT_GROUPED = ("seed", "depth_model")  # seeds are averaged; depth_model shows as `depth`
 

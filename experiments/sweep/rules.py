@@ -59,6 +59,10 @@ RULES: tuple[Rule, ...] = (
          "replay buffers belong to the gradient learners; VBGS streams without one"),
     Rule("dataset", lambda s: not TASKS[s["task"]].dataset_exists(s["dataset"]), SKIP,
          "the dataset is another task's built-in dataset"),
+    Rule("components", lambda s: isinstance(s["components"], str)
+         and (s["task"] == "image" or _gradient(s) or s.get("init", "stream") != "stream"),
+         SKIP, "components = \"auto\" is chosen by VBGS's scene stream as frames arrive "
+               "(init stream); images, the gradient baseline and oracle starts take a count"),
     Rule("assign", _gradient, DROP, "the gradient baseline has no E-step assignment"),
     Rule("estep", _gradient, DROP, "the gradient baseline has no E-step"),
     Rule("candidates", lambda s: _gradient(s) or s.get("estep") == "dense", DROP,

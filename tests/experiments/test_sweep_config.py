@@ -50,8 +50,10 @@ def test_paper_config_parses():
                               "'components'?)"),
         ({"components": [20, -5]}, "grid[0].components: must be a positive integer, got -5"),
         ({"components": [0]}, "grid[0].components: must be a positive integer, got 0"),
-        ({"components": ["500"]}, "grid[0].components: must be an integer, got '500'"),
-        ({"components": [True]}, "grid[0].components: must be an integer, got True"),
+        ({"components": ["500"]}, "grid[0].components: must be an integer (without quotes), "
+                                  "\"auto\" or \"auto:MAX\" (MAX a positive integer), got '500'"),
+        ({"components": ["auto:0"]}, "(MAX a positive integer), got 'auto:0'"),
+        ({"components": [True]}, "grid[0].components: must be an integer or a string, got True"),
         ({"init": ["zeros"]}, "grid[0].init: must be one of stream, data, random, got 'zeros'"),
         ({"order": "backwards"}, "grid[0].order: must be one of sequential"),
         ({"dataset": ["/no/such/photo.png"]}, "grid[0].dataset: '/no/such/photo.png' is "

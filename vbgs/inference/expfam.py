@@ -233,6 +233,25 @@ def niw_kl(q: NIW, p: NIW) -> jnp.ndarray:
     return mean_kl + wishart_kl
 
 
+def niw_log_evidence(prior: NIW, post: NIW) -> jnp.ndarray:
+    """``log p(X_k)`` ``[k]``: the marginal likelihood of the points a component holds
+    (Gaussian with ``(mu, Sigma) ~ NIW(prior)``; ``post`` the conjugate update on them,
+    :func:`niw_posterior` on exact data), with ``n = nu_n - nu_0``:
+
+    ``-n d/2 log pi + log Gamma_d(nu_n/2) - log Gamma_d(nu_0/2) + nu_0/2 log|Psi_0|
+      - nu_n/2 log|Psi_n| + d/2 (log kappa_0 - log kappa_n)``.
+
+    It is the ELBO ``E_q[log p(X | mu, Sigma)] - KL(q || p)`` at its optimum ``q = post``:
+    the bound a component's points give, the data term and the KL in one number."""
+    d = post.mean.shape[-1]
+    n = post.dof - prior.dof
+    return (-0.5 * n * d * jnp.log(jnp.pi)
+            + multigammaln(0.5 * post.dof, d) - multigammaln(0.5 * prior.dof, d)
+            + 0.5 * prior.dof * jnp.linalg.slogdet(prior.scale)[1]
+            - 0.5 * post.dof * jnp.linalg.slogdet(post.scale)[1]
+            + 0.5 * d * (jnp.log(prior.kappa) - jnp.log(post.kappa)))
+
+
 # -------------------------------------------------------------------------- colour
 
 
@@ -273,6 +292,23 @@ def colour_kl(q: ColourNormal, p: ColourNormal, noise: float) -> jnp.ndarray:
     return 1.5 * (ratio - 1.0 - jnp.log(ratio)) + 0.5 * p.kappa * sq / noise**2
 
 
+def colour_log_evidence(prior: ColourNormal, post: ColourNormal, noise: float) -> jnp.ndarray:
+    """``log p(C_k) + sum_n |c_n|^2 / (2 s^2)`` ``[k]``: the marginal likelihood of the
+    colours a component holds (``c ~ N(mu_c, s^2 I)``, ``mu_c ~ N(m_0, s^2/l_0 I)``;
+    ``post`` the update on them, :func:`colour_posterior`), with ``n = l_n - l_0``:
+
+    ``-3n/2 log(2 pi s^2) + 3/2 log(l_0 / l_n) - (l_0 |m_0|^2 - l_n |m_n|^2) / (2 s^2)``.
+
+    The points' own ``-sum |c_n|^2 / (2 s^2)`` is left out (the statistics do not hold
+    it): it is the same however the points are grouped, so differences between
+    groupings (a merge) are exact."""
+    var = noise**2
+    n = post.kappa - prior.kappa
+    return (-1.5 * n * (LOG_2PI + jnp.log(var)) + 1.5 * jnp.log(prior.kappa / post.kappa)
+            - 0.5 * (prior.kappa * jnp.sum(prior.mean**2, -1)
+                     - post.kappa * jnp.sum(post.mean**2, -1)) / var)
+
+
 # ------------------------------------------------------------------------ Dirichlet
 
 
@@ -285,6 +321,14 @@ def dirichlet_expected_log(alpha: jnp.ndarray, total: jnp.ndarray | None = None)
     """``E[log pi_k] = psi(alpha_k) - psi(sum alpha)``; ``total``: the sum over the whole
     Dirichlet when ``alpha`` holds only some of its components (default ``alpha.sum()``)."""
     return digamma(alpha) - digamma(alpha.sum() if total is None else total)
+
+
+def dirichlet_log_evidence_terms(alpha0: jnp.ndarray, counts: jnp.ndarray) -> jnp.ndarray:
+    """``log Gamma(alpha0_k + N_k) - log Gamma(alpha0_k)`` ``[k]``: component k's part of the
+    mixing weights' marginal likelihood ``log B(alpha0 + N) / B(alpha0) = sum_k (this)
+    + log Gamma(sum alpha0) - log Gamma(sum alpha0 + sum N)`` (the optimum over
+    ``q(pi)`` of ``sum_k N_k E[log pi_k] - KL(q(pi) || Dir(alpha0))``)."""
+    return gammaln(alpha0 + counts) - gammaln(alpha0)
 
 
 def dirichlet_kl(q: jnp.ndarray, p: jnp.ndarray) -> jnp.ndarray:

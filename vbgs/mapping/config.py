@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from vbgs.inference import grow
+from vbgs.components import AUTO_MERGE_EVERY, AUTO_POINTS, parse_components
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
 from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
@@ -38,8 +39,6 @@ REFINE_SHARE = 0.05
 # stream meeting new ground every frame merges every few frames, not every frame (each
 # round searches every component's neighbours: 0.1-0.2 s at K = 20k).
 MERGE_AHEAD = 0.02
-
-
 def _positive(owner: str, name: str, value, *, upper: float | None = None) -> None:
     ok = isinstance(value, (int, float)) and math.isfinite(value) and value > 0
     if not ok or (upper is not None and value > upper):
@@ -58,7 +57,10 @@ class GrowthConfig:
     reach_cells: points farther than this many cells from every component are left
         out of the update (:func:`vbgs.inference.grow.reach_of`);
     coarse_levels: coarse cells (side ``cell * 2^j``, j at most this) for ground seen
-        coarsely (:func:`vbgs.inference.grow.point_levels`; 0: one cell side everywhere).
+        coarsely (:func:`vbgs.inference.grow.point_levels`; 0: one cell side everywhere);
+    auto_points, auto_merge_every: ``components="auto"`` only (``mapper._auto_room``):
+        first-frame points per level-0 cell (the resolution), frames between rounds of
+        merges scored by the bound.
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -70,9 +72,19 @@ class GrowthConfig:
     merge: bool = True
     merge_ahead: float = MERGE_AHEAD
     coarse_from: float = grow.COARSE_FROM
+    auto_points: float = AUTO_POINTS
+    auto_merge_every: int = AUTO_MERGE_EVERY
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
+        if not (isinstance(self.auto_points, (int, float)) and math.isfinite(self.auto_points)
+                and self.auto_points >= 1):
+            raise ValueError(f"growth.auto_points must be a number >= 1 (a level-0 cell holds "
+                             f"at least one of the first frame's points; fewer asks for more "
+                             f"cells than there are points), got {self.auto_points!r}")
+        if not isinstance(self.auto_merge_every, int) or self.auto_merge_every < 1:
+            raise ValueError(f"growth.auto_merge_every must be a positive integer (frames), "
+                             f"got {self.auto_merge_every!r}")
         _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
         _positive("growth", "reach_cells", self.reach_cells)
         if not (isinstance(self.refine_share, (int, float)) and 0 <= self.refine_share <= 1):
@@ -200,14 +212,16 @@ def _choice(name: str, value, choices: tuple[str, ...]) -> None:
 class Config:
     """Everything the scene learner needs besides the data and the key.
 
-    components: the capacity K (static shapes: a fixed number of slots);
+    components: the capacity K (static shapes: a fixed number of slots), or ``"auto"`` /
+        ``"auto:MAX"``: K chosen from the data (``mapper._auto_room``; slots grow in
+        buckets, at most MAX; :func:`vbgs.components.parse_components`);
     assign: responsibilities under the fixed ``prior`` (a stream equals one batch when
         the reference does not grow) or the current ``posterior``;
     estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
     prior, growth, evidence, render, sensor, budget: the nested groups above.
     """
 
-    components: int = 20000
+    components: int | str = 20000
     assign: str = "prior"
     estep: str = "sparse"
     candidates: int = DEFAULT_CANDIDATES
@@ -219,15 +233,25 @@ class Config:
     budget: BudgetConfig = field(default_factory=BudgetConfig)
 
     def __post_init__(self):
-        for name in ("components", "candidates"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        parse_components(self.components)
+        value = self.candidates
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise ValueError(f"candidates must be a positive integer, got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
         if self.sensor.noisy and self.estep != "sparse":
             raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
                              f"estep='sparse': its noise is modelled in the sparse E-step")
+
+    @property
+    def auto(self) -> bool:
+        """The component count is chosen from the data (``components="auto[:MAX]"``)."""
+        return parse_components(self.components)[0]
+
+    @property
+    def max_components(self) -> int:
+        """The capacity K, or under ``auto`` the most components it may use."""
+        return parse_components(self.components)[1]
 
 
 def dotted_names(config: Any = None, prefix: str = "") -> list[str]:

@@ -32,6 +32,13 @@ RGB, z-depth):
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
 
+With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows at the
+resolution of the first frame's points (``growth.auto_points`` of them per cell), merges
+every few frames the neighbours whose merge raises the bound
+(:func:`vbgs.inference.merge.bound_pairs`) and grows the slots in buckets
+(:mod:`vbgs.inference.capacity`) up to MAX (``MapState.capped`` once reached); see
+``_auto_room``.
+
 The state is a NamedTuple and is never changed in place; it holds, beside arrays, the
 host-side objects a stream needs (the growth rule, and the stepper: the compiled update
 with the reference's terms, replaced when the reference grows). Under prior assignment
@@ -49,9 +56,10 @@ import jax
 import numpy as np
 
 from vbgs.data.scene import Frame
-from vbgs.inference import expfam, grow, merge, model
+from vbgs.inference import capacity, expfam, grow, merge, model
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.stepper import Stepper
+from vbgs.components import AUTO_BUCKET
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
@@ -75,6 +83,8 @@ class MapState(NamedTuple):
     n_points: int  # points seen (valid depth pixels of every frame)
     n_unlearned: int  # of which left out, beyond reach of every component
     growing: bool  # started empty: components are grown as frames arrive
+    n_frames: int = 0  # frames learned
+    capped: bool = False  # components="auto" reached its most components (merged to go on)
 
     @property
     def points_unlearned(self) -> float:
@@ -107,8 +117,11 @@ def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) 
     init: nothing read ahead); with one (e.g. :func:`vbgs.inference.model.init` on
     known points: an oracle start when they come from frames not yet arrived) its
     components are fixed and only learned."""
-    k = config.components
+    k = _first_capacity(config)
     mixture = None
+    if prior is not None and config.auto:
+        raise ValueError("components='auto' chooses the components as frames arrive; a "
+                         "given prior fixes them: give the prior's count as components")
     if prior is not None:
         if prior.n_components != k or prior.dim != 3:
             raise ValueError(f"the prior has {prior.n_components} {prior.dim}-D components; "
@@ -152,7 +165,8 @@ def update(state: MapState, frame: Frame, config: Config,
     if step.learned is not None:  # points beyond reach were left out
         xyz, rgb = xyz[step.learned], rgb[step.learned]
     state = state._replace(mixture=mixture, evidence=evidence, n_points=state.n_points + n,
-                           n_unlearned=state.n_unlearned + n - len(xyz))
+                           n_unlearned=state.n_unlearned + n - len(xyz),
+                           n_frames=state.n_frames + 1)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
                                     frame.rgb, 0.0 if background is None else background,
@@ -208,16 +222,20 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     if not state.growing:
         return state, np.zeros(0, np.int64)
     mixture, rule = state.mixture, state.rule
-    k, g = config.components, config.growth
+    k, g = config.max_components, config.growth
     if mixture is None:  # the first frame fixes the cell side
-        rule = grow.calibrate(xyz, k, g.first_frame_share * k, refine=g.refine_share,
+        first, refine = g.first_frame_share * k, g.refine_share
+        if config.auto:  # the sensor's resolution, not a share of K; see _auto_room
+            first, refine = len(xyz) / g.auto_points, 0.0
+        rule = grow.calibrate(xyz, k, first, refine=refine,
                               levels=g.levels, rate=g.max_new_share, footprint=footprint,
                               coarse=g.coarse_levels, coarse_from=g.coarse_from)
-        mixture = _measured(grow.start_empty(xyz, k, rule.cell, config.prior), config)
+        mixture = _measured(grow.start_empty(xyz, _first_capacity(config), rule.cell,
+                                             config.prior), config)
     key, sub = jax.random.split(state.key)
     levels = grow.point_levels(rule, footprint)
-    state, merged = _make_room(state._replace(mixture=mixture, rule=rule), xyz, ray, levels,
-                               config)
+    room = _auto_room if config.auto else _make_room
+    state, merged = room(state._replace(mixture=mixture, rule=rule), xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
                               ray=ray, levels=levels)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
@@ -254,12 +272,64 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
     n_pairs = max(short, int(config.growth.merge_ahead * prior.n_components))
     pairs = merge.choose_pairs(mixture.posterior, counts, grow.is_active(prior), n_pairs,
                                config.prior.colour_noise)
-    empty = grow.empty_prior(prior.n_components, prior.origin, rule.cell, config.prior,
+    return _merged(state, pairs, config), pairs.reshape(-1)
+
+
+def _merged(state: MapState, pairs: np.ndarray, config: Config) -> MapState:
+    """The state with ``pairs [p, 2]`` merged (:func:`vbgs.inference.merge.merge`):
+    statistics, opacity evidence and colour sums alike."""
+    if len(pairs) == 0:
+        return state
+    mixture, prior = state.mixture, state.mixture.prior
+    empty = grow.empty_prior(prior.n_components, prior.origin, state.rule.cell, config.prior,
                              prior.alpha.dtype)
-    state = state._replace(mixture=merge.merge(mixture, pairs, empty),
-                           evidence=merge.merge_rows(state.evidence, pairs),
-                           colour=merge.merge_rows(state.colour, pairs))
-    return state, pairs.reshape(-1)
+    return state._replace(mixture=merge.merge(mixture, pairs, empty),
+                          evidence=merge.merge_rows(state.evidence, pairs),
+                          colour=merge.merge_rows(state.colour, pairs))
+
+
+def _auto_room(state: MapState, xyz, ray, levels, config: Config
+               ) -> tuple[MapState, np.ndarray]:
+    """``components="auto"``: the count follows the data by births and merges.
+
+    Births are :func:`vbgs.inference.grow.grow`'s new ground at a resolution the data
+    set: the first frame fixes the cell side so that each level-0 cell holds about
+    ``growth.auto_points`` of its points (the sensor's own sampling, whatever the
+    scene's extent), and ground is not refined further (refinement spends a share of a
+    budget there is none of). Every ``growth.auto_merge_every`` frames the neighbours
+    whose merge raises the bound are merged (:func:`vbgs.inference.merge.bound_pairs`,
+    the derivation in :mod:`vbgs.inference.merge`): the data decide where one component
+    explains what two did. When the frame's new ground wants more slots than are empty
+    the capacity grows to the next bucket (:mod:`vbgs.inference.capacity`: a compilation
+    per bucket, not per frame); at ``config.max_components`` it stops growing, the state
+    says so (``capped``) and the cheapest pairs are merged as under a fixed K."""
+    g = config.growth
+    merged = np.zeros(0, np.int64)
+    if g.merge and state.n_frames and state.n_frames % g.auto_merge_every == 0:
+        mixture = state.mixture
+        pairs = merge.bound_pairs(mixture, grow.is_active(mixture.prior),
+                                  config.prior.colour_noise)
+        state, merged = _merged(state, pairs, config), pairs.reshape(-1)
+    short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels)
+    k0 = state.mixture.prior.n_components
+    if short > 0:
+        k = capacity.bucket(k0 + short, AUTO_BUCKET, config.max_components)
+        if k > k0:
+            state = state._replace(
+                mixture=capacity.widen(state.mixture, k, state.rule.cell, config.prior),
+                evidence=capacity.widen_rows(state.evidence, k),
+                colour=capacity.widen_rows(state.colour, k))
+        if k0 + short > k:  # at the ceiling: make room as a fixed K does
+            state, more = _make_room(state._replace(capped=True), xyz, ray, levels, config)
+            merged = np.concatenate([merged, more])
+    return state, merged
+
+
+def _first_capacity(config: Config) -> int:
+    """The slots a map starts with: K, or under ``auto`` the first bucket."""
+    if config.auto:
+        return capacity.bucket(1, AUTO_BUCKET, config.max_components)
+    return config.max_components
 
 
 def _measured(mixture: model.State, config: Config) -> model.State:
@@ -276,7 +346,7 @@ def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapStat
     """The stepper for the state's reference: built on the first frame, grown (a new
     stepper sharing the compiled step) after the frame's growth filled ``slots``."""
     prior = state.mixture.prior
-    if state.stepper is None:
+    if state.stepper is None or state.stepper.prior.n_components != prior.n_components:
         reach = None
         if state.growing and config.estep == "sparse":
             reach = grow.reach_of(state.rule, config.growth.reach_cells)
