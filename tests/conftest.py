@@ -1,0 +1,38 @@
+"""Session-wide test fixtures.
+
+Every compiled XLA:CPU executable keeps a few memory mappings (about 3), and JAX keeps
+every executable the session compiled, eager operations on a new shape included. The
+whole suite compiles enough of them to approach Linux's limit on mappings per process
+(``vm.max_map_count``, 65530 by default); past it the next compilation segfaults inside
+XLA (seen twice in a full run, in ``backend_compile_and_load`` and in a persistent-cache
+read). Between tests, once the process holds more than :data:`MAX_MAPPINGS`, JAX's
+caches are cleared: the executables are freed, and tests that need them again compile
+them again (or load them from the persistent compilation cache).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+MAPS = Path("/proc/self/maps")
+MAX_MAPPINGS = 30000  # about half of the default vm.max_map_count
+
+
+def mappings() -> int:
+    """The memory mappings this process holds (0 where /proc is not there)."""
+    try:
+        with MAPS.open("rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return 0
+
+
+@pytest.fixture(autouse=True)
+def _free_executables_before_the_mapping_limit():
+    yield
+    if mappings() > MAX_MAPPINGS:
+        import jax
+
+        jax.clear_caches()
