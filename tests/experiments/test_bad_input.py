@@ -530,7 +530,7 @@ FLAGS = [
     ("replay = form", ["--replay=full"], "--replay applies"),
     ("components 0", ["--components", "0"], "components must be a positive integer"),
     ("frames 0", ["--frames", "0"], "frames must be a positive integer"),
-    ("size 0", ["--size", "0"], "size must be a positive integer"),
+    ("components text", ["--components", "many"], "components must be a positive integer"),
     ("test views 0", ["--test-views", "0"], "--test-views must be at least 1"),
     ("splat blur 20", ["--splat-blur", "20"], "splat_blur must be"),
     ("splat blur negative", ["--splat-blur", "-1"], "splat_blur must be"),
@@ -575,7 +575,7 @@ def test_flags_that_apply_reach_the_fit(capsys, reached, name, extra, method):
 ARGPARSE = [
     ("format unknown", ["--format", "colmap"]),
     ("method unknown", ["--method", "nerf"]),
-    ("components text", ["--components", "many"]),
+    ("size 0", ["--size", "0"]),
     ("depth-scale text", ["--depth-scale", "mm"]),
     ("order unknown", ["--order", "backwards"]),
     ("unknown flag", ["--frobnicate"]),

@@ -14,7 +14,8 @@ from experiments.sweep.config import SETTINGS
 # CLI flags whose task field has another name, or whose value the command translates.
 RENAMED = {"test_views": "n_test", "val_views": "n_val", "image": "image", "scene": "scene"}
 NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "reassign", "opacity",
-                   "splat_scale", "splat_blur", "view", "methods", "anchor"}
+                   "splat_scale", "splat_blur", "view", "methods", "anchor",
+                   "budget_points"}  # budget_points: the nested field budget.points
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:
