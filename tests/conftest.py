@@ -8,16 +8,41 @@ XLA (seen twice in a full run, in ``backend_compile_and_load`` and in a persiste
 read). Between tests, once the process holds more than :data:`MAX_MAPPINGS`, JAX's
 caches are cleared: the executables are freed, and tests that need them again compile
 them again (or load them from the persistent compilation cache).
+
+The suite never writes into a user's caches (``~/.cache/vbgs``: compiled executables,
+resized photos): unless ``VBGS_CACHE_DIR`` or ``VBGS_COMPILE_CACHE`` is set, the session
+points ``VBGS_CACHE_DIR`` at a temporary folder, which the commands the tests start in
+subprocesses inherit, and removes it at the end.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
 
 MAPS = Path("/proc/self/maps")
 MAX_MAPPINGS = 30000  # about half of the default vm.max_map_count
+
+
+_SESSION_CACHE: list[str] = []
+
+
+def pytest_configure(config):
+    if not (os.environ.get("VBGS_CACHE_DIR") or os.environ.get("VBGS_COMPILE_CACHE")):
+        folder = tempfile.mkdtemp(prefix="vbgs-test-cache-")
+        os.environ["VBGS_CACHE_DIR"] = folder
+        _SESSION_CACHE.append(folder)
+
+
+def pytest_unconfigure(config):
+    while _SESSION_CACHE:
+        folder = _SESSION_CACHE.pop()
+        os.environ.pop("VBGS_CACHE_DIR", None)
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def mappings() -> int:

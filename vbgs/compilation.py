@@ -5,7 +5,9 @@ although nothing changed since the last run. :func:`enable_persistent_cache` kee
 compiled executables on disk (``$XDG_CACHE_HOME/vbgs/jax``, by default
 ``~/.cache/vbgs/jax``) so a second identical run loads them instead; set
 ``VBGS_NO_COMPILE_CACHE=1`` to opt out, or ``VBGS_COMPILE_CACHE=DIR`` to move it.
-:func:`cache_root` is the folder of the CLI's other caches (resized photos, ``images``).
+:func:`cache_root` is the folder of the CLI's other caches (resized photos, ``images``);
+``VBGS_CACHE_DIR=DIR`` moves all of them (the test suite points it at a temporary
+folder, so tests never write into a user's cache).
 :class:`CompileTimer` sums the compile events JAX reports (tracing, lowering, backend
 compile or cache load) so results can report compile time apart from run time.
 """
@@ -15,8 +17,6 @@ from __future__ import annotations
 import os
 import threading
 from pathlib import Path
-
-import jax
 
 COMPILE_EVENTS = (
     "/jax/core/compile/jaxpr_trace_duration",
@@ -30,10 +30,13 @@ _listening = [False]
 
 
 def cache_root() -> Path | None:
-    """The CLI's cache folder, ``$XDG_CACHE_HOME/vbgs`` (``~/.cache/vbgs``), or None
-    when ``VBGS_NO_COMPILE_CACHE`` opts out of caching."""
+    """The CLI's cache folder: ``$VBGS_CACHE_DIR`` when set, else
+    ``$XDG_CACHE_HOME/vbgs`` (``~/.cache/vbgs``); None when ``VBGS_NO_COMPILE_CACHE``
+    opts out of caching."""
     if os.environ.get("VBGS_NO_COMPILE_CACHE", "").strip() not in ("", "0"):
         return None
+    if os.environ.get("VBGS_CACHE_DIR"):
+        return Path(os.environ["VBGS_CACHE_DIR"]).expanduser()
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "vbgs"
 
 
@@ -50,6 +53,9 @@ def cache_dir() -> Path | None:
 def enable_persistent_cache() -> Path | None:
     """Turn on JAX's persistent compilation cache (every executable, however quick to
     compile); returns the folder, or None when ``VBGS_NO_COMPILE_CACHE`` is set."""
+    import jax  # here, not at import: a sweep reads cache_dir() before its workers
+    #             set their thread limits and import JAX
+
     folder = cache_dir()
     if folder is None:
         return None
@@ -77,6 +83,8 @@ class CompileTimer:
 
     def __init__(self):
         if not _listening[0]:
+            import jax
+
             jax.monitoring.register_event_duration_secs_listener(_listen)
             _listening[0] = True
         self.seconds = 0.0

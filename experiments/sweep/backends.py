@@ -16,8 +16,9 @@ use N cores instead of N x cores threads fighting over them.
 
 JAX compilation dominates small cells, so workers take *chunks* of cells that share
 array shapes (same settings apart from ``cells.AFFINITY_FREE``), compiling each shape
-once per worker, and share JAX's persistent compilation cache (``~/.cache/vbgs/jax``;
-set ``VBGS_JAX_CACHE`` to another folder, or to ``off``). Records come back through a
+once per worker, and share JAX's persistent compilation cache, the CLI's
+(:func:`vbgs.compilation.cache_dir`: ``~/.cache/vbgs/jax``; ``VBGS_COMPILE_CACHE`` moves
+it, ``VBGS_NO_COMPILE_CACHE=1`` turns it off). Records come back through a
 queue, one per finished cell. Stopping the sweep (Ctrl-C, an error) terminates the
 workers; a worker whose sweep was killed outright stops before its next cell.
 """
@@ -32,9 +33,9 @@ import sys
 import threading
 import traceback
 from collections.abc import Iterable, Iterator
-from pathlib import Path
 
 from experiments.sweep.cells import Cell, execute_cell, failed_record, shape_signature
+from vbgs.compilation import cache_dir
 
 BACKENDS = ("local", "serial", "dask")
 
@@ -53,12 +54,9 @@ class BackendError(ValueError):
 
 
 def compile_cache_dir() -> str | None:
-    """Where workers keep JAX's persistent compilation cache (None: off)."""
-    value = os.environ.get("VBGS_JAX_CACHE")
-    if value is not None:
-        return None if value.lower() in ("", "0", "off", "none") else value
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return str(Path(base) / "vbgs" / "jax")
+    """Where workers keep JAX's persistent compilation cache (None: off): the CLI's."""
+    folder = cache_dir()
+    return None if folder is None else str(folder)
 
 
 def single_thread_worker(cache_dir: str | None = None, cpu: int | None = None) -> None:

@@ -11,8 +11,12 @@ from vbgs import compilation
 def test_cache_dir_default_opt_out_and_override(monkeypatch, tmp_path):
     monkeypatch.delenv("VBGS_NO_COMPILE_CACHE", raising=False)
     monkeypatch.delenv("VBGS_COMPILE_CACHE", raising=False)
+    monkeypatch.delenv("VBGS_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert compilation.cache_dir() == tmp_path / "vbgs" / "jax"
+    monkeypatch.setenv("VBGS_CACHE_DIR", str(tmp_path / "moved"))
+    assert compilation.cache_root() == tmp_path / "moved"
+    assert compilation.cache_dir() == tmp_path / "moved" / "jax"
     monkeypatch.setenv("VBGS_COMPILE_CACHE", str(tmp_path / "elsewhere"))
     assert compilation.cache_dir() == Path(tmp_path / "elsewhere")
     monkeypatch.setenv("VBGS_NO_COMPILE_CACHE", "1")
