@@ -27,6 +27,7 @@ from vbgs.mapping.mapper import (
     update_points,
 )
 
-__all__ = ["BudgetConfig", "Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState", "Mapper",
-           "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted", "grow_components", "init", "mapper", "splats",
-           "update", "update_points", "with_dotted"]
+__all__ = ["BudgetConfig", "Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState",
+           "Mapper", "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted",
+           "grow_components", "init", "mapper", "splats", "update", "update_points",
+           "with_dotted"]

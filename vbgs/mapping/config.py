@@ -215,8 +215,9 @@ class Config:
     components: the capacity K (static shapes: a fixed number of slots), or ``"auto"`` /
         ``"auto:MAX"``: K chosen from the data (``mapper._auto_room``; slots grow in
         buckets, at most MAX; :func:`vbgs.components.parse_components`);
-    assign: responsibilities under the fixed ``prior`` (a stream equals one batch when
-        the reference does not grow) or the current ``posterior``;
+    assign: responsibilities under the ``prior`` (a stream equals one batch, in any
+        order, when that reference is fixed: given to ``init``, not grown, not re-seeded)
+        or the current ``posterior`` (order-dependent);
     estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
     local_iters: under posterior assignment, the most E-steps of a batch's local
         coordinate ascent (:func:`vbgs.inference.model.local_cavi`: components grown for

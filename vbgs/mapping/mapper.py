@@ -143,6 +143,9 @@ def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) 
     growth's and re-seeding's random choices, and a point budget's offsets."""
     k = _first_capacity(config)
     mixture = None
+    if prior is None and config.reseed:
+        raise ValueError("reseed moves the unused components of a fixed reference; a map "
+                         "started empty grows its own: give a prior or leave reseed off")
     if prior is not None and config.auto:
         raise ValueError("components='auto' chooses the components as frames arrive; a "
                          "given prior fixes them: give the prior's count as components")
@@ -194,7 +197,7 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
                   weight=None) -> tuple[MapState, MapInfo]:
     """Learn one arriving batch of points ``xyz [n, d]``, ``rgb [n, 3]`` (d = 3 for a
     scene, 2 for an image's pixels): the one stream loop's step, which :func:`update`
-    takes every frame through after unprojection (steps 2 and 4 of the module
+    takes every frame through after unprojection (steps 2 and 3 of the module
     docstring). A growing map first grows components for the batch's new ground
     (:func:`grow_components`); a fixed reference under ``config.reseed`` first re-seeds
     its unused components onto the batch's worst-explained points. The batch is then
@@ -224,7 +227,8 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
     n = len(xyz)
     if learned is not None:  # points beyond reach were left out
         xyz, rgb = xyz[learned], rgb[learned]
-    state = state._replace(n_points=state.n_points + n, n_unlearned=state.n_unlearned + n - len(xyz),
+    state = state._replace(n_points=state.n_points + n,
+                           n_unlearned=state.n_unlearned + n - len(xyz),
                            n_frames=state.n_frames + 1)
     return state, MapInfo(elbo, n, len(xyz), len(slots), before, xyz, rgb)
 
@@ -236,9 +240,6 @@ def _learn_slowly(state: MapState, xyz, rgb, config: Config
     ``config.reseed`` (its unused components moved onto the points worst explained under
     the assigning model; the state's key split once). Returns the state, the posterior the
     batch was learned from and the batch's ELBO term."""
-    if config.reseed and state.growing:
-        raise ValueError("reseed moves the unused components of a fixed reference; a map "
-                         "started empty grows its own: give a prior or leave reseed off")
     learn = partial(model.update, assign=config.assign, config=config.prior,
                     estep=config.estep, n_candidates=config.candidates,
                     local_iters=config.local_iters)
