@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import numpy as np
@@ -22,10 +23,13 @@ from experiments.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.inference import grow, model
 from vbgs.inference.bound import StreamBound, batch_bound
-from vbgs.inference.fit import fit, stream
+from vbgs.inference.fit import fit
 from vbgs.io_atomic import write_atomic
 from vbgs.render.image import render_image
 from vbgs.render.metrics import psnr, ssim
+
+if TYPE_CHECKING:  # vbgs.mapping imports the renderer (scipy, skimage): a batch fit needs none
+    from vbgs import mapping
 
 
 @dataclass(frozen=True)
@@ -80,37 +84,48 @@ def image_prior(task: ImageTask, uv, rgb, key: jax.Array) -> model.Mixture:
     return model.init(uv, rgb, task.components, key=key, scheme=task.init, config=task.prior)
 
 
+def stream_config(task: ImageTask, first_share: float) -> mapping.Config:
+    """The stream loop's config for the task's patch stream (:func:`vbgs.mapping.update_points`):
+    the dense E-step over 2-D pixels, no merging. ``init="stream"`` grows from the first
+    patch, which gets ``first_share`` of K, and solves each patch by local coordinate
+    ascent under posterior assignment (grown components start at their prior); an oracle
+    start re-seeds its unused components before each patch under ``reassign``."""
+    from vbgs import mapping  # only a stream needs it (start-up of a batch fit)
+
+    growth = mapping.GrowthConfig(first_frame_share=first_share, refine_share=0.0,
+                                  merge=False)
+    grows = task.init == "stream"
+    return mapping.Config(components=task.components, assign=task.assign, estep="dense",
+                          prior=task.prior, growth=growth,
+                          local_iters=model.LOCAL_MAX_ITERS if grows else 1,
+                          reseed=task.reassign)
+
+
 def stream_patches(task: ImageTask, batches: list, h: int, w: int, k_init: jax.Array,
                    k_fit: jax.Array, uv, rgb, *, progress: bool
                    ) -> tuple[model.State, StreamBound]:
-    """One pass over the patches, with the streaming bound (:mod:`vbgs.inference.bound`).
-    ``init="stream"`` grows from the first patch, which gets its share of K by pixels
-    (the image's size is the sensor's, known before any data); ``data`` and ``random``
-    start from the whole image ``uv``, ``rgb`` (an oracle start). With ``reassign`` on,
-    the bound's ``q_{t-1}`` is the posterior before the re-seeding (not after)."""
+    """One pass over the patches through the stream loop (:func:`stream_config`), with the
+    streaming bound (:mod:`vbgs.inference.bound`). ``init="stream"`` grows from the first
+    patch, which gets its share of K by pixels (the image's size is the sensor's, known
+    before any data); ``data`` and ``random`` start from the whole image ``uv``, ``rgb``
+    (an oracle start). With ``reassign`` on, the bound's ``q_{t-1}`` is the posterior
+    before the re-seeding (not after)."""
+    from vbgs import mapping  # only a stream needs it (start-up of a batch fit)
+
     shown = progress_bar(batches, desc="patches", unit="patch", enabled=progress)
-    total = [StreamBound()]
-
-    def observe(i, before: model.Mixture, after: model.Mixture):
-        xyz, rgb_ = batches[i]
-        total[0] = total[0].add(batch_bound(before, after, xyz, rgb_, config=task.prior))
-
+    config = stream_config(task, len(batches[0][0]) / (h * w))
     if task.init == "stream":
-        first_cells = task.components * len(batches[0][0]) / (h * w)
-        state = grow.stream(shown, task.components, first_cells, key=k_init,
-                            assign=task.assign, config=task.prior,
-                            callback=lambda i, s, _, g: observe(i, g.posterior, s.posterior))
-        return state, total[0]
-    prior = image_prior(task, uv, rgb, k_init)
-    previous = [prior]
-
-    def after_batch(i, s, _):
-        observe(i, previous[0], s.posterior)
-        previous[0] = s.posterior
-
-    state = stream(prior, shown, assign=task.assign, config=task.prior,
-                   key=k_fit if task.reassign else None, callback=after_batch)
-    return state, total[0]
+        state = mapping.init(config, key=k_init)
+    else:
+        state = mapping.init(config, key=k_fit, prior=image_prior(task, uv, rgb, k_init))
+    total = StreamBound()
+    for xyz, rgb_ in shown:
+        previous = None if state.mixture is None else state.mixture.posterior
+        state, info = mapping.update_points(state, xyz, rgb_, config)
+        before = previous if config.reseed else info.before
+        total = total.add(batch_bound(before, state.mixture.posterior, xyz, rgb_,
+                                      config=task.prior))
+    return state.mixture, total
 
 
 def task_image(task: ImageTask, image: np.ndarray | None = None, *,

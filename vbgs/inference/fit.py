@@ -1,12 +1,14 @@
-"""Loops over :func:`vbgs.inference.model.update`: batch CAVI and streaming, with optional reassign.
+"""Batch CAVI: iterations of :func:`vbgs.inference.model.update` on all the data, with
+optional re-seeding (:mod:`vbgs.inference.reassign`).
 
-Kept apart from :mod:`vbgs.inference.model` because they combine the model with
-:mod:`vbgs.inference.reassign`.
+Kept apart from :mod:`vbgs.inference.model` because it combines the model with
+:mod:`vbgs.inference.reassign`. Streams (each batch seen once) have one loop, the scene
+learner's: :func:`vbgs.mapping.update_points`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from functools import partial
 from typing import NamedTuple
 
@@ -14,11 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import (
-    Assign,
-    EStep,
-    Info,
     Mixture,
     PriorConfig,
     State,
@@ -31,7 +29,6 @@ from vbgs.inference.model import (
     update,
 )
 from vbgs.inference.reassign import MIN_COUNT, reassign, reassign_centred
-from vbgs.inference.stepper import Stepper
 
 
 class FitInfo(NamedTuple):
@@ -162,49 +159,3 @@ def fit_steps(
             converged = True
             break
     return state.posterior, FitInfo(np.asarray(trace), len(trace), converged, moved)
-
-
-def stream(
-    prior: Mixture,
-    batches: Iterable[tuple[np.ndarray, np.ndarray]],
-    *,
-    assign: Assign = "prior",
-    config: PriorConfig = PriorConfig(),
-    key: jax.Array | None = None,
-    callback: Callable | None = None,
-    estep: EStep = "dense",
-    n_candidates: int = DEFAULT_CANDIDATES,
-) -> State:
-    """Continual learning: each ``(xyz, rgb)`` batch is seen once, through
-    :func:`update`; nothing is replayed.
-
-    With ``key``, before each batch is learned the unused components are re-seeded
-    onto its worst-explained points (:func:`vbgs.inference.reassign.reassign`, scored under the
-    assignment model), so new regions of the stream get fresh components. This costs
-    one more E-step per batch and changes the reference model, so ``prior``
-    assignment is then no longer order-invariant. ``callback(i, state, info)``
-    observes each batch.
-
-    Without ``key`` the batches go through one :class:`vbgs.inference.stepper.Stepper` (terms and
-    candidate structure built once, one compiled step); with ``key`` the reference
-    model changes every batch and each goes through :func:`update`. ``estep`` and
-    ``n_candidates`` are as in :func:`update`.
-    """
-    state = start(prior, config)
-    step = None if key is not None else Stepper(prior, assign=assign, config=config,
-                                                 estep=estep, n_candidates=n_candidates)
-    for i, (xyz, rgb) in enumerate(batches):
-        if step is not None:
-            state, info = step(state, xyz, rgb)
-            if callback is not None:  # the caller observes: copy its [n] log-likelihoods
-                info = Info(info.elbo, np.asarray(info.point_loglik)[: len(xyz)])
-        else:
-            key, sub = jax.random.split(key)
-            _, scored = update(state, xyz, rgb, assign=assign, estep=estep,
-                               n_candidates=n_candidates)
-            state, _ = reassign(state, xyz, rgb, scored.point_loglik, key=sub)
-            state, info = update(state, xyz, rgb, assign=assign, estep=estep,
-                                 n_candidates=n_candidates)
-        if callback is not None:
-            callback(i, state, info)
-    return state

@@ -24,7 +24,8 @@ cell side is fixed on the first batch by :func:`calibrate`: the area the batch c
 (:func:`covered_area`) over the number of components it should get. No bounds of
 unseen data are read. The state's prior changes as it grows, so under prior
 assignment the posterior is no longer independent of the order (as with
-:mod:`vbgs.inference.reassign`).
+:mod:`vbgs.inference.reassign`). The stream loop that grows and learns each batch is
+:func:`vbgs.mapping.update_points` (a map started without a prior).
 """
 
 from __future__ import annotations
@@ -37,7 +38,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs.inference.model import (
-    LOCAL_MAX_ITERS,
     Mixture,
     PriorConfig,
     State,
@@ -46,7 +46,6 @@ from vbgs.inference.model import (
     m_step,
     start,
 )
-from vbgs.inference.model import update as model_update
 
 # Compiled: eager, their many small ops dispatch one by one (m_step ~0.1 s at K=20k) and
 # each op is one more executable for a new process to load.
@@ -459,37 +458,6 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha), scales)
     return new_prior, GrowInfo(n_new, n_ground, int(active.sum()) + n_new, slots)
-
-
-def stream(batches, n_components: int, first_cells: float, *, key: jax.Array,
-           assign: str = "prior", config: PriorConfig = PriorConfig(),
-           refine: float = 0.0, local_iters: int = LOCAL_MAX_ITERS,
-           callback=None) -> State:
-    """Continual learning from empty slots: each ``(xyz, rgb)`` batch is seen once;
-    before it is learned (:func:`vbgs.inference.model.update`), :func:`grow` fills empty slots
-    on its poorly explained points. The cell side is fixed on the first batch so that
-    it gets about ``first_cells`` components. ``callback(i, state, info, grown)``
-    observes each batch (``grown``: the state after growth, before the batch).
-
-    Under posterior assignment each batch's update is solved by local coordinate
-    ascent, at most ``local_iters`` E-steps (:func:`vbgs.inference.model.local_cavi`): the
-    components grown for the batch start at their prior, and a single E-step would
-    score them so against neighbours fitted to earlier batches (1: that single step).
-    Prior assignment ignores ``local_iters`` (its E-step does not depend on the model)."""
-    state, rule = None, None
-    for i, (xyz, rgb) in enumerate(batches):
-        if state is None:
-            rule = calibrate(xyz, n_components, first_cells, refine=refine)
-            state = start_empty(xyz, n_components, rule.cell, config)
-        key, sub = jax.random.split(key)
-        grown, _ = grow(state, xyz, rgb, rule, key=sub, config=config)
-        state, info = model_update(grown, xyz, rgb, assign=assign, config=config,
-                                   local_iters=local_iters)
-        if callback is not None:
-            callback(i, state, info, grown)
-    if state is None:
-        raise ValueError("the stream is empty: no batch arrived")
-    return state
 
 
 def batch_prior(xyz, rgb, n_components: int, *, key: jax.Array,

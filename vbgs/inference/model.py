@@ -6,8 +6,10 @@ A data point has a position ``xyz [d]`` (d = 2 for images, 3 for scenes) and a c
 of :mod:`vbgs.inference.expfam`. Because the model is conjugate, a batch changes the posterior
 only through summed statistics: ``posterior = m_step(prior, stats)``.
 
-State is immutable: ``state, info = update(state, xyz, rgb)``. Batch CAVI and streaming
-loops over :func:`update` live in :mod:`vbgs.inference.fit`.
+State is immutable: ``state, info = update(state, xyz, rgb)``. Batch CAVI over
+:func:`update` lives in :mod:`vbgs.inference.fit`; the stream loop (each batch once, under
+a fixed, re-seeded or growing reference) is :func:`vbgs.mapping.update_points`, whose
+compiled stepper (:mod:`vbgs.inference.stepper`) :func:`update` is the reference of.
 """
 
 from __future__ import annotations

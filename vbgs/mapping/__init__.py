@@ -1,6 +1,7 @@
-"""The scene learner as library functions: ``init``, ``update``, ``splats`` over a
-:class:`MapState`, with every hyperparameter in one nested :class:`Config`; ``mapper``
-binds them (see :mod:`vbgs.mapping.mapper`)."""
+"""The scene learner as library functions: ``init``, ``update`` (a frame),
+``update_points`` (a batch of points: the one stream loop's step, which every frame goes
+through), ``splats`` over a :class:`MapState`, with every hyperparameter in one nested
+:class:`Config`; ``mapper`` binds them (see :mod:`vbgs.mapping.mapper`)."""
 
 from vbgs.mapping.config import (
     BudgetConfig,
@@ -23,8 +24,10 @@ from vbgs.mapping.mapper import (
     mapper,
     splats,
     update,
+    update_points,
 )
 
-__all__ = ["BudgetConfig", "Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState", "Mapper",
-           "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted", "grow_components", "init", "mapper", "splats",
-           "update", "with_dotted"]
+__all__ = ["BudgetConfig", "Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState",
+           "Mapper", "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted",
+           "grow_components", "init", "mapper", "splats", "update", "update_points",
+           "with_dotted"]

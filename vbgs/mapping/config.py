@@ -215,16 +215,33 @@ class Config:
     components: the capacity K (static shapes: a fixed number of slots), or ``"auto"`` /
         ``"auto:MAX"``: K chosen from the data (``mapper._auto_room``; slots grow in
         buckets, at most MAX; :func:`vbgs.components.parse_components`);
-    assign: responsibilities under the fixed ``prior`` (a stream equals one batch when
-        the reference does not grow) or the current ``posterior``;
+    assign: responsibilities under the ``prior`` (a stream equals one batch, in any
+        order, when that reference is fixed: given to ``init``, not grown, not re-seeded)
+        or the current ``posterior`` (order-dependent);
     estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
+    local_iters: under posterior assignment, the most E-steps of a batch's local
+        coordinate ascent (:func:`vbgs.inference.model.local_cavi`: components grown for
+        the batch start at their prior and a single E-step would score them so against
+        neighbours fitted to earlier batches); 1, the default, is one E-step through the
+        compiled stepper; ignored under prior assignment;
+    reseed: before each batch the unused components of a fixed reference are moved onto
+        its worst-explained points (:func:`vbgs.inference.reassign.reassign`, one more
+        E-step per batch); the reference then changes from batch to batch, so the order
+        matters even under prior assignment; not for a growing map (it grows its own);
     prior, growth, evidence, render, sensor, budget: the nested groups above.
+
+    ``local_iters > 1`` (posterior assignment) and ``reseed`` learn through
+    :func:`vbgs.inference.model.update`, the stepper's slow reference: every point at
+    weight 1 and without noise along its ray, so neither takes a point budget or a
+    measured depth.
     """
 
     components: int | str = 20000
     assign: str = "prior"
     estep: str = "sparse"
     candidates: int = DEFAULT_CANDIDATES
+    local_iters: int = 1
+    reseed: bool = False
     prior: PriorConfig = SURFACE_PRIOR
     growth: GrowthConfig = field(default_factory=GrowthConfig)
     evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
@@ -239,9 +256,26 @@ class Config:
             raise ValueError(f"candidates must be a positive integer, got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
+        value = self.local_iters
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise ValueError(f"local_iters must be a positive integer, got {value!r}")
+        if not isinstance(self.reseed, bool):
+            raise ValueError(f"reseed must be true or false, got {self.reseed!r}")
+        if self.slow_path and (self.budget.points or self.sensor.noisy):
+            raise ValueError("local_iters > 1 under posterior assignment and reseed learn "
+                             "every point at weight 1 without its noise: leave "
+                             "budget.points at 0 and the sensor exact, or take one E-step "
+                             "per batch without reseed")
         if self.sensor.noisy and self.estep != "sparse":
             raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
                              f"estep='sparse': its noise is modelled in the sparse E-step")
+
+    @property
+    def slow_path(self) -> bool:
+        """Batches are learned through :func:`vbgs.inference.model.update` rather than the
+        compiled stepper: the reference is re-seeded before each, or each is solved by
+        local coordinate ascent (``local_iters > 1`` under posterior assignment)."""
+        return self.reseed or (self.assign == "posterior" and self.local_iters > 1)
 
     @property
     def auto(self) -> bool:

@@ -1,4 +1,5 @@
-"""The scene learner: a continual map of Gaussian splats from posed RGB-D frames.
+"""The scene learner: a continual map of Gaussian splats from posed RGB-D frames, and the
+library's one stream loop.
 
 In the shape of blackjax's algorithms: a :class:`MapState` carried from frame to frame,
 a :class:`MapInfo` of per-frame diagnostics, pure functions that take the
@@ -10,24 +11,38 @@ hyperparameters as an argument, and :func:`mapper`, which binds them once::
         state, info = learner.update(state, frame)
     splats = learner.splats(state)            # render with vbgs.render.raster.rasterize
 
+A stream of bare points (an image's pixel patches, ``[n, 2]``; points from elsewhere,
+``[n, 3]``) goes through :func:`update_points`, the step every frame goes through too::
+
+    state = init(config, key=key, prior=prior)   # prior: a fixed reference, or None: grow
+    for xyz, rgb in batches:
+        state, info = update_points(state, xyz, rgb, config)
+
 What one :func:`update` does with a frame (a :class:`vbgs.data.scene.Frame`: camera,
 RGB, z-depth):
 
-1. its valid depth pixels become coloured world points (:func:`vbgs.render.camera.unproject`);
-2. a map started empty (``init`` without a ``prior``) grows components where the frame
+1. its valid depth pixels become coloured world points (:func:`vbgs.render.camera.unproject`;
+   at most ``budget.points`` of them, :mod:`vbgs.mapping.budget`), which
+   :func:`update_points` learns (2 and 3):
+2. a map started empty (``init`` without a ``prior``) grows components where the batch
    shows ground the map has none for (:func:`vbgs.inference.grow.grow`); the first
-   frame fixes the cell side with ``growth.first_frame_share`` of the capacity;
-3. the opacity evidence of the frame's depth map is added (``render.opacity_rule ==
-   "evidence"``; :mod:`vbgs.render.opacity`), read against the assigning model; with
-   a measured depth (``Config.sensor``) the hit band widens by the sensor's noise and a
-   missing pixel is a pass only where it shows nothing
-   (:func:`vbgs.render.background.empty_pixels`), never in a hole of a surface;
-4. one compiled conjugate update learns the points, with their noise along the rays
+   batch fixes the cell side with ``growth.first_frame_share`` of the capacity; a fixed
+   reference under ``config.reseed`` instead moves its unused components onto the
+   batch's worst-explained points (:mod:`vbgs.inference.reassign`);
+3. one compiled conjugate update learns the points, with their noise along the rays
    when the depth is measured (:mod:`vbgs.mapping.measurement`;
    :class:`vbgs.inference.stepper.Stepper`;
    growth hands it the new rows without recompiling); points farther than
    ``growth.reach_cells`` cells from every component are left out and counted
-   (``MapState.n_unlearned``);
+   (``MapState.n_unlearned``). Under ``config.slow_path`` (re-seeding, or local
+   coordinate ascent under posterior assignment, ``local_iters > 1``) the stepper's
+   reference :func:`vbgs.inference.model.update` learns them instead;
+4. the opacity evidence of the frame's depth map is added (``render.opacity_rule ==
+   "evidence"``; :mod:`vbgs.render.opacity`), read against the model that assigned the
+   points (the reference after growth, or the posterior before the frame); with
+   a measured depth (``Config.sensor``) the hit band widens by the sensor's noise and a
+   missing pixel is a pass only where it shows nothing
+   (:func:`vbgs.render.background.empty_pixels`), never in a hole of a surface;
 5. under ``render.colour_rule == "fit"`` the frame's colour least-squares terms are
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
@@ -41,15 +56,20 @@ every few frames the neighbours whose merge raises the bound
 
 The state is a NamedTuple and is never changed in place; it holds, beside arrays, the
 host-side objects a stream needs (the growth rule, and the stepper: the compiled update
-with the reference's terms, replaced when the reference grows). Under prior assignment
-with a fixed reference (``init(prior=...)``) the posterior is the same whatever the
-order of the frames; a map that grows changes its reference as frames arrive, so it is
-not (see :mod:`vbgs.inference.grow`).
+with the reference's terms, replaced when the reference grows).
+
+Order invariance holds for what it holds: under prior assignment with a fixed reference
+(``init(prior=...)``, ``reseed`` off) the posterior is a sum of per-batch statistics, the
+same whatever the order or split of the frames or batches (one batch of all of them
+included; ``tests/vbgs/mapping``); a map that grows, or one re-seeded, changes its
+reference as batches arrive, and posterior assignment scores each batch under the
+current posterior, so those are not (see :mod:`vbgs.inference.grow`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -58,6 +78,7 @@ import numpy as np
 from vbgs.data.scene import Frame
 from vbgs.inference import capacity, expfam, grow, merge, model
 from vbgs.inference.bound import BatchBound, batch_bound
+from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
 from vbgs.components import AUTO_BUCKET
 from vbgs.mapping.budget import stride, thin
@@ -77,7 +98,6 @@ class MapState(NamedTuple):
     key: jax.Array  # split once per frame (growth's random choices)
     rule: grow.Growth | None  # the growth rule, fixed on the first frame (None: no growth)
     stepper: Stepper | None  # the compiled update bound to mixture.prior
-    geometry: tuple | None  # means [k, 3], covariances [k, 3, 3] of mixture.prior
     evidence: opacity.Evidence  # rays that hit / passed each component
     colour: colour_fit.ColourNormal  # colour normal equations (colour_rule "fit")
     n_points: int  # points seen (valid depth pixels of every frame)
@@ -93,49 +113,59 @@ class MapState(NamedTuple):
 
 
 class MapInfo(NamedTuple):
-    """One frame's diagnostics."""
+    """One frame's (or point batch's) diagnostics."""
 
-    elbo: jax.Array  # the frame's ELBO term (scalar, on the device)
-    n_points: int  # the frame's points
+    elbo: jax.Array  # the batch's ELBO term (scalar, on the device)
+    n_points: int  # the batch's points
     n_learned: int  # of which within reach
-    n_new: int  # components grown for the frame
-    before: model.Mixture  # the posterior before the frame (for the streaming bound)
-    xyz: np.ndarray  # [n_learned, 3] the points learned
+    n_new: int  # slots changed for the batch (components grown, and merged pairs)
+    before: model.Mixture  # the posterior the batch was learned from: after growth or
+    #                        re-seeding, before the batch (for the streaming bound)
+    xyz: np.ndarray  # [n_learned, d] the points learned
     rgb: np.ndarray  # [n_learned, 3]
 
 
 class Mapper(NamedTuple):
-    """:func:`init`, :func:`update` and :func:`splats` bound to one :class:`Config`."""
+    """:func:`init`, :func:`update`, :func:`splats` and :func:`update_points` bound to one
+    :class:`Config`."""
 
     init: Callable[..., MapState]
     update: Callable[..., tuple[MapState, MapInfo]]
     splats: Callable[..., Splats]
+    update_points: Callable[..., tuple[MapState, MapInfo]]
 
 
 def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) -> MapState:
-    """A map before any frame. Without ``prior`` it starts empty and grows (stream
-    init: nothing read ahead); with one (e.g. :func:`vbgs.inference.model.init` on
-    known points: an oracle start when they come from frames not yet arrived) its
-    components are fixed and only learned."""
+    """A map before any frame or batch. Without ``prior`` it starts empty and grows
+    (stream init: nothing read ahead); with one (e.g. :func:`vbgs.inference.model.init`
+    on known points: an oracle start when they come from frames not yet arrived) its
+    components are fixed and only learned (re-seeded under ``config.reseed``). ``key``:
+    growth's and re-seeding's random choices, and a point budget's offsets."""
     k = _first_capacity(config)
     mixture = None
+    if prior is None and config.reseed:
+        raise ValueError("reseed moves the unused components of a fixed reference; a map "
+                         "started empty grows its own: give a prior or leave reseed off")
     if prior is not None and config.auto:
         raise ValueError("components='auto' chooses the components as frames arrive; a "
                          "given prior fixes them: give the prior's count as components")
     if prior is not None:
-        if prior.n_components != k or prior.dim != 3:
+        if prior.n_components != k or prior.dim not in (2, 3):
             raise ValueError(f"the prior has {prior.n_components} {prior.dim}-D components; "
-                             f"the config asks for {k} 3-D ones")
+                             f"the config asks for {k} (3-D for frames, 2-D or 3-D for "
+                             f"points)")
         mixture = _measured(model.start(prior), config)
-    return MapState(mixture, key, None, None, None, opacity.no_evidence(k),
+    return MapState(mixture, key, None, None, opacity.no_evidence(k),
                     colour_fit.no_frames(k), 0, 0, prior is None)
 
 
 def update(state: MapState, frame: Frame, config: Config,
            background=None) -> tuple[MapState, MapInfo]:
-    """Learn one arriving frame (the steps of the module docstring). ``background``
-    ([3] or None: black) is what the frame's pixels without a splat show; only the
-    colour fit reads it (pixels without depth are not points)."""
+    """Learn one arriving frame (the steps of the module docstring): its depth becomes
+    points that go through :func:`update_points`, then the frame's opacity evidence and
+    colour terms are added. ``background`` ([3] or None: black) is what the frame's pixels
+    without a splat show; only the colour fit reads it (pixels without depth are not
+    points)."""
     state, depth, weight = _within_budget(state, frame, config)
     xyz, rgb = unproject(frame.camera, frame.rgb, depth)
     if len(xyz) == 0:
@@ -143,36 +173,86 @@ def update(state: MapState, frame: Frame, config: Config,
     sensor = config.sensor
     ray = point_rays(frame.camera, depth, sensor.model, sensor.level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
-    state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
-    state = _sync_stepper(state, slots, config)
-    reach = None  # each point's own, when far ground has coarse cells
-    levels = grow.point_levels(state.rule, footprint) if state.growing else None
-    if levels is not None and state.stepper.reach is not None:
-        reach = state.stepper.reach * 2.0**levels
-    evidence = state.evidence
-    if config.render.opacity_rule == "evidence":  # against the model that assigns
-        geometry = (state.geometry if config.assign == "prior"
-                    else mixture_geometry(state.mixture.posterior))
+    state, info = update_points(state, xyz, rgb, config, ray=ray, footprint=footprint,
+                                weight=weight)
+    if config.render.opacity_rule == "evidence":  # against the model that assigned
+        geometry = mixture_geometry(state.mixture.prior if config.assign == "prior"
+                                    else info.before)
         variance = depth_variance(geometry[0], frame.camera, sensor.model, sensor.level) \
             if sensor.noisy else None
-        evidence = opacity.observe(evidence, *geometry, frame.camera, frame.depth,
+        evidence = opacity.observe(state.evidence, *geometry, frame.camera, frame.depth,
                                    pass_sigmas=config.evidence.pass_sigmas,
                                    sensor_var=variance,
                                    empty=empty_pixels(frame.depth, holes=not sensor.exact))
-    before = state.mixture.posterior
-    mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight)
-    n = len(xyz)
-    if step.learned is not None:  # points beyond reach were left out
-        xyz, rgb = xyz[step.learned], rgb[step.learned]
-    state = state._replace(mixture=mixture, evidence=evidence, n_points=state.n_points + n,
-                           n_unlearned=state.n_unlearned + n - len(xyz),
-                           n_frames=state.n_frames + 1)
+        state = state._replace(evidence=evidence)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
                                     frame.rgb, 0.0 if background is None else background,
                                     blur=config.render.splat_blur)
         state = state._replace(colour=colour)
-    return state, MapInfo(step.elbo, n, len(xyz), len(slots), before, xyz, rgb)
+    return state, info
+
+
+def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footprint=None,
+                  weight=None) -> tuple[MapState, MapInfo]:
+    """Learn one arriving batch of points ``xyz [n, d]``, ``rgb [n, 3]`` (d = 3 for a
+    scene, 2 for an image's pixels): the one stream loop's step, which :func:`update`
+    takes every frame through after unprojection (steps 2 and 3 of the module
+    docstring). A growing map first grows components for the batch's new ground
+    (:func:`grow_components`); a fixed reference under ``config.reseed`` first re-seeds
+    its unused components onto the batch's worst-explained points. The batch is then
+    learned once, by the compiled stepper or, under ``config.slow_path``, by
+    :func:`vbgs.inference.model.update` (``config.local_iters`` E-steps of local
+    coordinate ascent under posterior assignment). Nothing of the batch is kept.
+
+    ``ray [n, 3]``: measured points' noise along their rays; ``footprint [n]``: their
+    pixel footprints (far ground grows coarse cells); ``weight [n]``: each point's weight
+    in the statistics (a thinned frame's; None: 1); all from a frame
+    (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.mapping.budget`), None for bare points."""
+    if len(xyz) == 0:
+        raise ValueError("the batch has no points: nothing to learn")
+    state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
+    if config.slow_path:
+        state, before, elbo = _learn_slowly(state, xyz, rgb, config)
+        learned = None
+    else:
+        state = _sync_stepper(state, slots, config)
+        reach = None  # each point's own, when far ground has coarse cells
+        levels = grow.point_levels(state.rule, footprint) if state.growing else None
+        if levels is not None and state.stepper.reach is not None:
+            reach = state.stepper.reach * 2.0**levels
+        before = state.mixture.posterior
+        mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight)
+        state, elbo, learned = state._replace(mixture=mixture), step.elbo, step.learned
+    n = len(xyz)
+    if learned is not None:  # points beyond reach were left out
+        xyz, rgb = xyz[learned], rgb[learned]
+    state = state._replace(n_points=state.n_points + n,
+                           n_unlearned=state.n_unlearned + n - len(xyz),
+                           n_frames=state.n_frames + 1)
+    return state, MapInfo(elbo, n, len(xyz), len(slots), before, xyz, rgb)
+
+
+def _learn_slowly(state: MapState, xyz, rgb, config: Config
+                  ) -> tuple[MapState, model.Mixture, jax.Array]:
+    """:func:`update_points`' learning under ``config.slow_path``: the batch through
+    :func:`vbgs.inference.model.update`, after re-seeding the reference under
+    ``config.reseed`` (its unused components moved onto the points worst explained under
+    the assigning model; the state's key split once). Returns the state, the posterior the
+    batch was learned from and the batch's ELBO term."""
+    learn = partial(model.update, assign=config.assign, config=config.prior,
+                    estep=config.estep, n_candidates=config.candidates,
+                    local_iters=config.local_iters)
+    mixture = state.mixture
+    if config.reseed:
+        key, sub = jax.random.split(state.key)
+        _, scored = learn(mixture, xyz, rgb)
+        mixture, _ = reassign(mixture, xyz, rgb, scored.point_loglik, key=sub,
+                              colour_noise=config.prior.colour_noise)
+        state = state._replace(key=key)
+    before = mixture.posterior
+    mixture, info = learn(mixture, xyz, rgb)
+    return state._replace(mixture=mixture), before, info.elbo
 
 
 def splats(state: MapState, config: Config, drop_unused: bool = False) -> Splats:
@@ -197,8 +277,9 @@ def bound(info: MapInfo, state: MapState, config: Config) -> BatchBound:
 
 
 def mapper(config: Config) -> Mapper:
-    """The three functions with ``config`` bound: ``init(key=..., prior=None)``,
-    ``update(state, frame, background=None)``, ``splats(state, drop_unused=False)``."""
+    """The functions with ``config`` bound: ``init(key=..., prior=None)``,
+    ``update(state, frame, background=None)``, ``splats(state, drop_unused=False)`` and
+    ``update_points(state, xyz, rgb, ray=None, footprint=None, weight=None)``."""
 
     def bound_init(*, key: jax.Array, prior: model.Mixture | None = None) -> MapState:
         return init(config, key=key, prior=prior)
@@ -209,12 +290,15 @@ def mapper(config: Config) -> Mapper:
     def bound_splats(state: MapState, drop_unused: bool = False) -> Splats:
         return splats(state, config, drop_unused)
 
-    return Mapper(bound_init, bound_update, bound_splats)
+    def bound_update_points(state: MapState, xyz, rgb, **measured):
+        return update_points(state, xyz, rgb, config, **measured)
+
+    return Mapper(bound_init, bound_update, bound_splats, bound_update_points)
 
 
 def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None
                     ) -> tuple[MapState, np.ndarray]:
-    """Step 2 of :func:`update` alone: a growing map's new components for the points
+    """Step 2 of :func:`update_points` alone: a growing map's new components for the points
     ``xyz [n, 3]``, ``rgb [n, 3]`` (new ground; none for a map with a fixed reference),
     and the slots they filled. The first call fixes the growth rule; ``ray [n, 3]``:
     the points' noise along their rays, ``footprint [n]`` their pixel footprints
@@ -356,7 +440,7 @@ def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapStat
         step = state.stepper.grow(prior, slots)
     else:
         return state
-    return state._replace(stepper=step, geometry=mixture_geometry(prior))
+    return state._replace(stepper=step)
 
 
 def _splats(state: MapState, config: Config, drop_unused: bool = False,

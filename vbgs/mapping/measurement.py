@@ -8,9 +8,10 @@ the noise into its conjugate update (:func:`vbgs.inference.model.e_step_with`:
 convolved in the responsibilities, deconvolved from the moments), so the posterior
 describes the surface, not the surface blurred by the sensor. Why this and not a
 latent depth per ray: the deconvolution keeps every statistic a sum over points, so
-under prior assignment a stream still equals one batch, and it costs one rank-1
-correction per point and candidate; a latent depth would need the current component
-in the statistics, which only the reference (never the data) may provide here.
+under prior assignment with a fixed reference a stream still equals one batch, and it
+costs one rank-1 correction per point and candidate; a latent depth would need the
+current component in the statistics, which only the reference (never the data) may
+provide here.
 
 The sensors and their ``sigma_z`` are :mod:`vbgs.sensors`; a map's sensor is
 ``Config.sensor`` (``exact``: nothing to take into account, no extra work).
