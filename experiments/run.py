@@ -560,7 +560,7 @@ def _front(args) -> dict:
                                    "use fewer --components or a larger --size")
         argv += ["--iters", str(args.iters)]
         rows = run_image_front(args.image, size, components, args.iters, gradient,
-                               seed=args.seed)
+                               seed=args.seed, progress=True)
         title = f"{name}, {size} px"
     else:
         from experiments.front import run_scene_front
@@ -582,7 +582,7 @@ def _front(args) -> dict:
         argv += ["--frames", str(args.frames), "--test-views", str(args.test_views),
                  "--polish-steps", ",".join(map(str, plan.polish_steps)),
                  "--replays", ",".join(replays), "--steps-per-frame", str(args.steps_per_frame)]
-        rows = run_scene_front(base, plan)
+        rows = run_scene_front(base, plan, progress=True)
         title = (f"{name}, {size} px, {components[0]} components, {args.frames} frames")
     argv += ["--out", str(out)]
     files = write_front(rows, out, name, command="python -m experiments.run " + " ".join(argv),
