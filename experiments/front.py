@@ -226,51 +226,96 @@ def label(row: dict) -> str:
     return f"{row['method']} {row['protocol']}"
 
 
+def reference_row(rows: list[dict]) -> dict | None:
+    """The gradient baseline's static (or image) row with the most steps: the issue's
+    yardstick (its PSNR, and a tenth of its wall time), drawn on the plot."""
+    grad = [r for r in rows if r["method"] == "gradient" and r["protocol"] != "continual"]
+    return max(grad, key=lambda r: (r["components"], r["steps"])) if grad else None
+
+
 def plot_front(rows: list[dict], path: Path, title: str) -> None:
-    """PSNR against wall time (log x; the front drawn as a step line) and, beside it,
-    PSNR against replay memory."""
+    """PSNR against wall time (log x; the front drawn as a thick grey step line, the
+    gradient baseline's most-steps PSNR and a tenth of its time as dotted lines) and,
+    beside it, the streaming rows' PSNR against replay memory (static rows hold every
+    training frame: they have no place on a memory axis of a stream)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter, LogLocator
 
-    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(12, 4.6))
+    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(13, 5), width_ratios=(1.6, 1))
     series: dict[str, list[dict]] = {}
     for r in rows:
-        series.setdefault(label(r), []).append(r)
+        series.setdefault(label(r) + (f" K={r['components']}" if r["protocol"] == "image"
+                                      else ""), []).append(r)
     markers = "osD^v<>PX*"
+    streamed = [r for r in rows if r["protocol"] == "continual"]
     for j, (name, rs) in enumerate(series.items()):
         rs = sorted(rs, key=lambda r: r["wall_seconds"])
-        kw = dict(marker=markers[j % len(markers)], label=name)
+        continual = rs[0]["protocol"] == "continual" and rs[0]["method"] != "vbgs"
+        kw = dict(marker=markers[j % len(markers)], label=name, color=f"C{j % 10}",
+                  linestyle="--" if continual else "-", markersize=6)
         ax_t.plot([r["wall_seconds"] for r in rs], [r["psnr"] for r in rs], **kw)
         for r in rs:
             if r["steps"]:
                 ax_t.annotate(str(r["steps"]), (r["wall_seconds"], r["psnr"]), fontsize=7,
                               textcoords="offset points", xytext=(3, 3))
-        ax_m.plot([r["replay_bytes"] / 2**20 for r in rs], [r["psnr"] for r in rs],
-                  linestyle="none", **kw)
+        if rs[0]["protocol"] == "continual":
+            ax_m.plot([r["replay_bytes"] / 2**20 for r in rs], [r["psnr"] for r in rs],
+                      **{**kw, "linestyle": "none"})
+            for r in rs:
+                drop = r["early_psnr_when_seen"] - r["early_psnr_at_end"]
+                if np.isfinite(drop):
+                    ax_m.annotate(f"early views {-drop:+.2f} dB", (r["replay_bytes"] / 2**20,
+                                  r["psnr"]), fontsize=7, textcoords="offset points",
+                                  xytext=(4, -10))
     front = sorted((r for r in rows if r["on_front"]), key=lambda r: r["wall_seconds"])
     ax_t.step([r["wall_seconds"] for r in front], [r["psnr"] for r in front], where="post",
-              color="black", linewidth=2.5, alpha=0.35, label="Pareto front", zorder=0)
+              color="black", linewidth=6, alpha=0.18, label="Pareto front", zorder=0)
+    ref = reference_row(rows)
+    if ref is not None:
+        ax_t.axhline(ref["psnr"], color="grey", linestyle=":", linewidth=1)
+        ax_t.axvline(ref["wall_seconds"] / 10, color="grey", linestyle=":", linewidth=1)
+        ax_t.annotate(f"gradient {ref['steps']} steps: {ref['psnr']:.2f} dB; "
+                      f"dotted vertical: a tenth of its {ref['wall_seconds']:.0f} s",
+                      (ref["wall_seconds"] / 10, ref["psnr"]), fontsize=7, color="dimgrey",
+                      textcoords="offset points", xytext=(3, -11))
     ax_t.set_xscale("log")
     plain = FuncFormatter(lambda x, _: f"{x:g}")  # 0.2, 0.5, 1, 2, 5, 10, ...
     ax_t.xaxis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))
     ax_t.xaxis.set_major_formatter(plain)
     ax_t.xaxis.set_minor_formatter(plain)
-    ax_t.set_xlabel("wall seconds (training; log scale)")
+    ax_t.set_xlabel("wall seconds of training (log; static: cumulative to each step count)")
+    ax_t.set_title("error against time (up and left is better; labels: steps)", fontsize=9)
     ax_m.set_xscale("symlog", linthresh=0.01)
     ax_m.set_xlabel("replay memory (MiB of frames held; symlog)")
+    ax_m.set_title("streaming learners: error against memory", fontsize=9)
+    if not streamed:
+        ax_m.text(0.5, 0.5, "no streaming rows", ha="center", va="center",
+                  transform=ax_m.transAxes)
     for ax in (ax_t, ax_m):
         ax.set_ylabel("held-out PSNR (dB)")
         ax.grid(alpha=0.3, which="both")
     handles, names = ax_t.get_legend_handles_labels()
     fig.legend(handles, names, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 0.0),
                ncol=min(4, len(names)), frameon=False)
-    fig.suptitle(title + " (labels: steps)")
+    fig.suptitle(title)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png"))
     plt.close(fig)
+
+
+def read_front(csv: str | Path) -> list[dict]:
+    """A front's rows back from its CSV (``--replot``)."""
+    import pandas as pd
+
+    frame = pd.read_csv(csv, keep_default_na=False, na_values=[""])
+    rows = frame.to_dict("records")
+    for r in rows:
+        r["replay"] = str(r["replay"])
+        r["on_front"] = bool(r["on_front"])
+    return rows
 
 
 def write_front(rows: list[dict], out: str | Path, name: str, *, command: str, title: str
@@ -284,7 +329,8 @@ def write_front(rows: list[dict], out: str | Path, name: str, *, command: str, t
             "compilation left out; a static method's rows are one run scored at each step "
             "count, its wall seconds the cumulative training to that count (the scoring "
             "at earlier counts excluded).")
-    paths = write_table(ordered, out, name, command=command, note=note)
+    paths = write_table(ordered, out, name, command=command, note=note,
+                        settings={"title": title})
     png = Path(out) / f"{name}.png"
     plot_front(rows, png, title)
     return [*paths, png]

@@ -121,3 +121,6 @@ def test_static_front_on_a_tiny_scene(tmp_path, capsys):
     for method in ("vbgs-polish", "gradient"):  # cumulative seconds along one run
         assert table.loc[table.method == method, "wall_seconds"].is_monotonic_increasing
     assert (out / "object.png").exists() and table.on_front.any()
+    (out / "object.png").unlink()  # drawn again from the CSV alone
+    assert main(["front", "--replot", str(out / "object.csv")]) == 0
+    assert (out / "object.png").stat().st_size > 10_000
