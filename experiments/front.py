@@ -1,7 +1,8 @@
 """Run time and memory against error: the whole front (``python -m experiments.run front``).
 
-For a scene (``--scene``) every point is one ``fit-scene`` run at the same size,
-components and frames:
+For a scene (``--scene``) every point is a ``fit-scene`` record at the same size,
+components and frames (the static rows of a method: one run scored at each step count,
+below):
 
 * ``vbgs``: the conjugate stream (no step, no replay);
 * ``vbgs-polish``, static: VBGS streams, then N steps on all training frames, for each
@@ -17,16 +18,28 @@ step count, for each component count (where splats are far fewer than pixels).
 
 Each row: method, protocol, steps, replay, wall seconds, replay bytes, PSNR, SSIM,
 depth L1, the early views' PSNR when seen and at the end (continual rows: the
-forgetting, :mod:`experiments.protocol`) and ``on_front``: on the Pareto front of PSNR against wall time (no other row
-is at least as fast and at least as good, and better in one). Written as CSV and
-markdown (:func:`experiments.bench.write_table`) and one PNG: PSNR against wall time
-(log scale), the front drawn, and PSNR against replay memory. Wall times are the
-runs' own training seconds on this machine without compilation: for a scene,
-``seconds - seconds_compiling`` of ``fit-scene``'s record (VBGS-polish: VBGS's stream
-plus the polish; JAX reports the tracing of a function compiled inside another within
-the outer's too, so a little more than the compilation may be taken off); for an image,
-each fit runs twice and the second, warm, run is timed (fits are cheap).
-``compile_seconds`` says what was left out.
+forgetting, :mod:`experiments.protocol`) and ``on_front``: on the Pareto front of PSNR
+against wall time (no other row is at least as fast and at least as good, and better in
+one). Written as CSV and markdown (:func:`experiments.bench.write_table`) and one PNG:
+PSNR against wall time (log scale), the front drawn, and PSNR against replay memory.
+
+**One run per static method.** The static rows of a method are one run to the largest
+step count, scored at each count (:func:`experiments.scene_task.run_scene_checkpoints`;
+images: :func:`experiments.image_task.gradient_image_path`). The learners' learning
+rates and frame draws are functions of the step count alone (the baseline's
+:class:`vbgs.baseline.Trainer`), so the row at N steps is what a run of N steps gives
+(tests/experiments/test_front.py holds them equal). Its wall time is the **cumulative
+training time to that count**; the scoring of the test views at the earlier counts is
+left out (it is no part of training).
+
+Wall times are the runs' own training seconds on this machine without compilation: for
+a scene, ``seconds - seconds_compiling`` of ``fit-scene``'s record (VBGS-polish: VBGS's
+stream plus the polish; JAX reports the tracing of a function compiled inside another
+within the outer's too, so a little more than the compilation may be taken off); for an
+image, VBGS's fit runs twice and the second, warm, run is timed, and the gradient fit
+compiles on a short fit before the timed one. ``compile_seconds`` says what was left
+out. Rows of one front ran on the same machine one after another, so their times compare
+with one another; across fronts, and across machines or loads, they do not.
 """
 
 from __future__ import annotations
@@ -74,30 +87,35 @@ def parse_counts(text: str, flag: str) -> tuple[int, ...]:
     return tuple(int(p) for p in parts)
 
 
-def scene_tasks(base, plan: FrontPlan) -> list:
-    """The :class:`experiments.scene_task.SceneTask` of each row, ``base`` giving the
-    scene, size, components, frames and seed."""
+def scene_runs(base, plan: FrontPlan) -> list[tuple]:
+    """The runs of a scene's front: ``(task, checkpoints)`` with the
+    :class:`experiments.scene_task.SceneTask` of each (``base`` giving the scene, size,
+    components, frames and seed) and, for a static run, the step counts it is scored at
+    (one run to the largest; None: one row)."""
     from dataclasses import replace
 
-    tasks = [replace(base, method="vbgs")]
-    tasks += [replace(base, method="vbgs-polish", protocol="static", steps=n)
-              for n in plan.polish_steps]
-    tasks += [replace(base, method="gradient", protocol="static", init="data", steps=n)
-              for n in plan.gradient_steps]
+    from experiments.learners import LEARNERS
+
+    runs = [(replace(base, method="vbgs"), None)]
+    if plan.polish_steps:
+        runs.append((replace(base, method="vbgs-polish", protocol="static",
+                             steps=max(plan.polish_steps)), plan.polish_steps))
+    if plan.gradient_steps:
+        runs.append((replace(base, method="gradient", protocol="static", init="data",
+                             steps=max(plan.gradient_steps)), plan.gradient_steps))
     if plan.continual:
         for spec in plan.replays:
-            tasks += [replace(base, method=m, protocol="continual", replay=spec,
-                              steps_per_frame=plan.steps_per_frame)
-                      for m in ("gradient", "vbgs-polish")]
-    for task in tasks:  # bad settings fail before any run
-        from experiments.learners import LEARNERS
-
+            runs += [(replace(base, method=m, protocol="continual", replay=spec,
+                              steps_per_frame=plan.steps_per_frame), None)
+                     for m in ("gradient", "vbgs-polish")]
+    for task, _ in runs:  # bad settings fail before any run
         LEARNERS[task.method].check(task)
-    return tasks
+    return runs
 
 
 def scene_row(task, record: dict) -> dict:
-    """One CSV row from a task and its ``fit-scene`` record."""
+    """One CSV row from a task and its ``fit-scene`` record (a static checkpoint's
+    record: its step count and the training seconds to it)."""
     steps = {"vbgs": 0}.get(task.method, record.get("steps_total", 0))
     return {"method": task.method, "protocol": "continual" if task.method == "vbgs"
             else task.protocol, "init": task.init, "components": task.components,
@@ -116,51 +134,73 @@ def nan_if_none(value) -> float:
     return float("nan") if value is None else float(value)
 
 
-def _say(i: int, n: int, row: dict) -> None:
-    print(f"front [{i}/{n}] {row['method']} {row['protocol']} steps={row['steps']} "
+def _say(row: dict) -> None:
+    print(f"front: {row['method']} {row['protocol']} steps={row['steps']} "
           f"replay={row['replay']}: {row['psnr']:.2f} dB in {row['wall_seconds']:.1f} s",
           file=sys.stderr, flush=True)
 
 
-def run_scene_front(base, plan: FrontPlan) -> list[dict]:
-    """Every row of a scene's front (progress on stderr)."""
-    from experiments.scene_task import run_scene
+def run_scene_front(base, plan: FrontPlan, *, progress: bool = False) -> list[dict]:
+    """Every row of a scene's front (:func:`scene_runs`; each row said on stderr, and with
+    ``progress`` a bar over the runs and each run's own)."""
+    from experiments.progress import progress as progress_bar
+    from experiments.scene_task import run_scene, run_scene_checkpoints
 
-    tasks = scene_tasks(base, plan)
+    runs = scene_runs(base, plan)
     rows = []
-    for i, task in enumerate(tasks, 1):
-        print(f"front [{i}/{len(tasks)}] running {task.method} {task.protocol} ...",
-              file=sys.stderr, flush=True)
-        rows.append(scene_row(task, run_scene(task).to_dict(images=False)))
-        _say(i, len(tasks), rows[-1])
+    bar = progress_bar(runs, desc="front runs", unit="run", enabled=progress)
+    for task, checkpoints in bar:
+        if checkpoints is None:
+            results = [run_scene(task, progress=progress)]
+        else:
+            results = (r for _, r in run_scene_checkpoints(task, checkpoints,
+                                                           progress=progress))
+        for result in results:
+            rows.append(scene_row(task, result.to_dict(images=False)))
+            _say(rows[-1])
     return mark_front(rows)
 
 
-def run_image_front(image: str, size: int, components: tuple[int, ...], iters: int,
-                    gradient_steps: tuple[int, ...], seed: int = 0) -> list[dict]:
-    """VBGS's batch fit and the 2-D gradient baseline at each step count, for each
-    component count, each fit timed warm (progress on stderr)."""
-    from experiments.image_task import ImageTask, run_image
+def _image_row(task, record: dict, compiled: float) -> dict:
+    return {"method": task.method, "protocol": "image", "init": task.init,
+            "components": task.components, "steps": record["iters"]
+            if task.method == "vbgs" else record["steps"], "replay": "none",
+            "wall_seconds": record["seconds"], "compile_seconds": compiled,
+            "replay_bytes": 0, "psnr": record["psnr"], "ssim": record["ssim"],
+            "depth_l1": float("nan"), "early_psnr_when_seen": float("nan"),
+            "early_psnr_at_end": float("nan"), "dropped": 0}
 
-    tasks = []
-    for k in components:
-        tasks.append(ImageTask(image=image, size=size, components=k, iters=iters, seed=seed))
-        tasks += [ImageTask(image=image, size=size, components=k, seed=seed,
-                            method="gradient", steps=n) for n in gradient_steps]
+
+def run_image_front(image: str, size: int, components: tuple[int, ...], iters: int,
+                    gradient_steps: tuple[int, ...], seed: int = 0, *,
+                    progress: bool = False) -> list[dict]:
+    """VBGS's batch fit and the 2-D gradient baseline at each step count, for each
+    component count (each row said on stderr; ``progress``: a bar over the fits and
+    each gradient fit's own). Fits are timed warm: VBGS's runs twice, the second timed;
+    the gradient's compiles on a short fit (the first step count), then one fit to the
+    largest step count is scored at each (:func:`experiments.image_task.gradient_image_path`:
+    seconds to each count, the scoring of the earlier ones left out)."""
+    from experiments.image_task import ImageTask, gradient_image_path, run_image
+    from experiments.progress import progress as progress_bar
+
+    counts = sorted(set(gradient_steps))
     rows = []
-    for i, task in enumerate(tasks, 1):
+    for k in progress_bar(components, desc="front components", unit="K", enabled=progress):
+        task = ImageTask(image=image, size=size, components=k, iters=iters, seed=seed)
         cold = run_image(task)["seconds"]  # compiles; the second run is timed warm
         record = run_image(task)
-        compiled = max(0.0, cold - record["seconds"])
-        rows.append({"method": task.method, "protocol": "image", "init": task.init,
-                     "components": task.components,
-                     "steps": task.iters if task.method == "vbgs" else task.steps,
-                     "replay": "none", "wall_seconds": record["seconds"],
-                     "compile_seconds": compiled, "replay_bytes": 0,
-                     "psnr": record["psnr"], "ssim": record["ssim"],
-                     "depth_l1": float("nan"), "early_psnr_when_seen": float("nan"),
-                     "early_psnr_at_end": float("nan"), "dropped": 0})
-        _say(i, len(tasks), rows[-1])
+        rows.append(_image_row(task, record, max(0.0, cold - record["seconds"])))
+        _say(rows[-1])
+        if not counts:
+            continue
+        task = ImageTask(image=image, size=size, components=k, seed=seed, method="gradient",
+                         steps=counts[-1])
+        (warm_up,) = gradient_image_path(task, counts[:1])  # compiles
+        for record in gradient_image_path(task, counts, progress=progress):
+            compiled = (max(0.0, warm_up["seconds"] - record["seconds"])
+                        if record["steps"] == counts[0] else 0.0)
+            rows.append(_image_row(task, record, compiled))
+            _say(rows[-1])
     return mark_front(rows)
 
 
@@ -186,51 +226,96 @@ def label(row: dict) -> str:
     return f"{row['method']} {row['protocol']}"
 
 
+def reference_row(rows: list[dict]) -> dict | None:
+    """The gradient baseline's static (or image) row with the most steps: the issue's
+    yardstick (its PSNR, and a tenth of its wall time), drawn on the plot."""
+    grad = [r for r in rows if r["method"] == "gradient" and r["protocol"] != "continual"]
+    return max(grad, key=lambda r: (r["components"], r["steps"])) if grad else None
+
+
 def plot_front(rows: list[dict], path: Path, title: str) -> None:
-    """PSNR against wall time (log x; the front drawn as a step line) and, beside it,
-    PSNR against replay memory."""
+    """PSNR against wall time (log x; the front drawn as a thick grey step line, the
+    gradient baseline's most-steps PSNR and a tenth of its time as dotted lines) and,
+    beside it, the streaming rows' PSNR against replay memory (static rows hold every
+    training frame: they have no place on a memory axis of a stream)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter, LogLocator
 
-    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(12, 4.6))
+    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(13, 5), width_ratios=(1.6, 1))
     series: dict[str, list[dict]] = {}
     for r in rows:
-        series.setdefault(label(r), []).append(r)
+        series.setdefault(label(r) + (f" K={r['components']}" if r["protocol"] == "image"
+                                      else ""), []).append(r)
     markers = "osD^v<>PX*"
+    streamed = [r for r in rows if r["protocol"] == "continual"]
     for j, (name, rs) in enumerate(series.items()):
         rs = sorted(rs, key=lambda r: r["wall_seconds"])
-        kw = dict(marker=markers[j % len(markers)], label=name)
+        continual = rs[0]["protocol"] == "continual" and rs[0]["method"] != "vbgs"
+        kw = dict(marker=markers[j % len(markers)], label=name, color=f"C{j % 10}",
+                  linestyle="--" if continual else "-", markersize=6)
         ax_t.plot([r["wall_seconds"] for r in rs], [r["psnr"] for r in rs], **kw)
         for r in rs:
             if r["steps"]:
                 ax_t.annotate(str(r["steps"]), (r["wall_seconds"], r["psnr"]), fontsize=7,
                               textcoords="offset points", xytext=(3, 3))
-        ax_m.plot([r["replay_bytes"] / 2**20 for r in rs], [r["psnr"] for r in rs],
-                  linestyle="none", **kw)
+        if rs[0]["protocol"] == "continual":
+            ax_m.plot([r["replay_bytes"] / 2**20 for r in rs], [r["psnr"] for r in rs],
+                      **{**kw, "linestyle": "none"})
+            for r in rs:
+                drop = r["early_psnr_when_seen"] - r["early_psnr_at_end"]
+                if np.isfinite(drop):
+                    ax_m.annotate(f"early views {-drop:+.2f} dB", (r["replay_bytes"] / 2**20,
+                                  r["psnr"]), fontsize=7, textcoords="offset points",
+                                  xytext=(4, -10))
     front = sorted((r for r in rows if r["on_front"]), key=lambda r: r["wall_seconds"])
     ax_t.step([r["wall_seconds"] for r in front], [r["psnr"] for r in front], where="post",
-              color="black", linewidth=2.5, alpha=0.35, label="Pareto front", zorder=0)
+              color="black", linewidth=6, alpha=0.18, label="Pareto front", zorder=0)
+    ref = reference_row(rows)
+    if ref is not None:
+        ax_t.axhline(ref["psnr"], color="grey", linestyle=":", linewidth=1)
+        ax_t.axvline(ref["wall_seconds"] / 10, color="grey", linestyle=":", linewidth=1)
+        ax_t.annotate(f"gradient {ref['steps']} steps: {ref['psnr']:.2f} dB; "
+                      f"dotted vertical: a tenth of its {ref['wall_seconds']:.0f} s",
+                      (ref["wall_seconds"] / 10, ref["psnr"]), fontsize=7, color="dimgrey",
+                      textcoords="offset points", xytext=(3, -11))
     ax_t.set_xscale("log")
     plain = FuncFormatter(lambda x, _: f"{x:g}")  # 0.2, 0.5, 1, 2, 5, 10, ...
     ax_t.xaxis.set_minor_locator(LogLocator(subs=(2.0, 5.0)))
     ax_t.xaxis.set_major_formatter(plain)
     ax_t.xaxis.set_minor_formatter(plain)
-    ax_t.set_xlabel("wall seconds (training; log scale)")
+    ax_t.set_xlabel("wall seconds of training (log; static: cumulative to each step count)")
+    ax_t.set_title("error against time (up and left is better; labels: steps)", fontsize=9)
     ax_m.set_xscale("symlog", linthresh=0.01)
     ax_m.set_xlabel("replay memory (MiB of frames held; symlog)")
+    ax_m.set_title("streaming learners: error against memory", fontsize=9)
+    if not streamed:
+        ax_m.text(0.5, 0.5, "no streaming rows", ha="center", va="center",
+                  transform=ax_m.transAxes)
     for ax in (ax_t, ax_m):
         ax.set_ylabel("held-out PSNR (dB)")
         ax.grid(alpha=0.3, which="both")
     handles, names = ax_t.get_legend_handles_labels()
     fig.legend(handles, names, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 0.0),
                ncol=min(4, len(names)), frameon=False)
-    fig.suptitle(title + " (labels: steps)")
+    fig.suptitle(title)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png"))
     plt.close(fig)
+
+
+def read_front(csv: str | Path) -> list[dict]:
+    """A front's rows back from its CSV (``--replot``)."""
+    import pandas as pd
+
+    frame = pd.read_csv(csv, keep_default_na=False, na_values=[""])
+    rows = frame.to_dict("records")
+    for r in rows:
+        r["replay"] = str(r["replay"])
+        r["on_front"] = bool(r["on_front"])
+    return rows
 
 
 def write_front(rows: list[dict], out: str | Path, name: str, *, command: str, title: str
@@ -240,8 +325,12 @@ def write_front(rows: list[dict], out: str | Path, name: str, *, command: str, t
 
     ordered = [{k: r[k] for k in (*COLUMNS, "on_front")} for r in rows]
     note = ("on_front: on the Pareto front of held-out PSNR against wall seconds. Wall "
-            "times are training seconds on this machine (shared CPUs are contended).")
-    paths = write_table(ordered, out, name, command=command, note=note)
+            "times are training seconds on this machine (shared CPUs are contended), "
+            "compilation left out; a static method's rows are one run scored at each step "
+            "count, its wall seconds the cumulative training to that count (the scoring "
+            "at earlier counts excluded).")
+    paths = write_table(ordered, out, name, command=command, note=note,
+                        settings={"title": title})
     png = Path(out) / f"{name}.png"
     plot_front(rows, png, title)
     return [*paths, png]

@@ -19,6 +19,9 @@ how it is scored, and the typed record of a run.
   same checkpoints: one render per view serves both.
 * :func:`static_protocol`: a learner that can ``train(frames, n_steps)`` takes
   ``task.steps`` steps on all training frames, then is scored (no forgetting metrics).
+  :func:`static_checkpoints` scores one such run at several step counts (the learners'
+  schedules are per step, so each is what a run of that length gives), its seconds the
+  training to that count, the scoring left out.
 * Final metrics are over all test views: PSNR, SSIM, depth L1 (where the ground truth
   has depth; rendered depth is the alpha-normalised expected depth).
 * **Validation views** (``scene.val``) are never scored here: they are for
@@ -278,22 +281,44 @@ def static_protocol(task, scene: Scene, learner, frames: list, *, progress: bool
     ``frames`` (in the learner's own form; the background estimated from all of them),
     then score the test views. No forgetting metrics; ``seconds_per_frame`` is the
     training time over the number of training frames."""
+    (_, result), = static_checkpoints(task, scene, learner, frames, (task.steps,),
+                                      progress=progress, ply=ply)
+    return result
+
+
+def static_checkpoints(task, scene: Scene, learner, frames: list, checkpoints, *,
+                       progress: bool = False, ply: str | None = None):
+    """One static run to the largest of ``checkpoints`` (step counts), yielding
+    ``(steps, SceneResult)`` at each as :func:`static_protocol` scores a run of that
+    many steps. Each result's ``seconds`` (and ``seconds_compiling``) is the training to
+    that count, cumulative; the test views' scoring in between is not timed. A learner's
+    steps must depend on the step count alone (per-step schedules and draws, as the
+    baseline's :class:`vbgs.baseline.Trainer`) for a checkpoint to equal a run of its
+    length. ``ply``: the splats of the last checkpoint."""
+    counts = sorted({int(n) for n in checkpoints})
+    if not counts or counts[0] < 1:
+        raise ValueError(f"checkpoints must be positive step counts, got {checkpoints!r}")
     background = static_background(task, scene)
-    bar = progress_bar(total=task.steps, desc="steps", unit="step", enabled=progress)
-    start, c0 = time.perf_counter(), compile_seconds()
-    for done in range(0, task.steps, PROGRESS_BLOCK):
-        n = min(PROGRESS_BLOCK, task.steps - done)
-        learner.train(frames, n, background)
-        bar.update(n)
-    seconds, compiling = time.perf_counter() - start, compile_seconds() - c0
+    bar = progress_bar(total=counts[-1], desc="steps", unit="step", enabled=progress)
+    seconds = compiling = 0.0
+    done = 0
+    for target in counts:
+        while done < target:
+            n = min(PROGRESS_BLOCK, target - done)
+            start, c0 = time.perf_counter(), compile_seconds()
+            learner.train(frames, n, background)
+            seconds += time.perf_counter() - start
+            compiling += compile_seconds() - c0
+            done += n
+            bar.update(n)
+        final, used = _final(scene, learner, background, ply if target == counts[-1] else None)
+        yield target, SceneResult(
+            settings={**task_settings(task), "steps": target}, psnr=final.psnr,
+            ssim=final.ssim, depth_l1=final.depth_l1, seconds=seconds,
+            seconds_per_frame=seconds / len(scene.train), peak_memory_mb=peak_memory_mb(),
+            components_used=used, replay_bytes=int(learner.replay_bytes), early_views=None,
+            early_psnr_when_seen=None, early_psnr_at_end=None, forgetting_curve=None,
+            dropped=final.dropped, background_rgb=background.tolist(),
+            uncovered=final.uncovered, seconds_compiling=compiling,
+            images={"target": [f.rgb for f in scene.test], "render": final.renders})
     bar.close()
-    final, used = _final(scene, learner, background, ply)
-    return SceneResult(
-        settings=task_settings(task), psnr=final.psnr, ssim=final.ssim,
-        depth_l1=final.depth_l1, seconds=seconds, seconds_per_frame=seconds / len(scene.train),
-        peak_memory_mb=peak_memory_mb(), components_used=used,
-        replay_bytes=int(learner.replay_bytes), early_views=None, early_psnr_when_seen=None,
-        early_psnr_at_end=None, forgetting_curve=None, dropped=final.dropped,
-        background_rgb=background.tolist(), uncovered=final.uncovered,
-        seconds_compiling=compiling,
-        images={"target": [f.rgb for f in scene.test], "render": final.renders})

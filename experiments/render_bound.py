@@ -15,8 +15,11 @@ over every training frame, ``steps`` steps on frames drawn uniformly, three ways
 Each is scored on the held-out test views beside the learner's own splats. The
 refinements read every training frame again, so they are yardsticks, never a
 learner's method, and nothing is tuned here: the test views only report. Learning rates
-are the baseline's (3DGS's, :class:`vbgs.baseline.TrainConfig`), splats are drawn with
-the VBGS learner's pixel filter throughout.
+are the baseline's (3DGS's, :class:`vbgs.baseline.TrainConfig`) on its per-step schedule
+(the position rate decays over
+:data:`experiments.learners.gradient_learner.SCENE_LR_DECAY_STEPS` steps, whatever
+``steps`` is: a refinement of N steps is the first N of a longer one,
+:func:`refine_path`); splats are drawn with the VBGS learner's pixel filter throughout.
 """
 
 from __future__ import annotations
@@ -42,13 +45,17 @@ REFINED = {
     "colours_opacities": ("colour_logits", "opacity_logits"),
     "everything": ("colour_logits", "opacity_logits", "means", "log_scales", "rotations"),
 }
-def refine(splats: Splats, frames: list, background, *, what: str, steps: int, blur: float,
-           extent: float, seed: int = 0) -> Splats:
-    """``splats`` after ``steps`` Adam steps on ``frames`` refining ``what`` (a key of
-    :data:`REFINED`)."""
+def refine_path(splats: Splats, frames: list, background, *, what: str, steps, blur: float,
+                extent: float, seed: int = 0) -> dict[int, Splats]:
+    """``splats`` refining ``what`` (a key of :data:`REFINED`) by Adam on ``frames`` (one
+    drawn uniformly a step), after each step count of ``steps`` (one run to the largest:
+    the schedule and the draws are per step, so each is what a run of that length gives)."""
+    counts = sorted(set(int(n) for n in steps))
+    if not counts or counts[0] < 1:
+        raise ValueError(f"steps must be positive integers, got {steps!r}")
     capacity = max(exact_capacity(splats, f.camera, blur=blur) for f in frames)
     capacity = 1 << int(np.ceil(np.log2(max(capacity, 1))))  # a power of two: one compile
-    config = replace(DEFAULT_CONFIG, lr_decay_steps=steps, raster_capacity=capacity, blur=blur)
+    config = replace(DEFAULT_CONFIG, raster_capacity=capacity, blur=blur)
     optimizer = make_optimizer(config, extent)
     step = make_step(config, optimizer, frozen=tuple(f for f in Params._fields[:-1]
                                                      if f not in REFINED[what]))
@@ -56,9 +63,22 @@ def refine(splats: Splats, frames: list, background, *, what: str, steps: int, b
     opt_state = optimizer.init(trainable(params))
     arrays = [frame_arrays(f) for f in frames]
     bg = jnp.asarray(background, jnp.float32)
-    for i in np.random.default_rng(seed).integers(0, len(arrays), steps):
+    # Generator.integers draws one after another: the first N of a longer draw are its own
+    picks = np.random.default_rng(seed).integers(0, len(arrays), counts[-1])
+    out = {}
+    for t, i in enumerate(picks, 1):
         params, opt_state, _ = step(params, opt_state, *arrays[int(i)], bg)
-    return to_splats(params)
+        if t in counts:
+            out[t] = to_splats(params)
+    return out
+
+
+def refine(splats: Splats, frames: list, background, *, what: str, steps: int, blur: float,
+           extent: float, seed: int = 0) -> Splats:
+    """``splats`` after ``steps`` Adam steps on ``frames`` refining ``what`` (a key of
+    :data:`REFINED`; :func:`refine_path` at one step count)."""
+    return refine_path(splats, frames, background, what=what, steps=(steps,), blur=blur,
+                       extent=extent, seed=seed)[steps]
 
 
 def render_bound(task, scene, *, steps: int = 900, progress: bool = False) -> dict:

@@ -512,6 +512,10 @@ def _add_front(sub):
     what.add_argument("--scene", help="object | room | walk | a dataset folder")
     what.add_argument("--image", help="a bundled photo or an image file: VBGS against the "
                                       "2-D gradient baseline")
+    what.add_argument("--replot", metavar="CSV", help="draw a front's PNG again from its "
+                      "CSV (beside it), running nothing")
+    p.add_argument("--title", default=None, help="--replot: the plot's title (default: "
+                   "the CSV's title column)")
     add_choice(p, "--format", FORMAT)
     p.add_argument("--size", type=int, default=None,
                    help="image size (default: 128 for scenes, 256 for images)")
@@ -540,6 +544,16 @@ def _front(args) -> dict:
 
     from experiments.front import FrontPlan, parse_counts, write_front
 
+    if args.replot:
+        from experiments.front import plot_front, read_front
+
+        csv = Path(args.replot)
+        if not csv.is_file():
+            raise ValueError(f"--replot {csv}: no such CSV (a front's NAME.csv)")
+        rows = read_front(csv)
+        title = args.title or str(rows[0].get("title", csv.stem))
+        plot_front(rows, csv.with_suffix(".png"), title)
+        return {"files": [str(csv.with_suffix(".png"))]}
     name = Path(args.scene or args.image).name or "front"
     out = Path(args.out or Path("runs/front") / name)
     image = args.image is not None
@@ -560,7 +574,7 @@ def _front(args) -> dict:
                                    "use fewer --components or a larger --size")
         argv += ["--iters", str(args.iters)]
         rows = run_image_front(args.image, size, components, args.iters, gradient,
-                               seed=args.seed)
+                               seed=args.seed, progress=True)
         title = f"{name}, {size} px"
     else:
         from experiments.front import run_scene_front
@@ -582,7 +596,7 @@ def _front(args) -> dict:
         argv += ["--frames", str(args.frames), "--test-views", str(args.test_views),
                  "--polish-steps", ",".join(map(str, plan.polish_steps)),
                  "--replays", ",".join(replays), "--steps-per-frame", str(args.steps_per_frame)]
-        rows = run_scene_front(base, plan)
+        rows = run_scene_front(base, plan, progress=True)
         title = (f"{name}, {size} px, {components[0]} components, {args.frames} frames")
     argv += ["--out", str(out)]
     files = write_front(rows, out, name, command="python -m experiments.run " + " ".join(argv),

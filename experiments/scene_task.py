@@ -18,7 +18,12 @@ from experiments.continual import check_segments
 from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.learners.gradient_learner import DEFAULT_CONFIG as BASELINE_CONFIG
-from experiments.protocol import SceneResult, static_protocol, stream_protocol
+from experiments.protocol import (
+    SceneResult,
+    static_checkpoints,
+    static_protocol,
+    stream_protocol,
+)
 from experiments.sensor_swap import learned_surface, simulate_training_depth
 from experiments.tracking import TrackedLearner, check_poses
 from experiments.settings import (
@@ -258,41 +263,76 @@ def warn_rgb_only_tests(scene: Scene) -> bool:
 def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None) -> SceneResult:
     """Run the task's learner on its scene under the task's protocol and score the
     held-out views (a learner that only streams, VBGS, streams under either protocol)."""
-    learner_cls = LEARNERS[task.method]
-    learner_cls.check(task)  # bad settings fail before any work
-    scene, depth_report = prepare_scene(task)
-    if not scene.test:
-        raise ValueError(f"scene {task.scene!r} has no held-out test views to score a learner "
-                         f"on ({len(scene.train)} training view(s)); use it with the oracle "
-                         f"command, or pick a scene with more views")
-    if len(scene.train) == 1:
-        print(f"warning: scene {task.scene!r} has one training frame: a map from one view "
-              f"scores poorly on held-out views seen from elsewhere", file=sys.stderr)
-    rgb_only_tests = warn_rgb_only_tests(scene)
-    static = task.protocol == "static" and "static" in learner_cls.PROTOCOLS
-    order = (np.arange(len(scene.train)) if static
-             else stream_order(len(scene.train), task.order, seed=task.seed))
-    arrivals = depth_arrivals(task, scene, order)
-    if static and arrivals is not None:  # all frames at once: their depth, in file order
-        scene = scene._replace(train=list(arrivals(iter(scene.train))))
-    learner = learner_cls(task, scene)
-    if task.poses != "given":  # fed the poses it tracks (the first given)
-        learner = TrackedLearner(learner, task, scene)
-    if static:
-        result = static_protocol(task, scene, learner, learner.static_frames(scene),
-                                 progress=progress, ply=ply)
+    run = _SceneRun(task)
+    if run.static:
+        result = static_protocol(task, run.scene, run.learner,
+                                 run.learner.static_frames(run.scene), progress=progress,
+                                 ply=ply)
     else:
-        result = stream_protocol(task, scene, learner, progress=progress, ply=ply,
-                                 arrive=arrivals)
-    if arrivals is not None:
-        depth_report = arrivals.report()
-    details = learner.details(result)
-    warn_unlearned(details.get("points_unlearned", 0.0), task)
-    warn_capped(details, task)
-    warn_uncovered(result.uncovered)
-    return replace(result, depth=depth_report, details=details,
-                   depth_l1=None if rgb_only_tests else result.depth_l1,
-                   settings={**result.settings, **what_ran(task, scene)})
+        result = stream_protocol(task, run.scene, run.learner, progress=progress, ply=ply,
+                                 arrive=run.arrivals)
+    return run.finish(result)
+
+
+def run_scene_checkpoints(task: SceneTask, checkpoints, *, progress: bool = False):
+    """A static run of ``task`` to the largest of ``checkpoints`` (step counts; the
+    task's ``steps`` is not read), yielding ``(steps, SceneResult)`` at each: the result
+    :func:`run_scene` gives for ``steps`` steps (the learners' schedules are per step,
+    :func:`experiments.protocol.static_checkpoints`), ``seconds`` the training to that
+    count. The warnings are said once, at the last."""
+    if task.protocol != "static" or "static" not in LEARNERS[task.method].PROTOCOLS:
+        raise ValueError(f"checkpoints are steps of a static run: --method {task.method} "
+                         f"--protocol {task.protocol} takes none")
+    run = _SceneRun(task)
+    frames = run.learner.static_frames(run.scene)
+    last = max(checkpoints)
+    for n, result in static_checkpoints(task, run.scene, run.learner, frames, checkpoints,
+                                        progress=progress):
+        yield n, run.finish(result, warn=n == last)
+
+
+class _SceneRun:
+    """A task's scene, depth and learner, built and checked before any training
+    (:func:`run_scene`), and the record finished from a protocol's result."""
+
+    def __init__(self, task: SceneTask):
+        learner_cls = LEARNERS[task.method]
+        learner_cls.check(task)  # bad settings fail before any work
+        scene, self.depth_report = prepare_scene(task)
+        if not scene.test:
+            raise ValueError(f"scene {task.scene!r} has no held-out test views to score a "
+                             f"learner on ({len(scene.train)} training view(s)); use it with "
+                             f"the oracle command, or pick a scene with more views")
+        if len(scene.train) == 1:
+            print(f"warning: scene {task.scene!r} has one training frame: a map from one view "
+                  f"scores poorly on held-out views seen from elsewhere", file=sys.stderr)
+        self.rgb_only_tests = warn_rgb_only_tests(scene)
+        self.static = task.protocol == "static" and "static" in learner_cls.PROTOCOLS
+        order = (np.arange(len(scene.train)) if self.static
+                 else stream_order(len(scene.train), task.order, seed=task.seed))
+        self.arrivals = depth_arrivals(task, scene, order)
+        if self.static and self.arrivals is not None:  # all frames at once, in file order
+            scene = scene._replace(train=list(self.arrivals(iter(scene.train))))
+        learner = learner_cls(task, scene)
+        if task.poses != "given":  # fed the poses it tracks (the first given)
+            learner = TrackedLearner(learner, task, scene)
+        self.task, self.scene, self.learner = task, scene, learner
+
+    def finish(self, result: SceneResult, *, warn: bool = True) -> SceneResult:
+        """The result with the depth report, the learner's details and what ran; the
+        warnings on stderr when ``warn``."""
+        task = self.task
+        depth_report = self.depth_report
+        if self.arrivals is not None:
+            depth_report = self.arrivals.report()
+        details = self.learner.details(result)
+        if warn:
+            warn_unlearned(details.get("points_unlearned", 0.0), task)
+            warn_capped(details, task)
+            warn_uncovered(result.uncovered)
+        return replace(result, depth=depth_report, details=details,
+                       depth_l1=None if self.rgb_only_tests else result.depth_l1,
+                       settings={**result.settings, **what_ran(task, self.scene)})
 
 
 def what_ran(task: SceneTask, scene: Scene) -> dict:

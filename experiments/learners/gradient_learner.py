@@ -91,14 +91,6 @@ def stream_extent(camera_position, xyz) -> float:
     return 1.1 * float(np.linalg.norm(np.asarray(camera_position) - centre))
 
 
-def total_steps(task, scene: Scene) -> int:
-    """Steps the task will take: ``frames · steps_per_frame`` (continual) or ``steps``
-    (vbgs-polish's schedule still reads it; the gradient learner's does not)."""
-    if task.protocol == "static":
-        return task.steps
-    return len(scene.train) * task.steps_per_frame
-
-
 def train_arrays(task, frame: Frame):
     """The frame as the step takes it; under a measured depth (``task.sensor``) its
     depth term weighted by the sensor's noise (:mod:`vbgs.baseline.loss`)."""

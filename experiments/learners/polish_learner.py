@@ -36,8 +36,10 @@ residual on top of it, never a copy that drifts away.
    on validation views). The residual and the carry stay either way.
 
 Not done: no densification (the rows are VBGS's components, and a moved row would lose
-its anchor), and the learning-rate decay spans the whole polish (``steps`` or
-``frames · steps_per_frame``) as the baseline's does. Splats are drawn with VBGS's pixel
+its anchor). The learning rates are the baseline's schedule of the step alone (the
+position rate decays over :data:`experiments.learners.gradient_learner.SCENE_LR_DECAY_STEPS`
+steps, never over the run's length): a polish of N steps is the first N steps of a longer
+one, so ``front`` scores one run at several step counts. Splats are drawn with VBGS's pixel
 filter throughout, so 0 steps render exactly VBGS's picture.
 
 Wall time: ``seconds`` is VBGS's stream plus the polish under either protocol
@@ -59,7 +61,6 @@ from experiments.learners.gradient_learner import (
     DEFAULT_CONFIG,
     TRAIN_KEY,
     stream_extent,
-    total_steps,
     train_arrays,
 )
 from experiments.learners.start import init_key
@@ -109,8 +110,8 @@ class PolishLearner:
         self.task = task
         self.vbgs = VbgsLearner(task, scene)
         self.blur = self.vbgs.blur
-        self.config = replace(DEFAULT_CONFIG, lr_decay_steps=total_steps(task, scene),
-                              densify=None, blur=self.blur)
+        # the baseline's per-step schedule (module docstring), no densification
+        self.config = replace(DEFAULT_CONFIG, densify=None, blur=self.blur)
         self.replay = parse_replay(task.replay, seed=task.seed)
         self.extent = (camera_extent([f.camera.position for f in scene.train])
                        if task.protocol == "static" else None)

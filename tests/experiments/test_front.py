@@ -24,7 +24,7 @@ def test_step_lists_are_refused_in_words():
         parse_counts("10,0", "--polish-steps")
 
 
-@pytest.mark.slow  # 31 s of compiling five learners; the image front keeps `front` in the default run
+@pytest.mark.slow  # 31 s of compiling five learners; test_static_front_on_a_tiny_scene is the default run's
 def test_front_on_a_tiny_scene(tmp_path, capsys):
     out = tmp_path / "front"
     code = main(["front", "--scene", "object", "--size", "16", "--components", "100",
@@ -33,7 +33,7 @@ def test_front_on_a_tiny_scene(tmp_path, capsys):
                  "--out", str(out), "--json"])
     assert code == 0
     captured = capsys.readouterr()
-    assert "front [5/5]" in captured.err  # progress on stderr
+    assert "front runs 5/5" in captured.err  # progress on stderr
     files = json.loads(captured.out.strip().splitlines()[-1])["files"]
     assert str(out / "object.png") in files and (out / "object.png").stat().st_size > 10_000
     table = pd.read_csv(out / "object.csv")
@@ -68,3 +68,59 @@ def test_image_front_times_warm_fits(tmp_path):
     assert table.method.tolist() == ["vbgs", "gradient"]
     assert table.steps.tolist() == [2, 5] and (table.protocol == "image").all()
     assert (table.compile_seconds >= 0).all() and (out / "astronaut.png").exists()
+
+
+def test_an_image_checkpoint_is_the_fit_of_its_length():
+    """The image front scores one gradient fit at several step counts (per-step schedule;
+    candidate refreshes every REFRESH_EVERY steps from the start)."""
+    from experiments.image_task import ImageTask, gradient_image_path, run_gradient_image
+
+    task = ImageTask(image="astronaut", size=16, components=20, method="gradient", steps=40)
+    path = {r["steps"]: r for r in gradient_image_path(task, (30, 40))}
+    alone = run_gradient_image(task, steps=30)
+    np.testing.assert_array_equal(path[30]["images"]["render"], alone["images"]["render"])
+    assert path[30]["loss"] == alone["loss"] and len(path[40]["loss"]) == 40
+    assert path[30]["seconds"] < path[40]["seconds"]
+
+
+TINY_SCENE = dict(scene="object", size=16, components=100, frames=3, n_test=1, n_val=0)
+
+
+@pytest.mark.parametrize("method", ["vbgs-polish", "gradient"])
+def test_a_checkpoint_is_the_run_of_its_length(method):
+    """The front scores one static run at several step counts: the learners' schedules
+    and draws are per step, so 3 steps of a 6-step run are a 3-step run (the gradient's
+    relocation every 2 steps included)."""
+    from dataclasses import replace
+
+    from experiments.scene_task import SceneTask, run_scene, run_scene_checkpoints
+    from vbgs.baseline.densify import DensifyConfig
+
+    task = SceneTask(**TINY_SCENE, method=method, protocol="static", init="data")
+    task = replace(task, baseline=replace(task.baseline, densify=DensifyConfig(every=2)))
+    path = dict(run_scene_checkpoints(replace(task, steps=6), (3, 6)))
+    alone = run_scene(replace(task, steps=3))
+    assert [path[n].details["steps_total"] for n in (3, 6)] == [3, 6]
+    assert path[3].settings["steps"] == 3
+    np.testing.assert_array_equal(np.asarray(path[3].images["render"]),
+                                  np.asarray(alone.images["render"]))
+    assert path[3].psnr == alone.psnr and path[6].psnr != alone.psnr
+    assert 0 < path[3].seconds < path[6].seconds  # cumulative training seconds
+
+
+def test_static_front_on_a_tiny_scene(tmp_path, capsys):
+    """The static rows: each method's one run scored at every step count."""
+    out = tmp_path / "front"
+    assert main(["front", "--scene", "object", "--size", "16", "--components", "100",
+                 "--frames", "3", "--test-views", "1", "--polish-steps", "1,2",
+                 "--gradient-steps", "1,3", "--replays", "", "--out", str(out)]) == 0
+    assert "front runs 3/3" in capsys.readouterr().err
+    table = pd.read_csv(out / "object.csv")
+    assert list(zip(table.method, table.steps, strict=True)) == [
+        ("vbgs", 0), ("vbgs-polish", 1), ("vbgs-polish", 2), ("gradient", 1), ("gradient", 3)]
+    for method in ("vbgs-polish", "gradient"):  # cumulative seconds along one run
+        assert table.loc[table.method == method, "wall_seconds"].is_monotonic_increasing
+    assert (out / "object.png").exists() and table.on_front.any()
+    (out / "object.png").unlink()  # drawn again from the CSV alone
+    assert main(["front", "--replot", str(out / "object.csv")]) == 0
+    assert (out / "object.png").stat().st_size > 10_000

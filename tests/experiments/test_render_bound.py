@@ -77,3 +77,18 @@ def test_render_bound_refuses_bad_input_before_any_work(capsys, monkeypatch):
                         lambda *a, **k: pytest.fail("the diagnostic started"))
     assert main(["render-bound", "--steps", "0"]) == 2
     assert "--test-views and --steps must be at least 1" in capsys.readouterr().err
+
+
+def test_a_refinement_of_n_steps_is_the_first_n_of_a_longer_one(learned):
+    """The schedule is per step (not the run's length): the splats after 3 steps of a
+    6-step refinement are a 3-step refinement's."""
+    from experiments.render_bound import refine_path
+
+    scene, splats, background, blur = learned
+    extent = camera_extent([f.camera.position for f in scene.train])
+    kw = dict(what="everything", blur=blur, extent=extent)
+    path = refine_path(splats, scene.train, background, steps=(3, 6), **kw)
+    short = refine(splats, scene.train, background, steps=3, **kw)
+    np.testing.assert_array_equal(path[3].means, short.means)
+    np.testing.assert_array_equal(path[3].colours, short.colours)
+    assert np.abs(np.asarray(path[6].means) - np.asarray(short.means)).max() > 0

@@ -33,6 +33,9 @@ def test_quick_config_parses_and_expands():
     assert values["assign"] == {"prior", "posterior"} and values["seed"] == {0, 1}
     assert len(values["dataset"]) >= 3
     assert all(c["stream"] == "patches" for c in cells if c["task"] == "image" and "order" in c)
+    # the batch fits and the gradient baseline: splats far fewer than pixels (>= 8 a splat)
+    batch = [c for c in cells if c["task"] == "image" and c.get("stream") == "none"]
+    assert batch and all(c["size"] ** 2 >= 8 * c["components"] for c in batch)
 
 
 def test_paper_config_parses():

@@ -35,6 +35,10 @@ from vbgs.inference.precision import mat_vec, matmul
 from vbgs.render.pixels import pixel_centres
 
 IMAGE_STEPS = 2000  # default number of Adam steps for an image fit
+# Steps over which the position rate decays 100-fold: a constant of the schedule, never
+# the run's length (a run of N steps is the first N of a longer one). The default fit's
+# length, so a default fit keeps the schedule it had when the decay spanned the run.
+IMAGE_LR_DECAY_STEPS = IMAGE_STEPS
 PIXEL_CHUNK = 1024  # pixels per chunk of the dense candidate pass (bounds [chunk, K] blocks)
 CANDIDATES = 16  # splats kept per pixel: those of largest weight w_k(x)
 REFRESH_EVERY = 25  # steps between candidate refreshes (a dense pass)
@@ -161,28 +165,45 @@ def make_image_step(config: TrainConfig, optimizer):
     return step
 
 
-def fit_image(params: Params, image, *, steps: int = IMAGE_STEPS,
-              config: TrainConfig | None = None, key: jax.Array, callback=None):
-    """Fit 2-D ``params`` (means in pixels) to ``image [h, w, 3]`` for ``steps`` Adam steps.
-
-    Candidates are refreshed every REFRESH_EVERY steps (and so right after every
-    densification, whose interval is a multiple of it by default). config: defaults to
-    :class:`TrainConfig` with ``lr_decay_steps = steps``; callback: called as
-    ``callback(n_done)`` after each refresh block. Returns the fitted params and the loss
-    per step ``[steps]``.
-    """
+def fit_image_path(params: Params, image, *, checkpoints, config: TrainConfig | None = None,
+                   key: jax.Array, callback=None):
+    """Fit 2-D ``params`` (means in pixels) to ``image [h, w, 3]`` by Adam, one run to the
+    largest of ``checkpoints`` (step counts), yielding ``(steps, params, losses [steps])``
+    at each. Candidates are refreshed every REFRESH_EVERY steps counted from the start
+    (and so right after every densification, whose interval is a multiple of it by
+    default), whatever the checkpoints; with the per-step schedule (``config`` defaults to
+    :class:`TrainConfig` with ``lr_decay_steps = IMAGE_LR_DECAY_STEPS``) each checkpoint
+    is what a run of that many steps gives. ``callback(n_done)`` after each block. The
+    caller's time between yields is the training's alone."""
     if params.dim != 2:
         raise ValueError(f"fit_image needs 2-D params, got {params.dim}-D")
-    config = config or TrainConfig(lr_decay_steps=steps)
+    counts = sorted({int(n) for n in checkpoints})
+    if not counts or counts[0] < 1:
+        raise ValueError(f"checkpoints must be positive step counts, got {checkpoints!r}")
+    config = config or TrainConfig(lr_decay_steps=IMAGE_LR_DECAY_STEPS)
     h, w = image.shape[:2]
     trainer = Trainer(config, extent=float(max(h, w)), make_step_fn=make_image_step)
     state = trainer.init(params, key=key)
     target = jnp.asarray(image, jnp.float32)
-    losses = []
-    for done in range(0, steps, REFRESH_EVERY):
-        cand = image_candidates(state.params, h, w)
-        state, block = trainer.train(state, [(target, cand)], min(REFRESH_EVERY, steps - done))
-        losses.append(block)
-        if callback is not None:
-            callback(done + len(block))
-    return state.params, np.concatenate(losses) if losses else np.zeros(0, np.float32)
+    losses, done, cand = [], 0, None
+    for goal in counts:
+        while done < goal:
+            if done % REFRESH_EVERY == 0:
+                cand = image_candidates(state.params, h, w)
+            n = min(REFRESH_EVERY - done % REFRESH_EVERY, goal - done)
+            state, block = trainer.train(state, [(target, cand)], n)
+            losses.append(block)
+            done += n
+            if callback is not None:
+                callback(done)
+        yield goal, state.params, np.concatenate(losses)
+
+
+def fit_image(params: Params, image, *, steps: int = IMAGE_STEPS,
+              config: TrainConfig | None = None, key: jax.Array, callback=None):
+    """Fit 2-D ``params`` (means in pixels) to ``image [h, w, 3]`` for ``steps`` Adam steps
+    (:func:`fit_image_path` to one checkpoint). Returns the fitted params and the loss per
+    step ``[steps]``."""
+    (_, params, losses), = fit_image_path(params, image, checkpoints=(steps,), config=config,
+                                          key=key, callback=callback)
+    return params, losses

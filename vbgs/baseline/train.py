@@ -208,6 +208,19 @@ def _optimizer_and_step(config, extent, make_step_fn):
     return optimizer, make_step_fn(config, optimizer)
 
 
+def key_entropy(key: jax.Array) -> tuple[int, ...]:
+    """A JAX key's bits as host integers (seed material for :func:`pick`)."""
+    return tuple(int(x) for x in np.asarray(jax.random.key_data(key)).ravel())
+
+
+def pick(entropy: tuple[int, ...], step: int, n: int) -> int:
+    """The frame of step ``step``: uniform in ``[0, n)``, a function of the key's bits and
+    the step alone, so a run's draws do not depend on how its steps were split into
+    ``train`` calls (a run of N steps is the first N steps of a longer one). NumPy on the
+    host: no device round trip between the steps."""
+    return int(np.random.default_rng((*entropy, step)).integers(n))
+
+
 class TrainState(NamedTuple):
     """What the training loop carries."""
 
@@ -219,6 +232,11 @@ class TrainState(NamedTuple):
 
 class Trainer:
     """The baseline's training loop: draws frames, steps, densifies on schedule.
+
+    Everything a step does is a function of its step count and the key (the learning
+    rates, the frame drawn, :func:`pick`; the key changes only at a relocation, which is
+    due at fixed steps), so ``train(state, frames, 100)`` then ``train(..., 200)`` equals
+    ``train(state, frames, 300)``: a run of N steps is the first N of a longer run.
 
     ``state = trainer.init(params, key=key)``; ``state, losses = trainer.train(state,
     frames, n_steps)`` with each step's frame drawn uniformly from ``frames``.
@@ -251,16 +269,16 @@ class Trainer:
         if not frames:
             raise ValueError("no frames to train on")
         arrays = [frame_arrays(f) if hasattr(f, "camera") else f for f in frames]
-        key, sub = jax.random.split(state.key)
-        picks = np.asarray(jax.random.randint(sub, (n_steps,), 0, len(arrays)))
-        state = state._replace(key=key)
+        entropy = key_entropy(state.key)
         losses = []
         params, opt_state = state.params, state.opt_state
-        for i in picks:
-            params, opt_state, loss = self.step_fn(params, opt_state, *arrays[int(i)], *shared)
+        for _ in range(n_steps):
+            i = pick(entropy, state.step, len(arrays))
+            params, opt_state, loss = self.step_fn(params, opt_state, *arrays[i], *shared)
             losses.append(loss)
             state = state._replace(params=params, opt_state=opt_state, step=state.step + 1)
             if self.config.densify is not None and self.config.densify.due(state.step):
                 state = self.densify(state)
                 params, opt_state = state.params, state.opt_state
+                entropy = key_entropy(state.key)
         return state, np.asarray(jnp.stack(losses)) if losses else np.zeros(0, np.float32)
