@@ -231,10 +231,15 @@ def prepare_scene(task) -> tuple[Scene, dict]:
     return learned_surface(scene, report, task.sensor, task.sensor_level)
 
 
-def depth_arrivals(task, scene: Scene, order):
+def depth_arrivals(task, scene: Scene, order, report: dict | None = None):
     """The stage that gives the arriving training frames the depth model's metric depth
     (:class:`experiments.depth_swap.EstimatedDepth`), or None without a depth model."""
     if not task.depth_model:
+        if task.sensor == "mono":  # a network's depth: each frame aligned as it arrives
+            from depth.perframe import FrameAlignConfig
+            from experiments.sensor_swap import AlignedArrivals
+
+            return AlignedArrivals(FrameAlignConfig(), report)
         return None
     from depth.stream import StreamConfig
     from experiments.depth_swap import EstimatedDepth
@@ -272,7 +277,7 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
     static = task.protocol == "static" and "static" in learner_cls.PROTOCOLS
     order = (np.arange(len(scene.train)) if static
              else stream_order(len(scene.train), task.order, seed=task.seed))
-    arrivals = depth_arrivals(task, scene, order)
+    arrivals = depth_arrivals(task, scene, order, depth_report)
     if static and arrivals is not None:  # all frames at once: their depth, in file order
         scene = scene._replace(train=list(arrivals(iter(scene.train))))
     learner = learner_cls(task, scene)
@@ -285,7 +290,7 @@ def run_scene(task: SceneTask, *, progress: bool = False, ply: str | None = None
         result = stream_protocol(task, scene, learner, progress=progress, ply=ply,
                                  arrive=arrivals)
     if arrivals is not None:
-        depth_report = arrivals.report()
+        depth_report = {**depth_report, **arrivals.report()}
     details = learner.details(result)
     warn_unlearned(details.get("points_unlearned", 0.0), task)
     warn_capped(details, task)
