@@ -18,7 +18,12 @@ A depth network's output ``p`` becomes metric depth by one alignment ``(s, t)``
 * ``kind="metric"``: the output is metric already; nothing is fitted or held.
 
 Each released frame's depth is the aligned prediction cut to what a network's depth
-shows of the surface (:meth:`vbgs.sensors.mono.Mono.surface`): its far field (sky,
+shows of the surface (below), then aligned once more, on its own, to the frames released
+before it (:func:`depth.perframe.align_frame`, ``StreamConfig.per_frame``; None turns it
+off): one alignment for the stream leaves each frame a scale, shift and warp error of its
+own, the same errors the ``mono`` sensor model simulates, whose in-memory path
+(``--simulate-sensor mono --sensor mono``) goes through the same function. The cut is
+the surface (:meth:`vbgs.sensors.mono.Mono.surface`): its far field (sky,
 empty background) and its depth edges become depth-less, so the background and the
 opacity evidence treat them as empty, and no shell of splats forms around the scene.
 

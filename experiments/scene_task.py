@@ -232,8 +232,12 @@ def prepare_scene(task) -> tuple[Scene, dict]:
 
 
 def depth_arrivals(task, scene: Scene, order, report: dict | None = None):
-    """The stage that gives the arriving training frames the depth model's metric depth
-    (:class:`experiments.depth_swap.EstimatedDepth`), or None without a depth model."""
+    """The stage the arriving training frames pass through: with a depth model, its
+    metric depth (:class:`experiments.depth_swap.EstimatedDepth`, which aligns each
+    frame to the frames before it); without one, for a network's depth (``sensor
+    "mono"``) the same per-frame alignment alone
+    (:class:`experiments.sensor_swap.AlignedArrivals`, ``report`` the sensor report it
+    extends); otherwise None (the depth as it is: exact-depth runs are unchanged)."""
     if not task.depth_model:
         if task.sensor == "mono":  # a network's depth: each frame aligned as it arrives
             from depth.perframe import FrameAlignConfig

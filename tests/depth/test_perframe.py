@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 from depth.perframe import FrameAlignConfig, Reference, align_frame, apply, fit, init
+from depth.stream import StreamConfig, arrive, finish
+from depth.stream import init as stream_init
 from experiments.sensor_swap import AlignedArrivals
 from vbgs.data.synthetic import make_scene
 
@@ -115,3 +117,23 @@ def test_the_aligner_keeps_only_its_window(frames):
         state, _, _ = align_frame(state, f.camera, f.depth, config)
     assert len(state.frames) == 3 and state.arrived == len(frames)
     assert state.frames[-1].camera is frames[-1].camera
+
+
+def test_a_depth_model_stream_aligns_each_released_frame(frames):
+    """depth.stream runs the same per-frame alignment on what it releases: a metric
+    model whose second frame is 5 % too far comes out right, its first as it came."""
+    k = np.ones(len(frames))
+    k[1] = 1.05
+    config = StreamConfig(kind="metric", per_frame=EXACT)
+    state, out = stream_init(), []
+    for f, kf in zip(frames[:3], k, strict=False):
+        pred = np.where(f.depth > 0, kf * f.depth, 3.0 * f.depth.max()).astype(np.float32)
+        state, ready = arrive(state, f._replace(depth=np.zeros_like(f.depth)), pred, config)
+        out += ready
+    state, ready = finish(state, config)
+    out += ready
+    assert len(out) == 3 and len(state.fits) == 3 and state.fits[0].n_pairs == 0
+    assert _rel_error(out[1][1], frames[1].depth) < 0.006
+    unaligned = StreamConfig(kind="metric", per_frame=None)
+    state, ready = arrive(stream_init(), frames[1], (1.05 * frames[1].depth), unaligned)
+    assert _rel_error(ready[0][1], frames[1].depth) > 0.04 and state.fits == ()
