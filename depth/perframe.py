@@ -49,8 +49,8 @@ network's own alignment, the errors stay bounded.
 Measured on validation views (``python -m experiments.val_probe fit-scene --scene object
 --size 64 --components 5000 --frames 20 --simulate-sensor mono --sensor mono --seed S``,
 4 views, seeds 0 / 1 / 2): without per-frame alignment 16.15 / 16.76 / 16.92 dB (mean
-16.61); the default (linear warp, ``ridge = shrink = shift_ridge = 1``, window 8) 16.14 /
-18.14 / 17.27 (17.18); scale and shift only (``warp_order=0``) 17.12; ``shrink=3`` 17.10;
+16.61); the default (linear warp, ``ridge = shrink = shift_ridge = 1``, window 8) 16.16 /
+18.14 / 17.30 (17.20); scale and shift only (``warp_order=0``) 17.12; ``shrink=3`` 17.10;
 ``window=16`` 17.14; a quadratic warp 16.10 / 18.22 on seeds 0 / 1. The depth error
 against the truth falls from 4.2 % to 2.7 % RMS (object) and from 4.8 % to 3.2 % (room).
 On test views, 128 px / 20k components / 60 frames: object 15.16 -> 15.97 dB (exact
