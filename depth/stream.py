@@ -18,7 +18,12 @@ A depth network's output ``p`` becomes metric depth by one alignment ``(s, t)``
 * ``kind="metric"``: the output is metric already; nothing is fitted or held.
 
 Each released frame's depth is the aligned prediction cut to what a network's depth
-shows of the surface (:meth:`vbgs.sensors.mono.Mono.surface`): its far field (sky,
+shows of the surface (below), then aligned once more, on its own, to the frames released
+before it (:func:`depth.perframe.align_frame`, ``StreamConfig.per_frame``; None turns it
+off): one alignment for the stream leaves each frame a scale, shift and warp error of its
+own, the same errors the ``mono`` sensor model simulates, whose in-memory path
+(``--simulate-sensor mono --sensor mono``) goes through the same function. The cut is
+the surface (:meth:`vbgs.sensors.mono.Mono.surface`): its far field (sky,
 empty background) and its depth edges become depth-less, so the background and the
 opacity evidence treat them as empty, and no shell of splats forms around the scene.
 
@@ -34,6 +39,7 @@ import numpy as np
 
 from depth.align import DEFAULT_METHOD, Alignment, align, apply
 from depth.multiview import View, align_views
+from depth.perframe import AlignState, FrameAlignConfig, align_frame
 from vbgs.sensors import SENSORS
 
 REFERENCES = ("auto", "sensor", "views")
@@ -51,6 +57,9 @@ class StreamConfig(NamedTuple):
     reference: str = "auto"  # auto | sensor | views
     views: int = ALIGN_VIEWS
     seed: int = 0
+    # each released frame then aligned to the frames released before it
+    # (depth.perframe); None: the one alignment only
+    per_frame: FrameAlignConfig | None = FrameAlignConfig()
 
 
 class Arrived(NamedTuple):
@@ -69,6 +78,8 @@ class StreamState(NamedTuple):
     reference: str | None = None  # "views" | "sensor" | "metric", once fitted
     aligned_on: tuple = ()  # arrival positions the alignment read
     arrived: int = 0
+    frames: AlignState = AlignState()  # the per-frame alignment's reference frames
+    fits: tuple = ()  # FrameFit of each released frame, in arrival order
 
 
 def check_config(config: StreamConfig) -> StreamConfig:
@@ -136,8 +147,15 @@ def metric_depth(state: StreamState, prediction: np.ndarray, camera) -> np.ndarr
     return SURFACE.surface(apply(state.alignment, prediction), camera)
 
 
-def _release(state: StreamState) -> tuple[StreamState, list]:
-    ready = [(h.frame, metric_depth(state, h.prediction, h.frame.camera)) for h in state.held]
+def _release(state: StreamState, config: StreamConfig) -> tuple[StreamState, list]:
+    ready = []
+    for h in state.held:
+        depth = metric_depth(state, h.prediction, h.frame.camera)
+        if config.per_frame is not None:
+            frames, depth, fit = align_frame(state.frames, h.frame.camera, depth,
+                                             config.per_frame)
+            state = state._replace(frames=frames, fits=(*state.fits, fit))
+        ready.append((h.frame, depth))
     return state._replace(held=()), ready
 
 
@@ -153,7 +171,7 @@ def arrive(state: StreamState, frame, prediction: np.ndarray, config: StreamConf
         state = _fit(state, config, final=False)
         if state.alignment is None:
             return state, []
-    return _release(state)
+    return _release(state, config)
 
 
 def finish(state: StreamState, config: StreamConfig) -> tuple[StreamState, list]:
@@ -162,4 +180,4 @@ def finish(state: StreamState, config: StreamConfig) -> tuple[StreamState, list]
         return state, []
     if state.alignment is None:
         state = _fit(state, config, final=True)
-    return _release(state)
+    return _release(state, config)

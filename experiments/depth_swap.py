@@ -18,6 +18,7 @@ import numpy as np
 
 from depth import OnnxDepth
 from depth.stream import StreamConfig, StreamState, arrive, check_config, finish, init
+from experiments.sensor_swap import per_frame_report
 from vbgs.data.scene import Frame
 
 
@@ -70,4 +71,5 @@ class EstimatedDepth:
             "depth_align_residual": float(fit.residual) if fit else float("nan"),
             "depth_abs_rel": float(np.mean(self.errors)) if self.errors else float("nan"),
             "depth_not_surface": self.cut[0] / self.cut[1] if self.cut[1] else 0.0,
+            **per_frame_report(self.state.fits),
         }

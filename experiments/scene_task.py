@@ -236,10 +236,19 @@ def prepare_scene(task) -> tuple[Scene, dict]:
     return learned_surface(scene, report, task.sensor, task.sensor_level)
 
 
-def depth_arrivals(task, scene: Scene, order):
-    """The stage that gives the arriving training frames the depth model's metric depth
-    (:class:`experiments.depth_swap.EstimatedDepth`), or None without a depth model."""
+def depth_arrivals(task, scene: Scene, order, report: dict | None = None):
+    """The stage the arriving training frames pass through: with a depth model, its
+    metric depth (:class:`experiments.depth_swap.EstimatedDepth`, which aligns each
+    frame to the frames before it); without one, for a network's depth (``sensor
+    "mono"``) the same per-frame alignment alone
+    (:class:`experiments.sensor_swap.AlignedArrivals`, ``report`` the sensor report it
+    extends); otherwise None (the depth as it is: exact-depth runs are unchanged)."""
     if not task.depth_model:
+        if task.sensor == "mono":  # a network's depth: each frame aligned as it arrives
+            from depth.perframe import FrameAlignConfig
+            from experiments.sensor_swap import AlignedArrivals
+
+            return AlignedArrivals(FrameAlignConfig(), report)
         return None
     from depth.stream import StreamConfig
     from experiments.depth_swap import EstimatedDepth
@@ -310,7 +319,7 @@ class _SceneRun:
         self.static = task.protocol == "static" and "static" in learner_cls.PROTOCOLS
         order = (np.arange(len(scene.train)) if self.static
                  else stream_order(len(scene.train), task.order, seed=task.seed))
-        self.arrivals = depth_arrivals(task, scene, order)
+        self.arrivals = depth_arrivals(task, scene, order, self.depth_report)
         if self.static and self.arrivals is not None:  # all frames at once, in file order
             scene = scene._replace(train=list(self.arrivals(iter(scene.train))))
         learner = learner_cls(task, scene)
@@ -324,7 +333,7 @@ class _SceneRun:
         task = self.task
         depth_report = self.depth_report
         if self.arrivals is not None:
-            depth_report = self.arrivals.report()
+            depth_report = {**depth_report, **self.arrivals.report()}
         details = self.learner.details(result)
         if warn:
             warn_unlearned(details.get("points_unlearned", 0.0), task)

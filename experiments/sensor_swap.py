@@ -71,3 +71,41 @@ def sensor_report(sensor: str, level: float, holes: int, with_depth: int,
         "depth_sensor_holes": holes / with_depth if with_depth else 0.0,
         "depth_sensor_abs_error": float(np.median(errors)) if errors.size else 0.0,
     }
+
+
+class AlignedArrivals:
+    """``arrivals(frames) -> frames``: each arriving training frame's depth aligned to
+    the frames that arrived before it (:func:`depth.perframe.align_frame`), lazily, in
+    arrival order: the stage a depth network's depth goes through (``--sensor mono``).
+    The ``mono`` sensor model is what a network gives after one alignment for the whole
+    stream; an ONNX model's depth gets the same stage inside :mod:`depth.stream`."""
+
+    def __init__(self, config, report: dict):
+        self.config = config
+        self.base = report
+        self.fits: list = []
+
+    def __call__(self, frames):
+        from depth.perframe import align_frame, init
+
+        state, self.fits = init(), []
+        for frame in frames:
+            state, depth, fit = align_frame(state, frame.camera, frame.depth, self.config)
+            self.fits.append(fit)
+            yield frame._replace(depth=depth)
+
+    def report(self) -> dict:
+        """The sensor report and the spread of the per-frame corrections."""
+        return {**self.base, **per_frame_report(self.fits)}
+
+
+def per_frame_report(fits) -> dict:
+    """Flat keys: frames aligned to earlier ones, the SD of their scale terms and the
+    median of their residuals (relative depth disagreement with the earlier frames)."""
+    used = [f for f in fits if f.n_pairs > 0 and np.isfinite(f.residual)]
+    return {
+        "depth_per_frame_aligned": len(used),
+        "depth_per_frame_scale_sd": float(np.std([f.coef[0] for f in used])) if used else 0.0,
+        "depth_per_frame_residual": float(np.median([f.residual for f in used]))
+        if used else float("nan"),
+    }

@@ -87,6 +87,8 @@ def test_sigma_z_is_relative():
     mono = Mono()
     assert mono.sigma_z(2.0) == pytest.approx(2 * mono.sigma_z(1.0))
     assert 0.03 < mono.relative_sigma() < 0.06  # sqrt(3^2 + 2^2 + 2.5^2) = 4.4 %
+    # what is left after the per-frame alignment (depth.perframe): 70 % of it
+    assert mono.sigma_z(1.0) == pytest.approx(0.7 * mono.relative_sigma())
     assert mono.sigma_z(1.0, level=2.0) == pytest.approx(2 * mono.sigma_z(1.0))
 
 
