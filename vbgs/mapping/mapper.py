@@ -21,7 +21,8 @@ RGB, z-depth):
    "evidence"``; :mod:`vbgs.render.opacity`), read against the assigning model; with
    a measured depth (``Config.sensor``) the hit band widens by the sensor's noise and a
    missing pixel is a pass only where it shows nothing
-   (:func:`vbgs.render.background.empty_pixels`), never in a hole of a surface;
+   (:func:`vbgs.render.background.empty_pixels`: away from the surfaces, or along them
+   where it has the ``background``'s colour), never in a hole of a surface;
 4. one compiled conjugate update learns the points, with their noise along the rays
    when the depth is measured (:mod:`vbgs.mapping.measurement`;
    :class:`vbgs.inference.stepper.Stepper`;
@@ -134,8 +135,9 @@ def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) 
 def update(state: MapState, frame: Frame, config: Config,
            background=None) -> tuple[MapState, MapInfo]:
     """Learn one arriving frame (the steps of the module docstring). ``background``
-    ([3] or None: black) is what the frame's pixels without a splat show; only the
-    colour fit reads it (pixels without depth are not points)."""
+    ([3] or None: black) is what the frame's pixels without a splat show; the colour
+    fit reads it, and with a measured depth the opacity evidence (a depth-less pixel of
+    its colour beside a silhouette shows it; pixels without depth are not points)."""
     state, depth, weight = _within_budget(state, frame, config)
     xyz, rgb = unproject(frame.camera, frame.rgb, depth)
     if len(xyz) == 0:
@@ -158,7 +160,8 @@ def update(state: MapState, frame: Frame, config: Config,
         evidence = opacity.observe(evidence, *geometry, frame.camera, frame.depth,
                                    pass_sigmas=config.evidence.pass_sigmas,
                                    sensor_var=variance,
-                                   empty=empty_pixels(frame.depth, holes=not sensor.exact))
+                                   empty=empty_pixels(frame.depth, holes=not sensor.exact,
+                                                      rgb=frame.rgb, background=background))
     before = state.mixture.posterior
     mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight)
     n = len(xyz)
