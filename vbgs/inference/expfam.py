@@ -131,11 +131,6 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
     return NIW(mean, kappa, prior.dof + n, scale)
 
 
-# The most of the deconvolution's noise share: the posterior scale keeps at least
-# 1 - NOISE_SHARE_MAX of what it had before the noise was taken off (niw_posterior).
-NOISE_SHARE_MAX = 0.99
-
-
 def trace_solve(a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
     """``tr(a^-1 b)`` ``[k]`` for symmetric ``a, b [k, d, d]`` (d = 2 or 3), through the
     adjugate: ``tr(adj(a) b) / det(a)``, elementwise (no LAPACK call)."""
