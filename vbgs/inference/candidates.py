@@ -71,6 +71,28 @@ def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
     and ``a = u^T P_k (x - m_k)``, the Mahalanobis term loses ``a^2 / (1 + q)`` and the
     log-determinant gains ``log(1 + q)``.
     """
+    return _logits(x, c, terms, cand, colour_noise, ray)[0]
+
+
+def candidate_latent(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
+                     colour_noise: float, ray: jnp.ndarray):
+    """:func:`candidate_logits` with noise, and the latent surface point of each point
+    under each candidate: ``(logits, beta, gamma)``, each ``[n, C]``.
+
+    A point measured as ``x = y + e u`` (``e ~ N(0, 1)``, ``u`` its noise along the
+    ray) from a surface point ``y ~ N(m_k, Sigma_k)`` has, given ``x``, the Gaussian
+    posterior ``E[y | x] = x - beta u`` and ``Cov[y | x] = gamma u u^T`` with
+    ``beta = a / (1 + q)``, ``gamma = 1 / (1 + q)`` (``a``, ``q`` as in
+    :func:`candidate_logits`; Sherman-Morrison on ``R (Sigma + R)^-1``): the point
+    slides along its ray onto the component's surface, and keeps as much of its noise
+    as the component's own spread along the ray allows."""
+    logits, a, q = _logits(x, c, terms, cand, colour_noise, ray)
+    gamma = 1.0 / (1.0 + q)
+    return logits, a * gamma, gamma
+
+
+def _logits(x, c, terms, cand, colour_noise, ray):
+    """The logits ``[n, C]`` and, with ``ray``, ``a`` and ``q`` ``[n, C]`` (else None)."""
     d = x.shape[1]
     k = terms.mean.shape[0]
     table = jnp.concatenate([terms.mean.T, terms.prec.reshape(k, d * d).T,
@@ -86,12 +108,20 @@ def candidate_logits(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
     colour = sum((c[:, i, None] - g[base + i]) ** 2 for i in range(3))
     logits = g[base + 3] - 0.5 * maha - 0.5 * colour / colour_noise**2
     if ray is None:
-        return logits
+        return logits, None, None
     u = [ray[:, i, None] for i in range(d)]  # d x [n, 1]
     pu = [sum(g[d + i * d + j] * u[j] for j in range(d)) for i in range(d)]  # P_k u: d x [n, C]
     q = sum(u[i] * pu[i] for i in range(d))  # [n, C]
     a = sum(pu[i] * diff[i] for i in range(d))
-    return logits + 0.5 * a**2 / (1.0 + q) - 0.5 * jnp.log1p(q)
+    return logits + 0.5 * a**2 / (1.0 + q) - 0.5 * jnp.log1p(q), a, q
+
+
+def scatter_pair_moments(acc: jnp.ndarray, resp: jnp.ndarray, psi: jnp.ndarray,
+                         cand: jnp.ndarray) -> jnp.ndarray:
+    """``acc[k] += sum_{n, c: cand_nc = k} r_nc psi_nc``; ``psi [n, C, G]`` a feature of
+    each point and candidate (the latent moments of :func:`candidate_latent`)."""
+    contrib = resp[:, :, None] * psi  # [n, C, G]
+    return acc.at[cand.reshape(-1)].add(contrib.reshape(-1, psi.shape[-1]))
 
 
 def scatter_moments(acc: jnp.ndarray, resp: jnp.ndarray, phi: jnp.ndarray,

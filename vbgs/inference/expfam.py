@@ -51,10 +51,12 @@ class Stats(NamedTuple):
     (x in the centred frame) and ``sum_c = sum_n r_nk c_n``.
 
     Measured points (``x_n = y_n + e_n``, the true surface point ``y_n`` seen with a
-    sensor's zero-mean noise ``e_n ~ N(0, R_n)``) also carry ``sum_noise = sum_n r_nk
-    R_n``: the scatter of the true points is ``E[sum r y y^T] = sum_xx - sum_noise`` in
-    expectation, which :func:`niw_posterior` uses (moment deconvolution). None for exact
-    data (the default): no term, no extra work.
+    sensor's zero-mean noise ``e_n ~ N(0, R_n)``) also carry what their latent surface
+    points differ by (:func:`vbgs.inference.model.e_step_with`): ``sum_noise = sum_n r_nk
+    (x_n x_n^T - E[y_n y_n^T | x_n])`` and ``sum_shift = sum_n r_nk (x_n - E[y_n |
+    x_n])``, the posteriors of ``y_n`` taken under the assigning (reference) component,
+    so both stay sums over points. :func:`niw_posterior` uses them for the covariance.
+    None for exact data (the default): no term, no extra work.
     """
 
     count: jnp.ndarray  # [k]
@@ -62,21 +64,24 @@ class Stats(NamedTuple):
     sum_xx: jnp.ndarray  # [k, d, d]
     sum_c: jnp.ndarray  # [k, 3]
     sum_noise: jnp.ndarray | None = None  # [k, d, d] or None (exact data)
+    sum_shift: jnp.ndarray | None = None  # [k, d] or None (exact data)
 
 
 def zero_stats(k: int, d: int, dtype=jnp.float32, noisy: bool = False) -> Stats:
-    """Statistics of no data (with a zero ``sum_noise`` when ``noisy``)."""
+    """Statistics of no data (with zero latent moments when ``noisy``)."""
     return Stats(
         jnp.zeros((k,), dtype), jnp.zeros((k, d), dtype), jnp.zeros((k, d, d), dtype),
         jnp.zeros((k, 3), dtype), jnp.zeros((k, d, d), dtype) if noisy else None,
+        jnp.zeros((k, d), dtype) if noisy else None,
     )
 
 
 def add_stats(a: Stats, b: Stats) -> Stats:
-    """Statistics of the union of two data sets (a missing ``sum_noise`` is zero)."""
-    noise = a.sum_noise if b.sum_noise is None else (
-        b.sum_noise if a.sum_noise is None else a.sum_noise + b.sum_noise)
-    return Stats(*(x + y for x, y in zip(a[:4], b[:4], strict=True)), noise)
+    """Statistics of the union of two data sets (missing latent moments are zero)."""
+    def add(x, y):
+        return x if y is None else (y if x is None else x + y)
+
+    return Stats(*(add(x, y) for x, y in zip(a, b, strict=True)))
 
 
 # ----------------------------------------------------------------------------- NIW
@@ -91,37 +96,39 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
     prior mean as ``Psi + (S2 - S1 m^T - m S1^T + N m m^T) - d1 d1^T / kappa'`` with
     ``d1 = S1 - N m`` to avoid cancelling large terms.
 
-    With measurement noise (``stats.sum_noise = N``) the scatter is deconvolved:
-    ``Psi'' = Psi' - lambda N`` (see :class:`Stats`). A handful of points can scatter
-    less than their noise predicts, which would leave ``Psi''`` indefinite, so the
-    share of the noise taken off is ``lambda = min(1, NOISE_SHARE_MAX / tr(Psi'^-1 N))``:
-    the eigenvalues of ``Psi'^-1 N`` are non-negative and at most its trace, so
-    ``Psi'' >= (1 - NOISE_SHARE_MAX) Psi'`` stays positive definite. Elementwise only
-    (:func:`trace_solve`): no batched LAPACK call in the compiled update.
+    With measurement noise (``stats.sum_noise``, ``stats.sum_shift``, see :class:`Stats`)
+    the scale is that of the latent surface points ``y_n``: the same update with
+    ``sum_x - sum_shift`` and ``sum_xx - sum_noise`` (a scatter of latent points, positive
+    semi-definite by construction), while the mean keeps the measured ``sum_x`` (the
+    noise has mean zero). Why not the latent mean too: under prior assignment the
+    latent points lie on the reference component's surface, and a grown reference sits
+    on one noisy point; the measured mean averages the noise away, the latent scatter
+    does not depend on where the reference's surface lies along the rays. Why not the
+    earlier moment deconvolution ``sum_xx - sum_n r R_n``: it is unbiased but a
+    component of N points keeps a scatter error of ``sigma^2 sqrt(2 / N)`` along the
+    rays; at 128 px / 20k components, 15 points each and a Kinect's 2.6 cm at 4 m, that
+    is ~1.6 cm of spurious thickness and tilt on components 1.2 cm across (object,
+    validation views: the exact-depth map with these covariances fell from 26.62 to
+    22.80 dB; with the exact map's means 26.16, colours 26.62, opacities 26.63).
     """
     n = stats.count
     kappa = prior.kappa + n
     m0 = prior.mean
-    d1 = stats.sum_x - n[:, None] * m0  # [k, d]  sum_n r (x - m0)
+    mean = m0 + (stats.sum_x - n[:, None] * m0) / kappa[:, None]
+    sum_x, sum_xx = stats.sum_x, stats.sum_xx
+    if stats.sum_noise is not None:
+        sum_x = sum_x - stats.sum_shift
+        sum_xx = sum_xx - 0.5 * (stats.sum_noise + jnp.swapaxes(stats.sum_noise, -1, -2))
+    d1 = sum_x - n[:, None] * m0  # [k, d]  sum_n r (x - m0)
     s2 = (
-        stats.sum_xx
-        - stats.sum_x[:, :, None] * m0[:, None, :]
-        - m0[:, :, None] * stats.sum_x[:, None, :]
+        sum_xx
+        - sum_x[:, :, None] * m0[:, None, :]
+        - m0[:, :, None] * sum_x[:, None, :]
         + n[:, None, None] * m0[:, :, None] * m0[:, None, :]
     )  # [k, d, d]  sum_n r (x - m0)(x - m0)^T
     scale = prior.scale + s2 - d1[:, :, None] * d1[:, None, :] / kappa[:, None, None]
-    if stats.sum_noise is not None:
-        noise = 0.5 * (stats.sum_noise + jnp.swapaxes(stats.sum_noise, -1, -2))
-        share = jnp.minimum(1.0, NOISE_SHARE_MAX / jnp.maximum(trace_solve(scale, noise),
-                                                               1e-30))
-        scale = scale - share[:, None, None] * noise
     scale = 0.5 * (scale + jnp.swapaxes(scale, -1, -2))
-    return NIW(m0 + d1 / kappa[:, None], kappa, prior.dof + n, scale)
-
-
-# The most of the deconvolution's noise share: the posterior scale keeps at least
-# 1 - NOISE_SHARE_MAX of what it had before the noise was taken off (niw_posterior).
-NOISE_SHARE_MAX = 0.99
+    return NIW(mean, kappa, prior.dof + n, scale)
 
 
 def trace_solve(a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:

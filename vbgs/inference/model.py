@@ -415,8 +415,8 @@ def feature_logits(phi: jnp.ndarray, weights: jnp.ndarray) -> jnp.ndarray:
 
 def moments_to_stats(acc: jnp.ndarray, d: int) -> Stats:
     """Split summed ``r_nk phi_n`` rows ``[k, F]`` (see :func:`features`) into Stats;
-    rows ``[k, F + d*d]`` carry the noise moments ``sum_n r_nk vec(u_n u_n^T)`` last
-    (see :func:`e_step_with`)."""
+    rows ``[k, F + d*d + d]`` carry the latent moments of measured points last,
+    ``sum_noise`` then ``sum_shift`` (see :func:`e_step_with`)."""
     k = acc.shape[0]
     width = d * d + d + 4
     return Stats(
@@ -424,7 +424,9 @@ def moments_to_stats(acc: jnp.ndarray, d: int) -> Stats:
         sum_x=acc[:, d * d : d * d + d],
         sum_xx=acc[:, : d * d].reshape(k, d, d),
         sum_c=acc[:, d * d + d : d * d + d + 3],
-        sum_noise=acc[:, width:].reshape(k, d, d) if acc.shape[1] > width else None,
+        sum_noise=acc[:, width:width + d * d].reshape(k, d, d) if acc.shape[1] > width
+        else None,
+        sum_shift=acc[:, width + d * d:] if acc.shape[1] > width else None,
     )
 
 
@@ -458,8 +460,12 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
 
     ``ray [n, d]``: measured points, each with its noise ``R_n = u_n u_n^T`` along its
     ray (sparse E-step only): responsibilities under the components convolved with the
-    noise (:func:`vbgs.inference.candidates.candidate_logits`) and the noise moments
-    summed into ``Stats.sum_noise`` for the M-step's deconvolution.
+    noise, and each point's latent surface point under each candidate, ``E[y | x] = x -
+    beta u`` with ``Cov[y | x] = gamma u u^T``
+    (:func:`vbgs.inference.candidates.candidate_latent`), summed as what the latent
+    points differ by from the measured ones: ``Stats.sum_noise = sum r (x x^T - E[y
+    y^T | x])`` and ``Stats.sum_shift = sum r (x - E[y | x])`` (the M-step's
+    :func:`vbgs.inference.expfam.niw_posterior`).
     """
     n, d = x.shape
     if ray is not None and cand is None:
@@ -472,21 +478,34 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
         phi = features(xb, cb)  # [chunk, F]
         if candb is None:
             logits = feature_logits(phi, reference) - inv2var * jnp.sum(cb**2, -1, keepdims=True)
+        elif rayb is None:
+            logits = candidates.candidate_logits(xb, cb, reference, candb, colour_noise)
         else:
-            logits = candidates.candidate_logits(xb, cb, reference, candb, colour_noise, rayb)
+            logits, beta, gamma = candidates.candidate_latent(xb, cb, reference, candb,
+                                                              colour_noise, rayb)
         lse = jax.nn.logsumexp(logits, -1)  # [chunk]
         resp = jnp.exp(logits - lse[:, None]) * wb[:, None]  # [chunk, k or C]
         if candb is None:
             return acc + precision.matmul(resp.T, phi), lse
-        if rayb is not None:  # the noise moments ride along: [chunk, F + d*d]
-            phi = jnp.concatenate([phi, (rayb[:, :, None] * rayb[:, None, :]).reshape(
-                rayb.shape[0], -1)], -1)
-        return candidates.scatter_moments(acc, resp, phi, candb), lse
+        if rayb is None:
+            return candidates.scatter_moments(acc, resp, phi, candb), lse
+        width = phi.shape[-1]
+        acc = acc.at[:, :width].set(
+            candidates.scatter_moments(acc[:, :width], resp, phi, candb))
+        # the latent moments, per point and candidate: [chunk, C, d*d + d]
+        uu = (rayb[:, :, None] * rayb[:, None, :]).reshape(-1, 1, d * d)
+        xu = (xb[:, :, None] * rayb[:, None, :]).reshape(-1, 1, d * d)
+        ux = (rayb[:, :, None] * xb[:, None, :]).reshape(-1, 1, d * d)
+        b, g = beta[:, :, None], gamma[:, :, None]
+        psi = jnp.concatenate([b * (xu + ux) - (b * b + g) * uu, b * rayb[:, None, :]], -1)
+        acc = acc.at[:, width:].set(
+            candidates.scatter_pair_moments(acc[:, width:], resp, psi, candb))
+        return acc, lse
 
     def shape(a):
         return None if a is None else a.reshape((n // chunk, chunk) + a.shape[1:])
 
-    width = d * d + d + 4 + (0 if ray is None else d * d)
+    width = d * d + d + 4 + (0 if ray is None else d * d + d)
     acc0 = jnp.zeros((n_rows, width), x.dtype)
     acc, lse = jax.lax.scan(one_chunk, acc0, (shape(x), shape(c), shape(w), shape(cand),
                                               shape(ray)))

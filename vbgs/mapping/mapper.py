@@ -42,7 +42,8 @@ RGB, z-depth):
    points (the reference after growth, or the posterior before the frame); with
    a measured depth (``Config.sensor``) the hit band widens by the sensor's noise and a
    missing pixel is a pass only where it shows nothing
-   (:func:`vbgs.render.background.empty_pixels`), never in a hole of a surface;
+   (:func:`vbgs.render.background.empty_pixels`: away from the surfaces, or along them
+   where it has the ``background``'s colour), never in a hole of a surface;
 5. under ``render.colour_rule == "fit"`` the frame's colour least-squares terms are
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
@@ -164,8 +165,9 @@ def update(state: MapState, frame: Frame, config: Config,
     """Learn one arriving frame (the steps of the module docstring): its depth becomes
     points that go through :func:`update_points`, then the frame's opacity evidence and
     colour terms are added. ``background`` ([3] or None: black) is what the frame's pixels
-    without a splat show; only the colour fit reads it (pixels without depth are not
-    points)."""
+    without a splat show; the colour fit reads it, and with a measured depth the opacity
+    evidence (a depth-less pixel of its colour beside a silhouette shows it; pixels
+    without depth are not points)."""
     state, depth, weight = _within_budget(state, frame, config)
     xyz, rgb = unproject(frame.camera, frame.rgb, depth)
     if len(xyz) == 0:
@@ -183,7 +185,8 @@ def update(state: MapState, frame: Frame, config: Config,
         evidence = opacity.observe(state.evidence, *geometry, frame.camera, frame.depth,
                                    pass_sigmas=config.evidence.pass_sigmas,
                                    sensor_var=variance,
-                                   empty=empty_pixels(frame.depth, holes=not sensor.exact))
+                                   empty=empty_pixels(frame.depth, holes=not sensor.exact,
+                                                      rgb=frame.rgb, background=background))
         state = state._replace(evidence=evidence)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,

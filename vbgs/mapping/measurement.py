@@ -4,14 +4,25 @@ A depth sensor's error lies along the ray a pixel is seen on: a reading z with a
 standard deviation ``sigma_z(z)`` places the point at ``o + z d`` with ``d`` the ray
 direction scaled to unit camera depth, so the point's noise is ``R = u u^T`` with
 ``u = sigma_z(z) d`` (a rank-1 covariance, mostly along the ray). The learner takes
-the noise into its conjugate update (:func:`vbgs.inference.model.e_step_with`:
-convolved in the responsibilities, deconvolved from the moments), so the posterior
-describes the surface, not the surface blurred by the sensor. Why this and not a
-latent depth per ray: the deconvolution keeps every statistic a sum over points, so
-under prior assignment with a fixed reference a stream still equals one batch, and it
-costs one rank-1 correction per point and candidate; a latent depth would need the
-current component in the statistics, which only the reference (never the data) may
-provide here.
+the noise into its conjugate update (:func:`vbgs.inference.model.e_step_with`): the
+responsibilities score each point under the component convolved with its noise, and the
+M-step's covariance is that of each point's latent surface point along its ray, ``E[y |
+x]`` and ``Cov[y | x]`` under the assigning (reference) component
+(:func:`vbgs.inference.candidates.candidate_latent`), so the posterior describes the
+surface, not the surface blurred by the sensor; the means keep the measured points (the
+noise averages away). Both stay sums over points, so under prior assignment with a fixed
+reference a stream still equals one batch.
+
+Why the latent points and not a moment deconvolution (``sum x x^T - sum R_n``, the first
+version): the deconvolution is unbiased, but a component of N points keeps a scatter
+error of ``sigma^2 sqrt(2 / N)``; at 128 px / 20k components a component holds about 15
+points and a Kinect's sigma is 2.6 cm at 4 m, so each kept ~1.6 cm of random thickness
+and tilt on a width of 1.2 cm. Object, 128 px / 20k / 60 frames, Kinect noise without
+holes, validation views (exact depth 26.58 dB): the exact map's covariances swapped for
+the deconvolved ones fell to 22.80 dB (its means: 26.16, colours and opacities: no
+change); learned on the exact map's components, the noisy data gave 22.53 dB
+deconvolved and 26.02 with the latent points. A stream's grown components are that
+reference: seeded on their patch's plane (:func:`vbgs.inference.grow.seeds_on_patches`).
 
 The sensors and their ``sigma_z`` are :mod:`vbgs.sensors`; a map's sensor is
 ``Config.sensor`` (``exact``: nothing to take into account, no extra work).

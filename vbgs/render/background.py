@@ -20,6 +20,16 @@ angles, on dark or shiny materials, at random. Such holes are not background. Wi
 connected to the image border (background and sky reach the border; a hole inside a
 surface does not), eroded by :data:`EDGE_HOLES_PX` so the holes that line a
 silhouette stay out.
+
+The opacity evidence (:mod:`vbgs.render.opacity`) reads the same pixels as passes, and
+there the eroded band costs: a splat that reaches past a silhouette is never shown the
+background it covers, so silhouettes grow a fringe. Given the frame's colours and the
+background estimate, a pixel of that band whose colour is the background's (within
+:data:`BACKGROUND_TOL` in every channel) shows the background again; a surface hole
+there rarely has the background's colour, and where it does, a splat missing there
+costs nothing. Object, 64 px / 5000 components / 20 frames, Kinect noise without holes,
+validation views: 21.62 dB with the band left out, 22.42 with every border-connected
+pixel empty (the oracle: no holes were made), exact depth 23.28.
 """
 
 from __future__ import annotations
@@ -36,6 +46,9 @@ MIN_EMPTY_FRACTION = 1e-3
 # Width (px) of the band of edge holes a depth sensor leaves along a silhouette: taken
 # off the border-connected depth-less region (a Kinect drops 1-2 px at depth edges).
 EDGE_HOLES_PX = 2
+# A depth-less pixel of that band whose colour differs from the background estimate by
+# at most this in every channel shows the background (empty_pixels with rgb).
+BACKGROUND_TOL = 0.1
 
 
 class BackgroundEstimate(NamedTuple):
@@ -52,12 +65,15 @@ def empty() -> BackgroundEstimate:
     return BackgroundEstimate(np.zeros(3), 0, np.zeros(3), 0)
 
 
-def empty_pixels(depth: np.ndarray, holes: bool = False, max_depth: float = np.inf
-                 ) -> np.ndarray:
+def empty_pixels(depth: np.ndarray, holes: bool = False, max_depth: float = np.inf,
+                 rgb: np.ndarray | None = None, background: np.ndarray | None = None,
+                 tol: float = BACKGROUND_TOL) -> np.ndarray:
     """``[h, w]`` bool: the pixels that show nothing (background, sky). Exact depth
     (``holes=False``): every pixel without depth. A sensor with holes: the depth-less
     region connected to the image border, less a band of :data:`EDGE_HOLES_PX` along
-    the surfaces it meets (module docstring)."""
+    the surfaces it meets; with the frame's ``rgb [h, w, 3]`` and a ``background [3]``
+    the band's pixels of the background's colour (within ``tol``) are empty again
+    (module docstring)."""
     no_depth = ~valid_depth(depth, max_depth)
     if not holes:
         return no_depth
@@ -66,7 +82,14 @@ def empty_pixels(depth: np.ndarray, holes: bool = False, max_depth: float = np.i
     inner = ndimage.binary_erosion(no_depth, iterations=EDGE_HOLES_PX, border_value=1)
     seeds = np.zeros_like(inner)
     seeds[[0, -1], :], seeds[:, [0, -1]] = inner[[0, -1], :], inner[:, [0, -1]]
-    return ndimage.binary_propagation(seeds, mask=inner)
+    empty = ndimage.binary_propagation(seeds, mask=inner)
+    if rgb is None or background is None or not empty.any():
+        return empty
+    like = np.all(np.abs(np.asarray(rgb, np.float32) - np.asarray(background, np.float32))
+                  <= tol, axis=-1)  # [h, w] the background's colour
+    # the band: depth-less pixels joined to the empty region through depth-less pixels
+    reach = ndimage.binary_propagation(empty, mask=no_depth)
+    return empty | (reach & like)
 
 
 def observe(estimate: BackgroundEstimate, rgb: np.ndarray, depth: np.ndarray,

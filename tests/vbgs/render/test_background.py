@@ -68,3 +68,20 @@ def test_holes_inside_surfaces_are_not_background():
     assert naive.max() < 0.9
     mask = bg.empty_pixels(depth, holes=True)
     assert mask[:8].all() and mask[10:].mean() < 0.01  # the surface's holes stay out
+
+
+def test_the_edge_band_shows_the_background_where_it_has_its_colour():
+    """Beside a silhouette the band of depth-less pixels that empty_pixels leaves out
+    (EDGE_HOLES_PX) is empty again where it has the background's colour (the opacity
+    evidence reads those as passes), and stays out where it shows the surface."""
+    rgb = np.full((40, 40, 3), 1.0)
+    depth = np.zeros((40, 40))
+    rgb[10:30, 10:30], depth[10:30, 10:30] = 0.3, 2.0  # a grey square on white
+    depth[10:30, 10] = 0.0  # a sensor's edge holes on the square's own left column
+    plain = bg.empty_pixels(depth, holes=True)
+    aware = bg.empty_pixels(depth, holes=True, rgb=rgb, background=np.ones(3))
+    band = (depth == 0) & ~plain
+    assert band[9, 12] and band[12, 9]  # the band lines the square's edges
+    assert aware[band & (rgb[..., 0] == 1.0)].all()  # white band pixels: background
+    assert not aware[10:30, 10].any()  # the grey edge holes: still no evidence
+    assert (aware == plain | (band & (rgb[..., 0] == 1.0))).all()
