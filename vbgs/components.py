@@ -26,6 +26,9 @@ AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
 # bound_pairs); each round searches every component's neighbours (0.1-0.2 s at 20k).
 AUTO_MERGE_EVERY = 4
+# "auto": the split rule (vbgs.inference.grow.refinement_levels): a point seeds a finer
+# component when its component explains its colour worse by more than this many nats.
+AUTO_REFINE_GAIN = 2.0
 AUTO = "auto"
 
 

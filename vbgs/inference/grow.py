@@ -79,6 +79,9 @@ COARSE_LEVELS = 5
 # the coarse cells (point_levels): a room's far wall, 2x its median depth, keeps the
 # fine cells; a street's end, 10x, does not.
 COARSE_FROM = 4.0
+# components="auto": a refinement cell is at least this many pixel footprints a side
+# (refinement_levels; a component need not be finer than the pixels it is seen with).
+REFINE_FOOTPRINTS = 1.0
 # Measured points: the cells a point is looked up in reach this many sigma of its noise
 # along its ray, before and behind it (see _pick).
 NOISE_SIGMAS = 2.0
@@ -255,6 +258,43 @@ def point_levels(rule: Growth, footprint) -> np.ndarray | None:
     return np.clip(level, 0, rule.coarse).astype(np.int64)
 
 
+def refinement_levels(rule: Growth, posterior: Mixture, active: np.ndarray, xyz, rgb, *,
+                      colour_noise: float, gain: float, footprint=None,
+                      floor: float = REFINE_FOOTPRINTS) -> np.ndarray:
+    """``[n]`` int: the finest refinement level (cells of side ``rule.cell / 2^l``) each
+    point of the batch ``xyz [n, d]``, ``rgb [n, 3]`` may seed, -1 for none: the split
+    rule of ``components="auto"`` (``mapper._auto_room``; derivation and figures in
+    :mod:`vbgs.components`).
+
+    A point is badly explained when its component (the active one of ``posterior`` whose
+    mean is nearest, ``active [k]``: the sparse E-step's first candidate) explains its
+    colour worse than a component of its own colour would by more than ``gain`` nats:
+    ``|c - m_c|^2 / (2 sigma_c^2) > gain`` (``sigma_c = colour_noise``; the colour term of
+    the expected log-likelihood, the part of the bound a split would win back; the spatial
+    part is the same for one component or two on a flat patch to first order). Such a
+    point seeds a child in its level-l cell when none lies there (:func:`select`), for
+    ``l >= 1`` down to the finest cell whose side is at least ``floor`` pixel footprints
+    ``footprint [n]`` (:func:`vbgs.mapping.measurement.point_footprints`): a component
+    need not be finer than the pixels it is seen with. Without footprints every level
+    ``< rule.levels`` is allowed."""
+    x = np.asarray(xyz, np.float64) - np.asarray(posterior.origin, np.float64)
+    n = len(x)
+    if not np.any(active) or n == 0:
+        return np.full(n, -1, np.int64)
+    from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
+
+    means = np.asarray(posterior.space.mean, np.float64)[active]
+    colours = np.asarray(posterior.colour.mean, np.float64)[active]
+    _, nearest = cKDTree(means).query(x, k=1, workers=-1)
+    miss = np.sum((np.asarray(rgb, np.float64) - colours[nearest]) ** 2, -1)
+    bad = miss / (2.0 * colour_noise**2) > gain
+    finest = np.full(n, rule.levels - 1, np.int64)
+    if footprint is not None:
+        ratio = rule.cell / (floor * np.maximum(np.asarray(footprint, np.float64), 1e-30))
+        finest = np.minimum(finest, np.floor(np.log2(ratio)).astype(np.int64))
+    return np.where(bad & (finest >= 1), finest, -1)
+
+
 def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
     """``cells x cell`` (:data:`REACH_CELLS` by default): how far from every component a point may lie and still be
     learned. Once the budget K is spent, new ground gets no component; its points, forced
@@ -379,37 +419,53 @@ def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray
 
 
 def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-           key: jax.Array, ray: np.ndarray | None = None, levels=None
+           key: jax.Array, ray: np.ndarray | None = None, levels=None, finest=None
            ) -> tuple[np.ndarray, int]:
     """Where a batch adds components: indices into ``x [n, d]`` (positions about the
     grid's origin) given the means ``taken [m, d]`` of the components in use and
     ``n_empty`` free slots. First one per cell holding no component (new ground,
     :func:`new_ground`), then refinement at finer levels within its share of the slots
-    left; at most ``rule.max_new`` in all; random choices under ``key``. Returns
-    ``(indices, n_ground)``."""
+    left; at most ``rule.max_new`` in all; random choices under ``key``. ``finest [n]``
+    int: the finest refinement level each point may seed (:func:`refinement_levels`;
+    -1: none); None: every point, every level. Returns ``(indices, n_ground)``."""
+    chosen, n_ground, _ = _select(x, taken, n_empty, rule, key=key, ray=ray, levels=levels,
+                                  finest=finest)
+    return chosen, n_ground
+
+
+def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
+            key: jax.Array, ray=None, levels=None, finest=None
+            ) -> tuple[np.ndarray, int, np.ndarray]:
+    """:func:`select`, and the refinement level of each chosen point ``[m]`` (0: new
+    ground)."""
     order = host_rng(key).permutation(len(x))  # random order of the points
     budget = int(min(rule.max_new, n_empty))
     chosen = new_ground(x, taken, rule, order, budget, ray, levels)
     n_ground = len(chosen)
     refine = int(min(budget - n_ground, np.floor(rule.refine * (n_empty - n_ground))))
+    level_of = [np.zeros(n_ground, np.int64)]
     for level in range(1, rule.levels):
         if refine <= 0:
             break
-        more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level, order,
+        seeds = order if finest is None else order[finest[order] >= level]
+        more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level, seeds,
                      refine, ray)
         chosen = np.concatenate([chosen, more])
+        level_of.append(np.full(len(more), level, np.int64))
         refine -= len(more)
-    return chosen, n_ground
+    return chosen, n_ground, np.concatenate(level_of)
 
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
-         config: PriorConfig = PriorConfig(), ray=None, levels=None) -> tuple[State, GrowInfo]:
+         config: PriorConfig = PriorConfig(), ray=None, levels=None, finest=None
+         ) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`);
-    ``levels [n]``: the points' coarse levels (:func:`point_levels`)."""
+    ``levels [n]``: the points' coarse levels (:func:`point_levels`); ``finest [n]``: the
+    finest refinement level each point may seed (:func:`refinement_levels`)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
-                               config=config, ray=ray, levels=levels)
+                               config=config, ray=ray, levels=levels, finest=finest)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
@@ -425,23 +481,39 @@ def _about_origin(prior: Mixture, posterior: Mixture, xyz, ray=None):
     return x, taken, active, None if ray is None else np.asarray(ray, np.float64)
 
 
-def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None) -> int:
+def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, finest=None
+              ) -> int:
     """How many more components the new ground of the batch ``xyz [n, d]`` wants (at most
     ``rule.max_new``, as :func:`select` counts it) than there are empty slots: above 0
-    when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it)."""
+    when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it). With
+    ``finest [n]`` (:func:`refinement_levels`) the refinement those points seed counts too
+    (as :func:`select` counts it with every slot free, in the points' own order)."""
     x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray)
-    wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
+    if finest is None:
+        wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
+    else:
+        order = np.arange(len(x))
+        chosen = new_ground(x, taken, rule, order, rule.max_new, ray, levels)
+        for level in range(1, rule.levels):
+            quota = rule.max_new - len(chosen)
+            if quota <= 0:
+                break
+            more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level,
+                         order[finest >= level], quota, ray)
+            chosen = np.concatenate([chosen, more])
+        wanted = len(chosen)
     return wanted - int((~active).sum())
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
-                 key: jax.Array, config: PriorConfig, ray=None, levels=None
+                 key: jax.Array, config: PriorConfig, ray=None, levels=None, finest=None
                  ) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     x, taken, active, ray = _about_origin(prior, posterior, xyz, ray)
     empty = np.flatnonzero(~active)
-    chosen, n_ground = select(x, taken, len(empty), rule, key=key, ray=ray, levels=levels)
+    chosen, n_ground, split = _select(x, taken, len(empty), rule, key=key, ray=ray,
+                                      levels=levels, finest=finest)
     n_new = len(chosen)
     if n_new == 0:
         return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
@@ -449,10 +521,13 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     dtype = prior.alpha.dtype
     scales = None
     coarse = levels is not None and bool(levels[chosen].any())
-    if prior.dim == 3 and (config.surface_thickness != 1.0 or coarse) and len(x) >= 3:
+    fine = finest is not None and bool(split.any())  # auto's splits: their own cells
+    if prior.dim == 3 and (config.surface_thickness != 1.0 or coarse or fine) and len(x) >= 3:
         s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
         if coarse:  # a component on a coarse cell of side cell 2^j: variance 4^j times
             s = s * 4.0 ** levels[chosen]
+        if fine:  # a split in a cell of side cell / 2^l: variance 4^-l times
+            s = s * 4.0 ** -split.astype(np.float64)
         scales = surface_scales(s, local_normals(x, chosen, ray=ray),
                                 config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, x[chosen].astype(dtype),

@@ -310,7 +310,7 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     if mixture is None:  # the first frame fixes the cell side
         first, refine = g.first_frame_share * k, g.refine_share
         if config.auto:  # the sensor's resolution, not a share of K; see _auto_room
-            first, refine = len(xyz) / g.auto_points, 0.0
+            first, refine = len(xyz) / g.auto_points, 1.0 if g.refine_gain > 0 else 0.0
         rule = grow.calibrate(xyz, k, first, refine=refine,
                               levels=g.levels, rate=g.max_new_share, footprint=footprint,
                               coarse=g.coarse_levels, coarse_from=g.coarse_from)
@@ -318,10 +318,16 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
                                              config.prior), config)
     key, sub = jax.random.split(state.key)
     levels = grow.point_levels(rule, footprint)
-    room = _auto_room if config.auto else _make_room
-    state, merged = room(state._replace(mixture=mixture, rule=rule), xyz, ray, levels, config)
+    state = state._replace(mixture=mixture, rule=rule)
+    finest = None
+    if config.auto:
+        state, merged = _auto_room(state, xyz, ray, levels, config)
+        finest = _split_levels(state, xyz, rgb, footprint, config)
+        state = _auto_widen(state, xyz, ray, levels, finest, config)
+    else:
+        state, merged = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
-                              ray=ray, levels=levels)
+                              ray=ray, levels=levels, finest=finest)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
@@ -397,16 +403,52 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
     short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels)
     k0 = state.mixture.prior.n_components
     if short > 0:
-        k = capacity.bucket(k0 + short, AUTO_BUCKET, config.max_components)
-        if k > k0:
-            state = state._replace(
-                mixture=capacity.widen(state.mixture, k, state.rule.cell, config.prior),
-                evidence=capacity.widen_rows(state.evidence, k),
-                colour=capacity.widen_rows(state.colour, k))
+        state = _widened(state, k0 + short, config)
+        k = state.mixture.prior.n_components
         if k0 + short > k:  # at the ceiling: make room as a fixed K does
             state, more = _make_room(state._replace(capped=True), xyz, ray, levels, config)
             merged = np.concatenate([merged, more])
     return state, merged
+
+
+def _widened(state: MapState, wanted: int, config: Config) -> MapState:
+    """The state with capacity for ``wanted`` slots (the bucket that holds them, at most
+    ``config.max_components``; :mod:`vbgs.inference.capacity`)."""
+    k0 = state.mixture.prior.n_components
+    k = capacity.bucket(wanted, AUTO_BUCKET, config.max_components)
+    if k <= k0:
+        return state
+    return state._replace(
+        mixture=capacity.widen(state.mixture, k, state.rule.cell, config.prior),
+        evidence=capacity.widen_rows(state.evidence, k),
+        colour=capacity.widen_rows(state.colour, k))
+
+
+def _split_levels(state: MapState, xyz, rgb, footprint, config: Config) -> np.ndarray | None:
+    """``components="auto"``: the finest refinement level each point of the batch may seed
+    (:func:`vbgs.inference.grow.refinement_levels`: points whose colour their component
+    explains worse than ``growth.refine_gain`` nats, cells no finer than
+    ``growth.refine_footprints`` pixel footprints); None when refinement is off."""
+    g = config.growth
+    if g.refine_gain <= 0:
+        return None
+    mixture = state.mixture
+    return grow.refinement_levels(state.rule, mixture.posterior, grow.is_active(mixture.prior),
+                                  xyz, rgb, colour_noise=config.prior.colour_noise,
+                                  gain=g.refine_gain, footprint=footprint,
+                                  floor=g.refine_footprints)
+
+
+def _auto_widen(state: MapState, xyz, ray, levels, finest, config: Config) -> MapState:
+    """Capacity for the refinement ``finest`` asks for as well as the new ground (births
+    beyond the ceiling are not made: refinement never merges to make room)."""
+    if finest is None or not (finest >= 1).any():
+        return state
+    short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels,
+                           finest=finest)
+    if short <= 0:
+        return state
+    return _widened(state, state.mixture.prior.n_components + short, config)
 
 
 def _first_capacity(config: Config) -> int:
