@@ -263,36 +263,53 @@ def refinement_levels(rule: Growth, posterior: Mixture, active: np.ndarray, xyz,
                       floor: float = REFINE_FOOTPRINTS) -> np.ndarray:
     """``[n]`` int: the finest refinement level (cells of side ``rule.cell / 2^l``) each
     point of the batch ``xyz [n, d]``, ``rgb [n, 3]`` may seed, -1 for none: the split
-    rule of ``components="auto"`` (``mapper._auto_room``; derivation and figures in
+    rule of ``components="auto"`` (``mapper._auto_room``; figures in
     :mod:`vbgs.components`).
 
-    A point is badly explained when its component (the active one of ``posterior`` whose
-    mean is nearest, ``active [k]``: the sparse E-step's first candidate) explains its
-    colour worse than a component of its own colour would by more than ``gain`` nats:
-    ``|c - m_c|^2 / (2 sigma_c^2) > gain`` (``sigma_c = colour_noise``; the colour term of
-    the expected log-likelihood, the part of the bound a split would win back; the spatial
-    part is the same for one component or two on a flat patch to first order). Such a
-    point seeds a child in its level-l cell when none lies there (:func:`select`), for
-    ``l >= 1`` down to the finest cell whose side is at least ``floor`` pixel footprints
-    ``footprint [n]`` (:func:`vbgs.mapping.measurement.point_footprints`): a component
-    need not be finer than the pixels it is seen with. Without footprints every level
-    ``< rule.levels`` is allowed."""
+    Each point's component is the active one of ``posterior`` (``active [k]``) whose mean
+    is nearest (the sparse E-step's first candidate), with colour mean ``m_n``. A child
+    in a cell that took the cell's points would explain them with their own mean colour
+    ``c_bar``; the colour term of the bound (``-|c - m|^2 / (2 sigma_c^2)`` per point,
+    ``sigma_c = colour_noise``) then rises by
+
+        G = [sum_n |c_n - m_n|^2 - sum_n |c_n - c_bar|^2] / (2 sigma_c^2)
+
+    nats over the cell's points of this batch (the colour noise within the cell cancels:
+    only what the component misses on average counts). The child is worth its place when
+    ``G`` exceeds its Occam factor (its KL to its prior, a few nats per parameter;
+    ``gain``, chosen on validation views). A point may seed levels ``1 .. l`` for the
+    finest ``l`` whose cell earns that, and whose side is at least ``floor`` pixel
+    footprints ``footprint [n]`` (:func:`vbgs.mapping.measurement.point_footprints`: a
+    component need not be finer than the pixels it is seen with; without footprints every
+    level ``< rule.levels``). The spatial terms are left out (a flat patch is explained
+    about as well by one component as by two)."""
     x = np.asarray(xyz, np.float64) - np.asarray(posterior.origin, np.float64)
     n = len(x)
+    finest = np.full(n, -1, np.int64)
     if not np.any(active) or n == 0:
-        return np.full(n, -1, np.int64)
+        return finest
     from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
 
     means = np.asarray(posterior.space.mean, np.float64)[active]
     colours = np.asarray(posterior.colour.mean, np.float64)[active]
     _, nearest = cKDTree(means).query(x, k=1, workers=-1)
-    miss = np.sum((np.asarray(rgb, np.float64) - colours[nearest]) ** 2, -1)
-    bad = miss / (2.0 * colour_noise**2) > gain
-    finest = np.full(n, rule.levels - 1, np.int64)
+    c = np.asarray(rgb, np.float64)
+    miss = np.sum((c - colours[nearest]) ** 2, -1)  # [n] |c_n - m_n|^2
+    own = np.sum(c**2, -1)  # [n] |c_n|^2
+    allowed = np.full(n, rule.levels - 1, np.int64)
     if footprint is not None:
         ratio = rule.cell / (floor * np.maximum(np.asarray(footprint, np.float64), 1e-30))
-        finest = np.minimum(finest, np.floor(np.log2(ratio)).astype(np.int64))
-    return np.where(bad & (finest >= 1), finest, -1)
+        allowed = np.minimum(allowed, np.floor(np.log2(ratio)).astype(np.int64))
+    for level in range(1, rule.levels):
+        ids = cell_ids(cell_index(x, rule.cell / 2**level))
+        m = ids.max() + 1
+        count = np.bincount(ids, minlength=m)
+        total = np.stack([np.bincount(ids, c[:, j], m) for j in range(c.shape[1])], 1)
+        spread = np.bincount(ids, own, m) - np.sum(total**2, 1) / count  # sum |c - c_bar|^2
+        g = (np.bincount(ids, miss, m) - spread) / (2.0 * colour_noise**2)
+        earns = (g[ids] > gain) & (allowed >= level)
+        finest = np.where(earns, level, finest)
+    return finest
 
 
 def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
