@@ -60,7 +60,7 @@ class GrowthConfig:
         coarsely (:func:`vbgs.inference.grow.point_levels`; 0: one cell side everywhere);
     auto_points, auto_merge_every: ``components="auto"`` only (``mapper._auto_room``):
         first-frame points per level-0 cell (the resolution), frames between rounds of
-        merges scored by the bound;
+        merges scored by the bound (0: none; at auto:MAX the budget merges still run);
     refine_gain, refine_footprints: ``components="auto"`` only: a point seeds a finer
         component when its component explains its colour worse by more than this many
         nats, in cells no finer than this many pixel footprints
@@ -88,9 +88,9 @@ class GrowthConfig:
             raise ValueError(f"growth.auto_points must be a number >= 1 (a level-0 cell holds "
                              f"at least one of the first frame's points; fewer asks for more "
                              f"cells than there are points), got {self.auto_points!r}")
-        if not isinstance(self.auto_merge_every, int) or self.auto_merge_every < 1:
-            raise ValueError(f"growth.auto_merge_every must be a positive integer (frames), "
-                             f"got {self.auto_merge_every!r}")
+        if not isinstance(self.auto_merge_every, int) or self.auto_merge_every < 0:
+            raise ValueError(f"growth.auto_merge_every must be an integer >= 0 (frames; 0: "
+                             f"no merges scored by the bound), got {self.auto_merge_every!r}")
         if not (isinstance(self.refine_gain, (int, float)) and math.isfinite(self.refine_gain)
                 and self.refine_gain >= 0):
             raise ValueError(f"growth.refine_gain must be a number >= 0 (nats; 0 turns auto's "

@@ -47,10 +47,12 @@ RGB, z-depth):
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
 
-With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows at the
-resolution of the first frame's points (``growth.auto_points`` of them per cell), merges
-every few frames the neighbours whose merge raises the bound
-(:func:`vbgs.inference.merge.bound_pairs`) and grows the slots in buckets
+With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows new
+ground at the resolution of the first frame's points (``growth.auto_points`` of them per
+cell), splits where the bound's colour term asks for a finer cell
+(:func:`vbgs.inference.grow.refinement_levels`, no finer than the pixel footprint allows),
+optionally merges every few frames the neighbours whose merge raises the bound
+(:func:`vbgs.inference.merge.bound_pairs`; off by default) and grows the slots in buckets
 (:mod:`vbgs.inference.capacity`) up to MAX (``MapState.capped`` once reached); see
 ``_auto_room``.
 
@@ -386,16 +388,20 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
     set: the first frame fixes the cell side so that each level-0 cell holds about
     ``growth.auto_points`` of its points (the sensor's own sampling, whatever the
     scene's extent), and ground is not refined further (refinement spends a share of a
-    budget there is none of). Every ``growth.auto_merge_every`` frames the neighbours
-    whose merge raises the bound are merged (:func:`vbgs.inference.merge.bound_pairs`,
-    the derivation in :mod:`vbgs.inference.merge`): the data decide where one component
-    explains what two did. When the frame's new ground wants more slots than are empty
+    budget there is none of). Every ``growth.auto_merge_every`` frames (0, the default:
+    never; figures in :mod:`vbgs.components`) the neighbours whose merge raises the bound
+    are merged (:func:`vbgs.inference.merge.bound_pairs`, the derivation in
+    :mod:`vbgs.inference.merge`). Splits come after this room is made
+    (``_split_levels``, ``_auto_widen``): a point seeds a child in a finer cell where
+    the colour term of the bound a child would win back there exceeds
+    ``growth.refine_gain`` nats (:func:`vbgs.inference.grow.refinement_levels`). When the frame's new ground wants more slots than are empty
     the capacity grows to the next bucket (:mod:`vbgs.inference.capacity`: a compilation
     per bucket, not per frame); at ``config.max_components`` it stops growing, the state
     says so (``capped``) and the cheapest pairs are merged as under a fixed K."""
     g = config.growth
     merged = np.zeros(0, np.int64)
-    if g.merge and state.n_frames and state.n_frames % g.auto_merge_every == 0:
+    every = g.auto_merge_every
+    if g.merge and every and state.n_frames and state.n_frames % every == 0:
         mixture = state.mixture
         pairs = merge.bound_pairs(mixture, grow.is_active(mixture.prior),
                                   config.prior.colour_noise)
