@@ -3,8 +3,10 @@
 Plain Python (no JAX, outside :mod:`vbgs.mapping`, whose package imports JAX): the
 command line and the sweep's config check read it before
 anything heavy is imported. What ``auto`` does is in :mod:`vbgs.mapping.mapper`
-(``_auto_room``), :mod:`vbgs.inference.merge` (merges scored by the bound) and
-:mod:`vbgs.inference.capacity` (slots grown in buckets).
+(``_auto_room``), :mod:`vbgs.inference.grow` (births on new ground at the first frame's
+resolution, splits where the bound's colour term asks for a finer cell:
+``refinement_levels``), :mod:`vbgs.inference.merge` (merges scored by the bound, off by
+default) and :mod:`vbgs.inference.capacity` (slots grown in buckets).
 """
 
 from __future__ import annotations
@@ -24,8 +26,35 @@ AUTO_MAX_COMPONENTS = 131072
 # 17.87 / 13.29 with 13.4k / 36.9k / 131k: finer cells leave the walk's views holed).
 AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
-# bound_pairs); each round searches every component's neighbours (0.1-0.2 s at 20k).
-AUTO_MERGE_EVERY = 4
+# bound_pairs); 0: none (at auto:MAX the budget's merges still make room). Off since auto
+# splits (below): on VALIDATION views, 128 px, 60 frames, split rule at 1 nat, merges
+# every 4 frames against none (`python -m experiments.run tune --scene object room walk
+# --components auto --grid growth.refine_gain=1 growth.merge=true,false`; merge=false
+# also stops these rounds): object 24.97 / 25.83 dB (8.9k / 19.3k components), room
+# 23.18 / 23.74 (29k / 56k), walk 21.06 / 22.92 (52k / 113k); every 12 frames at
+# footprints 0.5: object 25.20 (26k), room 23.51 (75k), walk 22.08 (96k). The bound
+# scores points, and the merges it allows cost pictures 0.6-1.9 dB; they held the count.
+AUTO_MERGE_EVERY = 0
+# "auto": the split rule (vbgs.inference.grow.refinement_levels): a child in a finer cell
+# when the colour term of the bound it wins back over its cell's points in a frame
+# exceeds this many nats, cells no finer than grow.REFINE_FOOTPRINTS pixel footprints.
+# Without it the resolution is the first frame's (auto_points) and auto was 1.7-2.9 dB
+# short of the best fixed K on test views. Chosen on VALIDATION views (128 px, 60 frames,
+# no bound merges, footprints 0.5), `python -m experiments.run tune --scene object room
+# walk --components auto --grid growth.refine_gain=4,16 growth.refine_footprints=0.5
+# growth.auto_merge_every=1000` and the same at refine_gain=1 (val_psnr, components):
+#   gain  1: object 26.38 (42.3k), room 24.09 (119k), walk 22.83 (131k: the ceiling)
+#   gain  4: object 25.24 (26.4k), room 23.91 (77.8k), walk 22.58 (81.1k)
+#   gain 16: object 23.99 (14.8k), room 23.75 (52.9k), walk 22.00 (41.6k)
+#   no split (auto_points 4, merges every 4, as before): object 24.26 (5.2k),
+#   room 22.78 (22.9k), walk 19.53 (13.4k)
+# Footprints 1 against 0.5 at gain 1, no merges: object 25.83 (19.3k) / 26.38 (42.3k),
+# room 23.74 (56k) / 24.09 (119k). A coarser first frame with the same splits is worse
+# at about the same count (auto_points 8 / 16: object 25.63 / 24.64, room 23.25 /
+# 22.72). The smallest gain tried is best everywhere: the picture wants more components
+# than a component's Occam factor (tens of nats) would allow, and the count is what the
+# scene's texture asks for (the walk's grass: the ceiling).
+AUTO_REFINE_GAIN = 1.0
 AUTO = "auto"
 
 

@@ -56,7 +56,10 @@ merges drop the components that births on sparse ground start and the data never
 On the walk (the same command with ``--scene walk``) they cost: 17.87 dB with 36936
 components, 19.64 dB with 75978 without (depth L1 1.16 against 0.68). The bound scores
 points, not pictures: a merge the points allow can still open holes in views from
-elsewhere (far ground, seen coarsely and from one side).
+elsewhere (far ground, seen coarsely and from one side). Since ``auto`` splits
+(:func:`vbgs.inference.grow.refinement_levels`) these merges cost pictures everywhere
+(0.6-1.9 dB on the three scenes' validation views) and are off by default
+(``growth.auto_merge_every = 0``; figures in :mod:`vbgs.components`).
 
 Precision: costs are computed on the host in float64 (log-determinants of nearly flat
 3x3 covariances differ in their last float32 digits); the merged statistics are sums,

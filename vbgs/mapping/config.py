@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from vbgs.inference import grow
-from vbgs.components import AUTO_MERGE_EVERY, AUTO_POINTS, parse_components
+from vbgs.components import AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, parse_components
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
 from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
@@ -60,7 +60,11 @@ class GrowthConfig:
         coarsely (:func:`vbgs.inference.grow.point_levels`; 0: one cell side everywhere);
     auto_points, auto_merge_every: ``components="auto"`` only (``mapper._auto_room``):
         first-frame points per level-0 cell (the resolution), frames between rounds of
-        merges scored by the bound.
+        merges scored by the bound (0: none; at auto:MAX the budget merges still run);
+    refine_gain, refine_footprints: ``components="auto"`` only: a point seeds a finer
+        component when its component explains its colour worse by more than this many
+        nats, in cells no finer than this many pixel footprints
+        (:func:`vbgs.inference.grow.refinement_levels`; gain 0: no refinement).
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -74,6 +78,8 @@ class GrowthConfig:
     coarse_from: float = grow.COARSE_FROM
     auto_points: float = AUTO_POINTS
     auto_merge_every: int = AUTO_MERGE_EVERY
+    refine_gain: float = AUTO_REFINE_GAIN
+    refine_footprints: float = grow.REFINE_FOOTPRINTS
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
@@ -82,9 +88,14 @@ class GrowthConfig:
             raise ValueError(f"growth.auto_points must be a number >= 1 (a level-0 cell holds "
                              f"at least one of the first frame's points; fewer asks for more "
                              f"cells than there are points), got {self.auto_points!r}")
-        if not isinstance(self.auto_merge_every, int) or self.auto_merge_every < 1:
-            raise ValueError(f"growth.auto_merge_every must be a positive integer (frames), "
-                             f"got {self.auto_merge_every!r}")
+        if not isinstance(self.auto_merge_every, int) or self.auto_merge_every < 0:
+            raise ValueError(f"growth.auto_merge_every must be an integer >= 0 (frames; 0: "
+                             f"no merges scored by the bound), got {self.auto_merge_every!r}")
+        if not (isinstance(self.refine_gain, (int, float)) and math.isfinite(self.refine_gain)
+                and self.refine_gain >= 0):
+            raise ValueError(f"growth.refine_gain must be a number >= 0 (nats; 0 turns auto's "
+                             f"refinement off), got {self.refine_gain!r}")
+        _positive("growth", "refine_footprints", self.refine_footprints)
         _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
         _positive("growth", "reach_cells", self.reach_cells)
         if not (isinstance(self.refine_share, (int, float)) and 0 <= self.refine_share <= 1):

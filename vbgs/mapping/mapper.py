@@ -48,10 +48,12 @@ RGB, z-depth):
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
 
-With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows at the
-resolution of the first frame's points (``growth.auto_points`` of them per cell), merges
-every few frames the neighbours whose merge raises the bound
-(:func:`vbgs.inference.merge.bound_pairs`) and grows the slots in buckets
+With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows new
+ground at the resolution of the first frame's points (``growth.auto_points`` of them per
+cell), splits where the bound's colour term asks for a finer cell
+(:func:`vbgs.inference.grow.refinement_levels`, no finer than the pixel footprint allows),
+optionally merges every few frames the neighbours whose merge raises the bound
+(:func:`vbgs.inference.merge.bound_pairs`; off by default) and grows the slots in buckets
 (:mod:`vbgs.inference.capacity`) up to MAX (``MapState.capped`` once reached); see
 ``_auto_room``.
 
@@ -313,7 +315,7 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     if mixture is None:  # the first frame fixes the cell side
         first, refine = g.first_frame_share * k, g.refine_share
         if config.auto:  # the sensor's resolution, not a share of K; see _auto_room
-            first, refine = len(xyz) / g.auto_points, 0.0
+            first, refine = len(xyz) / g.auto_points, 1.0 if g.refine_gain > 0 else 0.0
         rule = grow.calibrate(xyz, k, first, refine=refine,
                               levels=g.levels, rate=g.max_new_share, footprint=footprint,
                               coarse=g.coarse_levels, coarse_from=g.coarse_from)
@@ -321,10 +323,16 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
                                              config.prior), config)
     key, sub = jax.random.split(state.key)
     levels = grow.point_levels(rule, footprint)
-    room = _auto_room if config.auto else _make_room
-    state, merged = room(state._replace(mixture=mixture, rule=rule), xyz, ray, levels, config)
+    state = state._replace(mixture=mixture, rule=rule)
+    finest = None
+    if config.auto:
+        state, merged = _auto_room(state, xyz, ray, levels, config)
+        finest = _split_levels(state, xyz, rgb, footprint, config)
+        state = _auto_widen(state, xyz, ray, levels, finest, config)
+    else:
+        state, merged = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
-                              ray=ray, levels=levels)
+                              ray=ray, levels=levels, finest=finest)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
@@ -383,16 +391,20 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
     set: the first frame fixes the cell side so that each level-0 cell holds about
     ``growth.auto_points`` of its points (the sensor's own sampling, whatever the
     scene's extent), and ground is not refined further (refinement spends a share of a
-    budget there is none of). Every ``growth.auto_merge_every`` frames the neighbours
-    whose merge raises the bound are merged (:func:`vbgs.inference.merge.bound_pairs`,
-    the derivation in :mod:`vbgs.inference.merge`): the data decide where one component
-    explains what two did. When the frame's new ground wants more slots than are empty
+    budget there is none of). Every ``growth.auto_merge_every`` frames (0, the default:
+    never; figures in :mod:`vbgs.components`) the neighbours whose merge raises the bound
+    are merged (:func:`vbgs.inference.merge.bound_pairs`, the derivation in
+    :mod:`vbgs.inference.merge`). Splits come after this room is made
+    (``_split_levels``, ``_auto_widen``): a point seeds a child in a finer cell where
+    the colour term of the bound a child would win back there exceeds
+    ``growth.refine_gain`` nats (:func:`vbgs.inference.grow.refinement_levels`). When the frame's new ground wants more slots than are empty
     the capacity grows to the next bucket (:mod:`vbgs.inference.capacity`: a compilation
     per bucket, not per frame); at ``config.max_components`` it stops growing, the state
     says so (``capped``) and the cheapest pairs are merged as under a fixed K."""
     g = config.growth
     merged = np.zeros(0, np.int64)
-    if g.merge and state.n_frames and state.n_frames % g.auto_merge_every == 0:
+    every = g.auto_merge_every
+    if g.merge and every and state.n_frames and state.n_frames % every == 0:
         mixture = state.mixture
         pairs = merge.bound_pairs(mixture, grow.is_active(mixture.prior),
                                   config.prior.colour_noise)
@@ -400,16 +412,52 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
     short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels)
     k0 = state.mixture.prior.n_components
     if short > 0:
-        k = capacity.bucket(k0 + short, AUTO_BUCKET, config.max_components)
-        if k > k0:
-            state = state._replace(
-                mixture=capacity.widen(state.mixture, k, state.rule.cell, config.prior),
-                evidence=capacity.widen_rows(state.evidence, k),
-                colour=capacity.widen_rows(state.colour, k))
+        state = _widened(state, k0 + short, config)
+        k = state.mixture.prior.n_components
         if k0 + short > k:  # at the ceiling: make room as a fixed K does
             state, more = _make_room(state._replace(capped=True), xyz, ray, levels, config)
             merged = np.concatenate([merged, more])
     return state, merged
+
+
+def _widened(state: MapState, wanted: int, config: Config) -> MapState:
+    """The state with capacity for ``wanted`` slots (the bucket that holds them, at most
+    ``config.max_components``; :mod:`vbgs.inference.capacity`)."""
+    k0 = state.mixture.prior.n_components
+    k = capacity.bucket(wanted, AUTO_BUCKET, config.max_components)
+    if k <= k0:
+        return state
+    return state._replace(
+        mixture=capacity.widen(state.mixture, k, state.rule.cell, config.prior),
+        evidence=capacity.widen_rows(state.evidence, k),
+        colour=capacity.widen_rows(state.colour, k))
+
+
+def _split_levels(state: MapState, xyz, rgb, footprint, config: Config) -> np.ndarray | None:
+    """``components="auto"``: the finest refinement level each point of the batch may seed
+    (:func:`vbgs.inference.grow.refinement_levels`: points whose colour their component
+    explains worse than ``growth.refine_gain`` nats, cells no finer than
+    ``growth.refine_footprints`` pixel footprints); None when refinement is off."""
+    g = config.growth
+    if g.refine_gain <= 0:
+        return None
+    mixture = state.mixture
+    return grow.refinement_levels(state.rule, mixture.posterior, grow.is_active(mixture.prior),
+                                  xyz, rgb, colour_noise=config.prior.colour_noise,
+                                  gain=g.refine_gain, footprint=footprint,
+                                  floor=g.refine_footprints)
+
+
+def _auto_widen(state: MapState, xyz, ray, levels, finest, config: Config) -> MapState:
+    """Capacity for the refinement ``finest`` asks for as well as the new ground (births
+    beyond the ceiling are not made: refinement never merges to make room)."""
+    if finest is None or not (finest >= 1).any():
+        return state
+    short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels,
+                           finest=finest)
+    if short <= 0:
+        return state
+    return _widened(state, state.mixture.prior.n_components + short, config)
 
 
 def _first_capacity(config: Config) -> int:
