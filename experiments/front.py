@@ -236,21 +236,25 @@ def reference_row(rows: list[dict]) -> dict | None:
 def plot_front(rows: list[dict], path: Path, title: str) -> None:
     """PSNR against wall time (log x; the front drawn as a thick grey step line, the
     gradient baseline's most-steps PSNR and a tenth of its time as dotted lines) and,
-    beside it, the streaming rows' PSNR against replay memory (static rows hold every
-    training frame: they have no place on a memory axis of a stream)."""
+    beside it when there are streaming rows, their PSNR against replay memory (static
+    rows hold every training frame: they have no place on a memory axis of a stream)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter, LogLocator
 
-    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(13, 5), width_ratios=(1.6, 1))
+    streamed = [r for r in rows if r["protocol"] == "continual"]
+    if streamed:
+        fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(13, 5), width_ratios=(1.6, 1))
+    else:  # an image's front: time alone
+        fig, ax_t = plt.subplots(figsize=(8.5, 5))
+        ax_m = None
     series: dict[str, list[dict]] = {}
     for r in rows:
         series.setdefault(label(r) + (f" K={r['components']}" if r["protocol"] == "image"
                                       else ""), []).append(r)
     markers = "osD^v<>PX*"
-    streamed = [r for r in rows if r["protocol"] == "continual"]
     for j, (name, rs) in enumerate(series.items()):
         rs = sorted(rs, key=lambda r: r["wall_seconds"])
         continual = rs[0]["protocol"] == "continual" and rs[0]["method"] != "vbgs"
@@ -289,13 +293,11 @@ def plot_front(rows: list[dict], path: Path, title: str) -> None:
     ax_t.xaxis.set_minor_formatter(plain)
     ax_t.set_xlabel("wall seconds of training (log; static: cumulative to each step count)")
     ax_t.set_title("error against time (up and left is better; labels: steps)", fontsize=9)
-    ax_m.set_xscale("symlog", linthresh=0.01)
-    ax_m.set_xlabel("replay memory (MiB of frames held; symlog)")
-    ax_m.set_title("streaming learners: error against memory", fontsize=9)
-    if not streamed:
-        ax_m.text(0.5, 0.5, "no streaming rows", ha="center", va="center",
-                  transform=ax_m.transAxes)
-    for ax in (ax_t, ax_m):
+    if ax_m is not None:
+        ax_m.set_xscale("symlog", linthresh=0.01)
+        ax_m.set_xlabel("replay memory (MiB of frames held; symlog)")
+        ax_m.set_title("streaming learners: error against memory", fontsize=9)
+    for ax in (ax_t, ax_m) if ax_m is not None else (ax_t,):
         ax.set_ylabel("held-out PSNR (dB)")
         ax.grid(alpha=0.3, which="both")
     handles, names = ax_t.get_legend_handles_labels()
