@@ -37,7 +37,7 @@ a scene, ``seconds - seconds_compiling`` of ``fit-scene``'s record (VBGS-polish:
 stream plus the polish; JAX reports the tracing of a function compiled inside another
 within the outer's too, so a little more than the compilation may be taken off); for an
 image, VBGS's fit runs twice and the second, warm, run is timed, and the gradient fit
-compiles on a short fit before the timed one. ``compile_seconds`` says what was left
+compiles on a one-step fit before the timed one. ``compile_seconds`` says what was left
 out. Rows of one front ran on the same machine one after another, so their times compare
 with one another; across fronts, and across machines or loads, they do not.
 """
@@ -177,8 +177,9 @@ def run_image_front(image: str, size: int, components: tuple[int, ...], iters: i
     """VBGS's batch fit and the 2-D gradient baseline at each step count, for each
     component count (each row said on stderr; ``progress``: a bar over the fits and
     each gradient fit's own). Fits are timed warm: VBGS's runs twice, the second timed;
-    the gradient's compiles on a short fit (the first step count), then one fit to the
-    largest step count is scored at each (:func:`experiments.image_task.gradient_image_path`:
+    the gradient's compiles on a one-step fit (its seconds, an upper bound of the
+    compilation, are the first row's ``compile_seconds``), then one fit to the largest
+    step count is scored at each (:func:`experiments.image_task.gradient_image_path`:
     seconds to each count, the scoring of the earlier ones left out)."""
     from experiments.image_task import ImageTask, gradient_image_path, run_image
     from experiments.progress import progress as progress_bar
@@ -195,10 +196,9 @@ def run_image_front(image: str, size: int, components: tuple[int, ...], iters: i
             continue
         task = ImageTask(image=image, size=size, components=k, seed=seed, method="gradient",
                          steps=counts[-1])
-        (warm_up,) = gradient_image_path(task, counts[:1])  # compiles
+        (warm_up,) = gradient_image_path(task, (1,))  # compiles: one step and a render
         for record in gradient_image_path(task, counts, progress=progress):
-            compiled = (max(0.0, warm_up["seconds"] - record["seconds"])
-                        if record["steps"] == counts[0] else 0.0)
+            compiled = warm_up["seconds"] if record["steps"] == counts[0] else 0.0
             rows.append(_image_row(task, record, compiled))
             _say(rows[-1])
     return mark_front(rows)
@@ -236,21 +236,25 @@ def reference_row(rows: list[dict]) -> dict | None:
 def plot_front(rows: list[dict], path: Path, title: str) -> None:
     """PSNR against wall time (log x; the front drawn as a thick grey step line, the
     gradient baseline's most-steps PSNR and a tenth of its time as dotted lines) and,
-    beside it, the streaming rows' PSNR against replay memory (static rows hold every
-    training frame: they have no place on a memory axis of a stream)."""
+    beside it when there are streaming rows, their PSNR against replay memory (static
+    rows hold every training frame: they have no place on a memory axis of a stream)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import FuncFormatter, LogLocator
 
-    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(13, 5), width_ratios=(1.6, 1))
+    streamed = [r for r in rows if r["protocol"] == "continual"]
+    if streamed:
+        fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(13, 5), width_ratios=(1.6, 1))
+    else:  # an image's front: time alone
+        fig, ax_t = plt.subplots(figsize=(8.5, 5))
+        ax_m = None
     series: dict[str, list[dict]] = {}
     for r in rows:
         series.setdefault(label(r) + (f" K={r['components']}" if r["protocol"] == "image"
                                       else ""), []).append(r)
     markers = "osD^v<>PX*"
-    streamed = [r for r in rows if r["protocol"] == "continual"]
     for j, (name, rs) in enumerate(series.items()):
         rs = sorted(rs, key=lambda r: r["wall_seconds"])
         continual = rs[0]["protocol"] == "continual" and rs[0]["method"] != "vbgs"
@@ -267,7 +271,8 @@ def plot_front(rows: list[dict], path: Path, title: str) -> None:
             for r in rs:
                 drop = r["early_psnr_when_seen"] - r["early_psnr_at_end"]
                 if np.isfinite(drop):
-                    ax_m.annotate(f"early views {-drop:+.2f} dB", (r["replay_bytes"] / 2**20,
+                    ax_m.annotate(f"early views, seen to end: {-drop:+.2f} dB",
+                                  (r["replay_bytes"] / 2**20,
                                   r["psnr"]), fontsize=7, textcoords="offset points",
                                   xytext=(4, -10))
     front = sorted((r for r in rows if r["on_front"]), key=lambda r: r["wall_seconds"])
@@ -288,13 +293,11 @@ def plot_front(rows: list[dict], path: Path, title: str) -> None:
     ax_t.xaxis.set_minor_formatter(plain)
     ax_t.set_xlabel("wall seconds of training (log; static: cumulative to each step count)")
     ax_t.set_title("error against time (up and left is better; labels: steps)", fontsize=9)
-    ax_m.set_xscale("symlog", linthresh=0.01)
-    ax_m.set_xlabel("replay memory (MiB of frames held; symlog)")
-    ax_m.set_title("streaming learners: error against memory", fontsize=9)
-    if not streamed:
-        ax_m.text(0.5, 0.5, "no streaming rows", ha="center", va="center",
-                  transform=ax_m.transAxes)
-    for ax in (ax_t, ax_m):
+    if ax_m is not None:
+        ax_m.set_xscale("symlog", linthresh=0.01)
+        ax_m.set_xlabel("replay memory (MiB of frames held; symlog)")
+        ax_m.set_title("streaming learners: error against memory", fontsize=9)
+    for ax in (ax_t, ax_m) if ax_m is not None else (ax_t,):
         ax.set_ylabel("held-out PSNR (dB)")
         ax.grid(alpha=0.3, which="both")
     handles, names = ax_t.get_legend_handles_labels()
