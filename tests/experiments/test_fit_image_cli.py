@@ -47,6 +47,9 @@ def test_fit_image_loads_and_resizes_the_image_once(monkeypatch, capsys, tmp_pat
 
     if cache_dir() is not None:  # JAX's cache where it was; the photos under tmp_path
         monkeypatch.setenv("VBGS_COMPILE_CACHE", str(cache_dir()))
+    # VBGS_CACHE_DIR (the session's temporary cache, tests/conftest.py) wins over
+    # XDG_CACHE_HOME: both are pointed here
+    monkeypatch.setenv("VBGS_CACHE_DIR", str(tmp_path / "vbgs"))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
 
     calls = []
