@@ -70,7 +70,7 @@ def test_fit_image_loads_and_resizes_the_image_once(monkeypatch, capsys, tmp_pat
 
 
 def test_fit_image_bad_input_is_one_clear_line(capsys):
-    """One refusal through a real process (exit status 2, one line, no traceback: what a
+    """One refusal through a real process (exit status 2, the reason, no traceback: what a
     shell sees); the others in-process through the same entry point (a process start
     and JAX import each, ~4 s, for the same path)."""
     out = _run("fit-image", "--size", "8", "--image", "/no/such/file.png")

@@ -6,9 +6,9 @@ import numpy as np
 
 from experiments.run import main
 
-# the shapes of the other tiny fit-scene tests (test_fit_scene_cli, test_walk_scene): the
-# command's persistent compilation cache gives this run their compiled learner (with 500
-# components: 20.1 CPU s cold, 13.8 after test_fit_scene_cli)
+# the shapes of the other tiny fit-scene tests (test_fit_scene_cli, test_walk_scene): this
+# run reuses their compiled learner (with 500 components: 20.1 CPU s cold, 13.8 after
+# test_fit_scene_cli)
 TINY = ["--scene", "room", "--components", "600", "--frames", "6", "--test-views", "2",
         "--size", "32"]
 
