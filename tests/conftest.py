@@ -9,15 +9,6 @@ read). Between tests, once the process holds more than :data:`MAX_MAPPINGS`, JAX
 caches are cleared: the executables are freed, and tests that need them again compile
 them again (or load them from the persistent compilation cache).
 
-The default run (slow tests deselected) compiles with XLA's cheap backend settings
-(:data:`QUICK_COMPILE_FLAGS`, added to ``XLA_FLAGS`` before JAX starts, and inherited by the
-commands the tests start): its tests run tiny problems, so their time is compiling, not
-running. fit-scene on the object (32 px, 600 components, 6 frames) compiled in 43 s
-against 62 s on the loaded 2-core machine, and scored 19.756008817 dB against
-19.756010266 (the same code; LLVM's optimisations reorder float arithmetic). Set
-``XLA_FLAGS`` with ``xla_backend_optimization_level`` to choose otherwise; ``-m slow``
-runs keep XLA's defaults (their streams are long enough for the run time to count).
-
 The suite never writes into a user's caches (``~/.cache/vbgs``: compiled executables,
 resized photos): unless ``VBGS_CACHE_DIR`` or ``VBGS_COMPILE_CACHE`` is set, the session
 points ``VBGS_CACHE_DIR`` at a temporary folder, which the commands the tests start in
@@ -39,21 +30,8 @@ MAX_MAPPINGS = 30000  # about half of the default vm.max_map_count
 
 _SESSION_CACHE: list[str] = []
 
-QUICK_COMPILE_FLAGS = ("--xla_backend_optimization_level=0",
-                       "--xla_llvm_disable_expensive_passes=true")
-
-
-def quick_compile(config, environ=os.environ) -> None:
-    """Add :data:`QUICK_COMPILE_FLAGS` to ``XLA_FLAGS`` for the default run (``-m 'not
-    slow'``), unless ``XLA_FLAGS`` already sets the optimisation level."""
-    flags = environ.get("XLA_FLAGS", "")
-    if config.getoption("markexpr", "") == "not slow" and (
-            "xla_backend_optimization_level" not in flags):
-        environ["XLA_FLAGS"] = " ".join([flags, *QUICK_COMPILE_FLAGS]).strip()
-
 
 def pytest_configure(config):
-    quick_compile(config)
     if not (os.environ.get("VBGS_CACHE_DIR") or os.environ.get("VBGS_COMPILE_CACHE")):
         folder = tempfile.mkdtemp(prefix="vbgs-test-cache-")
         os.environ["VBGS_CACHE_DIR"] = folder
