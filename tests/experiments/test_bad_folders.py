@@ -14,7 +14,9 @@ from vbgs.data.synthetic import object_scene
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
-    return write_blender(object_scene(size=24, n_train=4, n_test=2, seed=0),
+    # 32 px and (below) 600 components: the shapes of the other tiny object runs
+    # (test_fit_scene_cli, test_background_cli), whose compiled learner the clean run reuses
+    return write_blender(object_scene(size=32, n_train=4, n_test=2, seed=0),
                          tmp_path_factory.mktemp("clean") / "scene")
 
 
@@ -84,7 +86,7 @@ CASES = [
 def test_a_broken_folder_is_refused_in_one_line(folder, tmp_path, capsys, name, change,
                                                 message):
     bad = broken(folder, tmp_path, change)
-    code = main(["fit-scene", "--scene", str(bad), "--components", "50", "--size", "24",
+    code = main(["fit-scene", "--scene", str(bad), "--components", "50", "--size", "32",
                  "--json"])
     out, err = capsys.readouterr()
     assert code == 2, (name, err)
@@ -101,8 +103,8 @@ def clean_run(folder):
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        code = main(["fit-scene", "--scene", str(folder), "--components", "50", "--size",
-                     "24", "--frames", "60", "--json"])
+        code = main(["fit-scene", "--scene", str(folder), "--components", "600", "--size",
+                     "32", "--frames", "60", "--json"])
     return code, json.loads(out.getvalue().strip().splitlines()[-1])
 
 

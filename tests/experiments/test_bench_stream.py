@@ -21,12 +21,13 @@ from vbgs.data.synthetic import object_scene
 def test_bench_stream_command_counts_every_frame_and_pads_above_the_points(tmp_path, capsys):
     """``bench stream`` end to end, tiny: each row streams every frame once (the sparse
     row all 4, the dense row its at most 8), pads above the points, and the tables and
-    the one-frame profile are written."""
+    the one-frame profile are written; ``--devices 2``: the components split over two
+    host devices in a process of their own (:func:`device_rows`), its table written."""
     from experiments.run import main
 
     assert main(["bench", "stream", "--components", "300", "--scenes", "object", "--frames",
-                 "4", "--sizes", "24", "--search", "kdtree", "--out", str(tmp_path),
-                 "--json"]) == 0
+                 "4", "--sizes", "24", "--search", "kdtree", "--devices", "2",
+                 "--out", str(tmp_path), "--json"]) == 0
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     rows = {r["estep"]: r for r in out["rows"]}
     assert set(rows) == {"dense", "sparse"}
@@ -37,7 +38,12 @@ def test_bench_stream_command_counts_every_frame_and_pads_above_the_points(tmp_p
     assert math.isfinite(row["s_per_frame"]) or row["compile_s"] > 0
     assert len(out["speedups"]) == 1 and out["profile"]
     names = {Path(f).name for f in out["files"]}
-    assert {"bench_stream.csv", "bench_stream.md", "bench_stream_profile.csv"} <= names
+    assert {"bench_stream.csv", "bench_stream.md", "bench_stream_profile.csv",
+            "bench_stream_devices.csv"} <= names
+    (device,) = out["devices"]
+    assert device["devices"] == 2 and device["components"] == 300 and device["frames"] == 4
+    assert device["estep"] == "sparse" and device["padded"] >= device["points_per_frame"] > 0
+    assert math.isfinite(device["s_per_frame"]) and device["s_per_frame"] > 0
 
 
 def test_a_budget_bounds_the_points_of_every_frame():
@@ -59,16 +65,6 @@ def test_speedups_pair_sparse_with_dense():
             {"scene": "room", "components": 10, "estep": "sparse", "s_per_frame": 0.5}]
     out = speedups(rows)
     assert len(out) == 1 and np.isclose(out[0]["sparse_over_dense"], 4.0)
-
-
-def test_device_rows_one_process_per_device_count():
-    # tiny: 4 frames of a 24 px object, 400 components split over 1 and 2 host devices
-    rows = device_rows([1, 2], 400, "object", frames=4, size=24)
-    assert [r["devices"] for r in rows] == [1, 2]
-    for r in rows:
-        assert r["components"] == 400 and r["frames"] == 4 and r["estep"] == "sparse"
-        assert r["padded"] >= r["points_per_frame"] > 0
-        assert math.isfinite(r["s_per_frame"]) and r["s_per_frame"] > 0
 
 
 def test_device_rows_refuse_an_uneven_split_before_starting_processes():

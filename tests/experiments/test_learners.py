@@ -26,7 +26,9 @@ class FirstFrameOnly(list):
 
 
 def tiny(**kw) -> SceneTask:
-    settings = dict(size=32, frames=6, n_test=2, components=300, steps_per_frame=5)
+    # the shapes of the other tiny object runs (32 px, 600 components, 2 test views:
+    # test_fit_scene_cli, test_background_cli, test_bad_folders): their compiled learner
+    settings = dict(size=32, frames=6, n_test=2, components=600, steps_per_frame=5)
     return SceneTask(**{**settings, **kw})
 
 
@@ -40,7 +42,7 @@ def test_stream_start_reads_only_the_frames_that_arrived(scene, method):
     guarded = scene._replace(train=FirstFrameOnly(scene.train))
     learner = LEARNERS[method](tiny(method=method), guarded)
     learner.learn(guarded.train[0], np.zeros(3, np.float32))
-    assert 0 < learner.splats(drop_unused=True).count <= 300
+    assert 0 < learner.splats(drop_unused=True).count <= 600
 
 
 def test_gradient_learner_grows_where_vbgs_grows(scene):
@@ -78,7 +80,7 @@ def test_the_streaming_bound_counts_only_the_points_learned():
     and, without merging (which frees slots for it), leaves it out."""
     from vbgs.mapping import GrowthConfig
 
-    task = tiny(scene="room", frames=25, growth=GrowthConfig(merge=False))
+    task = tiny(scene="room", frames=25, components=300, growth=GrowthConfig(merge=False))
     room = prepare_scene(task)[0]
     learner = VbgsLearner(task, room)
     for frame in room.train:
@@ -122,7 +124,8 @@ def test_points_left_unlearned_are_said_on_stderr(capsys):
     and a warning."""
     from vbgs.mapping import GrowthConfig
 
-    result = run_scene(tiny(scene="room", frames=25, growth=GrowthConfig(merge=False)))
+    result = run_scene(tiny(scene="room", frames=25, components=300,
+                            growth=GrowthConfig(merge=False)))
     share = result.details["points_unlearned"]
     assert share > 0.01
     err = capsys.readouterr().err

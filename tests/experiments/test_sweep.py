@@ -274,8 +274,10 @@ def test_scene_cells_through_a_stand_in_scene_task(tmp_path, monkeypatch, capsys
 
 def test_real_scene_cell(tmp_path, capsys):
     config = tmp_path / "c.toml"
+    # render-bound's, tune's and colour-gap's tiny shapes (16 px, 3 frames, 150
+    # components): the learner they compiled
     config.write_text('name = "scene"\n[[grid]]\ntask = "scene"\ndataset = "object"\n'
-                      'size = 16\nframes = 2\ncomponents = 20\nseed = 0\n')
+                      'size = 16\nframes = 3\ncomponents = 150\nseed = 0\n')
     out = tmp_path / "res"
     assert main(["sweep", "--config", str(config), "--out", str(out), "--backend", "serial",
                  "--json"]) == 0

@@ -1,27 +1,25 @@
 """End to end: ``fit-scene --poses track|odometry`` on a tiny scene, and its refusals."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 
 from experiments.run import main
 
-# the shapes of the other tiny fit-scene tests (test_fit_scene_cli, test_walk_scene): the
-# command's persistent compilation cache gives this run their compiled learner (with 500
-# components: 20.1 CPU s cold, 13.8 after test_fit_scene_cli)
+# the shapes of the other tiny fit-scene tests (test_fit_scene_cli, test_walk_scene): this
+# run reuses their compiled learner (with 500 components: 20.1 CPU s cold, 13.8 after
+# test_fit_scene_cli)
 TINY = ["--scene", "room", "--components", "600", "--frames", "6", "--test-views", "2",
         "--size", "32"]
 
 
-def test_fit_scene_tracks(tmp_path):
+def test_fit_scene_tracks(tmp_path, capsys):
+    # in-process: a process start and JAX import fewer (test_fit_scene_cli runs fit-scene
+    # as a real process)
     png = tmp_path / "t.png"
-    out = subprocess.run([sys.executable, "-m", "experiments.run", "fit-scene", *TINY,
-                          "--poses", "odometry", "--drift", "0.01,0.5", "--plot", str(png),
-                          "--json"], capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr
-    r = json.loads(out.stdout.strip().splitlines()[-1])
+    assert main(["fit-scene", *TINY, "--poses", "odometry", "--drift", "0.01,0.5", "--plot",
+                 str(png), "--json"]) == 0
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     for key in ("ate_rmse", "rpe_trans", "rpe_rot_deg", "odometry_ate_rmse",
                 "tracking_seconds_per_frame", "psnr"):
         assert np.isfinite(r[key]), key
