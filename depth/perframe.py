@@ -148,16 +148,14 @@ def _sample(depth: np.ndarray, u: np.ndarray, v: np.ndarray, spread: float):
     return np.where(ok, val, np.nan)
 
 
-def _pairs(depth: np.ndarray, camera, reference: Reference, phi_map: np.ndarray):
-    ok = depth > 0
-    rays = pixel_rays(camera.height, camera.width, camera.fx, camera.fy, camera.cx,
-                      camera.cy)[ok]  # [n, 3]
-    pose = np.asarray(camera.pose, np.float64)
+def _pairs(world_dir: np.ndarray, centre: np.ndarray, reference: Reference):
+    """The target's valid pixels' rays ``world_dir [n, 3]`` (world directions at unit
+    camera depth) from its camera centre ``centre [3]``, in the reference's frame: the
+    rays ``[n, 3]`` and the centre's offset ``[3]``."""
     rpose = np.asarray(reference.camera.pose, np.float64)
-    world_dir = rays @ pose[:3, :3].T  # [n, 3]
     in_ref = world_dir @ rpose[:3, :3]  # [n, 3] the ray in the reference's frame
-    off = (pose[:3, 3] - rpose[:3, 3]) @ rpose[:3, :3]  # [3]
-    return depth[ok], phi_map[ok], in_ref, off
+    off = (centre - rpose[:3, 3]) @ rpose[:3, :3]  # [3]
+    return in_ref, off
 
 
 def _lookup(d_new, in_ref, off, reference: Reference, spread: float):
@@ -217,7 +215,13 @@ def fit(depth: np.ndarray, camera, references, config: FrameAlignConfig) -> Fram
     h, w = depth.shape
     phi_map = basis(h, w, config.warp_order)  # [h, w, m]
     m = phi_map.shape[-1]
-    parts = [(_pairs(depth, camera, r, phi_map), r) for r in references]
+    ok = depth > 0  # the target's rays, once for every reference
+    rays = pixel_rays(camera.height, camera.width, camera.fx, camera.fy, camera.cx,
+                      camera.cy)[ok]  # [n, 3]
+    pose = np.asarray(camera.pose, np.float64)
+    world_dir = rays @ pose[:3, :3].T  # [n, 3]
+    d, phi = depth[ok], phi_map[ok]
+    parts = [(_pairs(world_dir, pose[:3, 3], r), r) for r in references]
     theta = np.zeros(m + 1)
     theta[0] = 1.0
     prior_w = np.full(m + 1, float(config.ridge))
@@ -228,7 +232,7 @@ def fit(depth: np.ndarray, camera, references, config: FrameAlignConfig) -> Fram
     n_used, res = 0, float("nan")
     for _ in range(OUTER):
         rows, ys, zs = [], [], []
-        for (d, phi, in_ref, off), r in parts:
+        for (in_ref, off), r in parts:
             d_new = d * (phi @ theta[:m]) + theta[m]
             z_ref, _ = _lookup(d_new, in_ref, off, r, config.agree)
             z_far, _ = _lookup(d_new * (1 + STEP), in_ref, off, r, config.agree)
