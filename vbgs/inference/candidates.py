@@ -126,6 +126,6 @@ def scatter_pair_moments(acc: jnp.ndarray, resp: jnp.ndarray, psi: jnp.ndarray,
 
 def scatter_moments(acc: jnp.ndarray, resp: jnp.ndarray, phi: jnp.ndarray,
                     cand: jnp.ndarray) -> jnp.ndarray:
-    """``acc[k] += sum_{n, c: cand_nc = k} r_nc phi_n``; acc ``[k, F]``, resp ``[n, C]``."""
-    contrib = resp[:, :, None] * phi[:, None, :]  # [n, C, F]
-    return acc.at[cand.reshape(-1)].add(contrib.reshape(-1, phi.shape[-1]))
+    """``acc[k] += sum_{n, c: cand_nc = k} r_nc phi_n``; acc ``[k, F]``, resp ``[n, C]``:
+    :func:`scatter_pair_moments` with one feature per point, whatever its candidate."""
+    return scatter_pair_moments(acc, resp, phi[:, None, :], cand)
