@@ -390,15 +390,14 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
     Births are :func:`vbgs.inference.grow.grow`'s new ground at a resolution the data
     set: the first frame fixes the cell side so that each level-0 cell holds about
     ``growth.auto_points`` of its points (the sensor's own sampling, whatever the
-    scene's extent), and ground is not refined further (refinement spends a share of a
-    budget there is none of). Every ``growth.auto_merge_every`` frames (0, the default:
+    scene's extent); finer cells come only from the splits below. Every ``growth.auto_merge_every`` frames (0, the default:
     never; figures in :mod:`vbgs.components`) the neighbours whose merge raises the bound
     are merged (:func:`vbgs.inference.merge.bound_pairs`, the derivation in
     :mod:`vbgs.inference.merge`). Splits come after this room is made
     (``_split_levels``, ``_auto_widen``): a point seeds a child in a finer cell where
     the colour term of the bound a child would win back there exceeds
-    ``growth.refine_gain`` nats (:func:`vbgs.inference.grow.refinement_levels`). When the frame's new ground wants more slots than are empty
-    the capacity grows to the next bucket (:mod:`vbgs.inference.capacity`: a compilation
+    ``growth.refine_gain`` nats (:func:`vbgs.inference.grow.refinement_levels`). When the
+    frame's new ground wants more slots than are empty the capacity grows to the next bucket (:mod:`vbgs.inference.capacity`: a compilation
     per bucket, not per frame); at ``config.max_components`` it stops growing, the state
     says so (``capped``) and the cheapest pairs are merged as under a fixed K."""
     g = config.growth
