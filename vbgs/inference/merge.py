@@ -119,12 +119,14 @@ def merge_costs(posterior: Mixture, counts: np.ndarray, pairs: np.ndarray,
     na, nb = counts[a], counts[b]
     ma, ca = _moments(posterior.space, a)
     mb, cb = _moments(posterior.space, b)
-    _, c = _union(na, ma, ca, nb, mb, cb)
+    empty = na + nb <= 0  # two components without points: no cost defined, never merged
+    _, c = _union(np.where(empty, 1.0, na), ma, ca, np.where(empty, 1.0, nb), mb, cb)
     logdet = _logdet3 if c.shape[-1] == 3 else (lambda s: np.linalg.slogdet(s)[1])
     space = 0.5 * ((na + nb) * logdet(c) - na * logdet(ca) - nb * logdet(cb))
     colour = np.asarray(posterior.colour.mean, np.float64)
     gap = ((colour[a] - colour[b]) ** 2).sum(-1)
-    return space + na * nb / np.maximum(na + nb, 1e-12) * gap / (2.0 * colour_noise**2)
+    cost = space + na * nb / np.maximum(na + nb, 1e-12) * gap / (2.0 * colour_noise**2)
+    return np.where(empty, np.inf, cost)
 
 
 def choose_pairs(posterior: Mixture, counts: np.ndarray, active: np.ndarray, n: int,

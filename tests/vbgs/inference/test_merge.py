@@ -1,5 +1,7 @@
 """vbgs.inference.merge: freeing slots by merging neighbours, exactly in the statistics."""
 
+import warnings
+
 import jax
 import numpy as np
 
@@ -61,6 +63,17 @@ def test_near_duplicates_cost_less_than_an_edge_of_colour_or_distance():
     red, _, _, _ = two_clusters_state(colours=((0.9, 0.1, 0.1), (0.1, 0.1, 0.9)))
     edge = merge.merge_costs(red.posterior, counts, np.array([[0, 1]]), CONFIG.colour_noise)
     assert edge[0] > 100 * cost[0]  # the same geometry across a colour edge
+
+
+def test_two_components_without_points_are_never_merged_and_warn_nothing():
+    state, *_ = two_clusters_state()
+    counts = np.asarray(state.stats.count, np.float64)
+    counts[[2, 3]] = 0.0  # two active slots whose points went elsewhere
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no 0/0 in the moment match
+        cost = merge.merge_costs(state.posterior, counts, np.array([[0, 1], [2, 3]]),
+                                 CONFIG.colour_noise)
+    assert np.isfinite(cost[0]) and cost[1] == np.inf
 
 
 def test_choose_pairs_takes_disjoint_pairs_cheapest_first():
