@@ -258,7 +258,8 @@ def prepare_scene(task) -> tuple[Scene, dict]:
                                             task.seed, task.sensor_holes)
     if task.simulate_sensor == "exact":  # the data's own depth: its sensor, as recorded
         data = data_sensor(task.scene, task.format)
-        report = {**report, "depth_sensor": data.sensor, "depth_sensor_level": data.level}
+        report = {**report, "depth_sensor": data.sensor, "depth_sensor_level": data.level,
+                  **data.measured}  # a record's holes and error: over the frames written
     return learned_surface(scene, report, task.sensor, task.sensor_level)
 
 

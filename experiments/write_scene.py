@@ -74,7 +74,7 @@ def write_scene(scene: str, out, *, size=128, frames: int = 60, n_test: int = 8,
     splits = {"train": sensor, "test": "exact", **({"val": "exact"} if data.val else {})}
     write_sensor_record(out, sensor, task.sensor_level, holes, seed, splits,
                         f"write-scene --scene {scene} --size {size_text(task.size)} "
-                        f"--seed {seed}")  # first: a folder cut short has no transforms
+                        f"--seed {seed}", report)  # first: a folder cut short has no transforms
 
     def bar(items, total):
         return progress_bar(items, total=total, desc="frames written", unit="frame",

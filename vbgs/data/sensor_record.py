@@ -39,17 +39,26 @@ class DataSensor(NamedTuple):
     level: float
     source: str
     recorded: bool = False
+    measured: dict = {}  # the record's share of holes and median error (flat report keys)
+
+
+MEASURED_KEYS = ("depth_sensor_holes", "depth_sensor_abs_error")  # over the written frames
 
 
 def write_sensor_record(folder, sensor: str, level: float, holes: str, seed: int,
-                        splits: dict[str, str], source: str) -> Path:
+                        splits: dict[str, str], source: str, measured: dict | None = None
+                        ) -> Path:
     """Write ``folder/depth_sensor.json``: ``sensor`` at ``level`` with ``holes`` and
     ``seed`` on the splits ``splits`` names (``{"train": "kinect", "test": "exact"}``),
-    ``source`` saying what was written (free text). Returns the file's path."""
+    ``source`` saying what was written (free text), ``measured`` the simulation's
+    report (its :data:`MEASURED_KEYS` are kept: the share of the training pixels with
+    depth that became holes, the median error). Returns the file's path."""
     if sensor not in SENSOR_NAMES:
         raise ValueError(f"unknown depth sensor {sensor!r}: use one of {', '.join(SENSOR_NAMES)}")
     record = {"sensor": sensor, "level": check_level(level), "holes": holes, "seed": int(seed),
-              "splits": dict(splits), "source": source}
+              "splits": dict(splits), "source": source,
+              "measured": {k: float(v) for k, v in (measured or {}).items()
+                           if k in MEASURED_KEYS}}
     path = Path(folder) / SENSOR_RECORD
     write_text_atomic(path, json.dumps(record, indent=2) + "\n")
     return path
@@ -85,8 +94,10 @@ def data_sensor(scene, format: str | None = None) -> DataSensor:
         return DataSensor(DEFAULT_SENSOR, 1.0, "default (not a dataset folder)")
     record = read_sensor_record(path)
     if record is not None:
+        measured = record.get("measured", {})
         return DataSensor(record["sensor"], float(record["level"]),
-                          f"the folder's {SENSOR_RECORD}", recorded=True)
+                          f"the folder's {SENSOR_RECORD}", recorded=True,
+                          measured={k: measured[k] for k in MEASURED_KEYS if k in measured})
     if format is None:
         try:
             format = detect_format(path)
