@@ -200,7 +200,6 @@ class SceneTask:
             raise ValueError(f"colour_ridge must be > 0 (pixels' worth of weight on the "
                              f"posterior colour), got {self.colour_ridge!r}")
 
-
     def _resolve_sensor(self) -> None:
         """``sensor`` and ``sensor_level`` left None become the data's (a folder's
         record, its format's default; a level the record does not give is 1); a
@@ -256,7 +255,7 @@ def prepare_scene(task) -> tuple[Scene, dict]:
         return scene, {}
     scene, report = simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,
                                             task.seed, task.sensor_holes)
-    if task.simulate_sensor == "exact":  # the data's own depth: its sensor, as recorded
+    if task.simulate_sensor == "exact" and Path(task.scene).is_dir():  # a folder's own depth
         data = data_sensor(task.scene, task.format)
         report = {**report, "depth_sensor": data.sensor, "depth_sensor_level": data.level,
                   **data.measured}  # a record's holes and error: over the frames written
