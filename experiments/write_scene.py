@@ -10,7 +10,9 @@ noise from ``[seed, SENSOR_STREAM, i]``). The folder records the sensor
 measurement model by default. What the files keep (:func:`vbgs.data.blender.write_blender`):
 
 * colour: 8 bits a channel (rounded to 1/255: at most 1/510 off, train and held-out);
-* depth: 16-bit millimetres (at most 0.5 mm off; a hole, 0, stays a hole);
+* depth: 16-bit millimetres (at most 0.5 mm off; a hole, 0, stays a hole), or where
+  some frame's depth lies beyond their 65.535 units (a depth network's sky on the
+  walk) float32 ``.npy`` files, exact;
 * cameras: intrinsics and poses as JSON floats (float64, read back exactly; the
   OpenGL axis flip is exact).
 """
@@ -24,7 +26,7 @@ from pathlib import Path
 from experiments.progress import progress as progress_bar
 from experiments.scene_task import SceneTask, load_task_scene
 from experiments.sensor_swap import simulate_training_depth
-from vbgs.data.blender import write_blender
+from vbgs.data.blender import depth_files, write_blender
 from vbgs.data.scene import size_text
 from vbgs.data.sensor_record import SENSOR_RECORD, write_sensor_record
 from vbgs.data.synthetic import SCENES
@@ -80,10 +82,15 @@ def write_scene(scene: str, out, *, size=128, frames: int = 60, n_test: int = 8,
         return progress_bar(items, total=total, desc="frames written", unit="frame",
                             enabled=progress, compiles=False)
 
-    WRITERS[format](data, out, progress=bar)
-    print(f"note: colour is stored at 8 bits and depth at 1 mm: the folder's frames differ "
-          f"from the in-memory ones by at most 1/510 and 0.5 mm", file=sys.stderr)
+    files = depth_files(data)
+    WRITERS[format](data, out, progress=bar, depth=files)
+    kept = ("depth at 1 mm (16-bit PNGs): the folder's frames differ from the in-memory ones "
+            "by at most 1/510 and 0.5 mm" if files == "png" else
+            "depth exactly (float32 .npy: some depth lies beyond the 65.535 units a 16-bit "
+            "millimetre PNG holds): the folder's colour differs by at most 1/510")
+    print(f"note: colour is stored at 8 bits and {kept}", file=sys.stderr)
     return {"out": str(out), "format": format, "scene": scene, "size": size_text(task.size),
             "frames": len(data.train), "n_test": len(data.test), "n_val": len(data.val),
-            "seed": seed, "sensor_holes": holes, "sensor_record": str(out / SENSOR_RECORD),
+            "seed": seed, "sensor_holes": holes, "depth_files": files,
+            "sensor_record": str(out / SENSOR_RECORD),
             **report, "seconds": time.perf_counter() - start}

@@ -33,10 +33,14 @@ def _close_frames(written, memory, what):
                                       b.camera.width, b.camera.height)), what
 
 
-@pytest.mark.parametrize("sensor", ["kinect", "mono"])
-def test_the_folder_reloads_to_the_in_memory_frames(tmp_path, sensor):
-    record = write_scene("object", tmp_path / sensor, sensor=sensor, seed=1, **SMALL)
-    memory = SceneTask(scene="object", size=32, frames=5, n_test=2, n_val=1, seed=1,
+@pytest.mark.parametrize("scene, sensor, files", [("object", "kinect", "png"),
+                                                  ("object", "mono", "png"),
+                                                  ("walk", "mono", "npy")])
+def test_the_folder_reloads_to_the_in_memory_frames(tmp_path, scene, sensor, files):
+    record = write_scene(scene, tmp_path / sensor, sensor=sensor, seed=1, **SMALL)
+    # the walk's mono sky (1.5 x the farthest depth, 80 units) is beyond a 16-bit mm PNG
+    assert record["depth_files"] == files
+    memory = SceneTask(scene=scene, size=32, frames=5, n_test=2, n_val=1, seed=1,
                        simulate_sensor=sensor, sensor=sensor)
     simulated, report = simulate_training_depth(load_task_scene(memory), sensor, 1.0, 1)
     assert {k: record[k] for k in report} == report  # the report fit-scene gives in memory
@@ -45,9 +49,12 @@ def test_the_folder_reloads_to_the_in_memory_frames(tmp_path, sensor):
     read = load_task_scene(folder)
     for split in ("train", "test", "val"):
         _close_frames(getattr(read, split), getattr(simulated, split), split)
+        if files == "npy":  # float32 files: the depth itself
+            for a, b in zip(getattr(read, split), getattr(simulated, split), strict=True):
+                np.testing.assert_array_equal(a.depth, b.depth)
     if sensor == "kinect":  # holes made, and the held-out views' depth exact (none)
         assert 0.2 < np.mean([np.mean(f.depth == 0) for f in read.train]) < 0.9
-    exact = load_task_scene(SceneTask(scene="object", seed=1, **SMALL))
+    exact = load_task_scene(SceneTask(scene=scene, seed=1, **SMALL))
     for split in ("test", "val"):
         _close_frames(getattr(read, split), getattr(exact, split), split)
     # what the learner takes (the sensor's surface cut: mono's far field) matches too
