@@ -63,6 +63,11 @@ def write_scene(scene: str, out, *, size=128, frames: int = 60, n_test: int = 8,
     if not isinstance(n_test, int) or n_test < 1:
         raise ValueError(f"--test-views must be at least 1 (the views a run is scored on), "
                          f"got {n_test!r}")
+    if not isinstance(n_val, int) or n_val < 1:
+        raise ValueError(f"--val-views must be at least 1, got {n_val!r}: without a "
+                         f"validation split the loader holds every 8th training frame out "
+                         f"for validation, and the folder's stream would be shorter than "
+                         f"the scene's")
     task = SceneTask(scene=scene, size=size, frames=frames, n_test=n_test, n_val=n_val,
                      seed=seed, simulate_sensor=sensor, sensor_level=level,
                      sensor_holes=holes, sensor="exact")  # checks the settings

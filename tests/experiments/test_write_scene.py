@@ -101,6 +101,7 @@ def test_fit_scene_on_the_folder_scores_as_in_memory(tmp_path, capsys):
     (["--sensor-holes", "random:0.1"], "makes none"),
     (["--test-views", "0"], "--test-views must be at least 1"),
     (["--frames", "0"], "frames must be a positive integer"),
+    (["--val-views", "0"], "--val-views must be at least 1"),
 ])
 def test_bad_settings_are_refused_before_writing(tmp_path, capsys, argv, words):
     out = tmp_path / "out"

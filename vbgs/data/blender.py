@@ -303,6 +303,8 @@ def write_blender(scene: Scene, folder, progress=None, depth: str = "png") -> Pa
     for split, meta in metas.items():
         (folder / split).mkdir(parents=True, exist_ok=True)
         write_text_atomic(folder / f"transforms_{split}.json", json.dumps(meta, indent=2))
+    if not scene.val:  # an earlier write's validation split would be read as this scene's
+        (folder / "transforms_val.json").unlink(missing_ok=True)
     return folder
 
 
