@@ -20,7 +20,8 @@ class LogLines:
     plain lines to ``stream`` (None: silent)."""
 
     def __init__(self, iterable=None, total=None, desc: str = "", unit: str = "it",
-                 stream=sys.stderr, every: float = LOG_EVERY, clock=time.monotonic):
+                 stream=sys.stderr, every: float = LOG_EVERY, clock=time.monotonic,
+                 compiles: bool = True):
         self.iterable, self.desc, self.unit, self.stream = iterable, desc, unit, stream
         if total is None and iterable is not None and hasattr(iterable, "__len__"):
             total = len(iterable)
@@ -29,7 +30,7 @@ class LogLines:
         self.first_done: float | None = None
         self.lines = 0
         self._say(f"{self._count()}: compiling on the first {unit} (or loading the compile "
-                  f"cache) ...")
+                  f"cache) ..." if compiles else f"{self._count()} ...")
 
     def __len__(self):
         return self.total
@@ -75,14 +76,16 @@ class LogLines:
 
 
 def progress(iterable=None, *, total=None, desc: str = "", unit: str = "it",
-             enabled: bool = True, leave: bool = False):
+             enabled: bool = True, leave: bool = False, compiles: bool = True):
     """The progress of a loop: a tqdm bar when stderr is a terminal, else log lines;
-    silent when not ``enabled``."""
+    silent when not ``enabled``. ``compiles``: the first item compiles (the log's first
+    line says so)."""
     if enabled and sys.stderr.isatty():
         from tqdm.auto import tqdm
 
         return tqdm(iterable, total=total, desc=desc, unit=unit, leave=leave)
-    return LogLines(iterable, total, desc, unit, sys.stderr if enabled else None)
+    return LogLines(iterable, total, desc, unit, sys.stderr if enabled else None,
+                    compiles=compiles)
 
 
 def write(line: str) -> None:

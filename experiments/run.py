@@ -4,6 +4,8 @@ Commands:
   fit-image   fit one photo (batch CAVI or a patch stream) and score it
   fit-scene   learn a 3-D splat from a stream of RGB-D frames, score held-out views
   check       a dataset doctor: cameras, depth scale and multi-view consistency of a folder
+  write-scene a synthetic scene as a dataset folder, a simulated sensor's depth on its
+              training frames (fit-scene --scene FOLDER takes that sensor by default)
   sweep       run a grid of cells from a TOML config (resumable), then report
   report      tables and plots from a sweep's results folder
   depth-study sensor depth against estimated depth (RGB-only path), per method
@@ -154,10 +156,11 @@ def _add_fit_scene(sub):
                    metavar="{" + ",".join(SENSOR.values) + "}", help=SENSOR.help)
     p.add_argument("--sensor", default=MEASURED_BY.default,
                    metavar="{" + ",".join(MEASURED_BY.values) + "}", help=MEASURED_BY.help)
-    p.add_argument("--sensor-level", type=float, default=1.0, metavar="X",
+    p.add_argument("--sensor-level", type=float, default=None, metavar="X",
                    help="noise multiplier of the sensor, simulated (--simulate-sensor) and "
                         "as the learner takes it (--sensor): 0: exact depth values, "
-                        "1: the published model, 2: twice its noise")
+                        "1: the published model, 2: twice its noise (default: the "
+                        "folder's record of its sensor, else 1)")
     p.add_argument("--sensor-holes", default=SENSOR_HOLES_DEFAULT, metavar="SPEC",
                    help=SENSOR_HOLES_HELP)
     add_choice(p, "--opacity-rule", OPACITY_RULE)
@@ -175,6 +178,43 @@ def _add_fit_scene(sub):
     p.add_argument("--ply", metavar="OUT", help="save the splats as a 3DGS PLY")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _add_write_scene(sub):
+    p = sub.add_parser("write-scene", help="write a synthetic scene as a dataset folder, a "
+                                           "simulated sensor's depth on its training frames")
+    p.add_argument("--scene", default="object", help="object | room | walk")
+    p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)
+    p.add_argument("--frames", type=int, default=60, help="training frames")
+    p.add_argument("--test-views", type=int, default=8, help="held-out test views")
+    p.add_argument("--val-views", type=int, default=4, help="validation views")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the scene's views and the sensor's noise, as fit-scene --seed")
+    p.add_argument("--simulate-sensor", default=SENSOR.default,
+                   metavar="{" + ",".join(SENSOR.values) + "}", help=SENSOR.help)
+    p.add_argument("--sensor-level", type=float, default=1.0, metavar="X",
+                   help="noise multiplier of the simulated sensor (0: exact depth values, "
+                        "1: the published model, 2: twice its noise)")
+    p.add_argument("--sensor-holes", default=SENSOR_HOLES_DEFAULT, metavar="SPEC",
+                   help=SENSOR_HOLES_HELP)
+    p.add_argument("--format", choices=WRITE_FORMATS, default=WRITE_FORMATS[0],
+                   help="dataset layout (blender: train, test and val splits)")
+    p.add_argument("--out", required=True, metavar="FOLDER", help="the folder to write")
+    p.add_argument("--force", action="store_true", help="write into a non-empty --out")
+    p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _write_scene(args) -> dict:
+    from experiments.write_scene import write_scene
+
+    return write_scene(args.scene, args.out, size=args.size, frames=args.frames,
+                       n_test=args.test_views, n_val=args.val_views, seed=args.seed,
+                       sensor=args.simulate_sensor, level=args.sensor_level,
+                       holes=args.sensor_holes, format=args.format, force=args.force,
+                       progress=True)
+
+
+WRITE_FORMATS = ("blender",)  # the layouts with separate train, test and val splits
 
 
 def _add_calibration(p) -> None:
@@ -722,6 +762,7 @@ def _sweep_cli(name: str):
 
 COMMANDS = {"fit-image": (_add_fit_image, _fit_image), "fit-scene": (_add_fit_scene, _fit_scene),
             "check": (_add_check, _check),
+            "write-scene": (_add_write_scene, _write_scene),
             "depth-study": (_add_depth_study, _depth_study), "bench": (_add_bench, _bench),
             "oracle": (_add_oracle, _oracle), "tune": (_add_tune, _tune),
             "colour-gap": (_add_colour_gap, _colour_gap),

@@ -49,6 +49,7 @@ from vbgs.components import parse_components
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene, parse_size
+from vbgs.data.sensor_record import data_sensor
 from vbgs.data.streams import stream_order
 from vbgs.data.synthetic import SCENES
 from vbgs.inference import model
@@ -94,13 +95,15 @@ class SceneTask:
     # a depth sensor simulated on the training frames only (vbgs.sensors; test and
     # validation views keep their exact depth) and its noise multiplier (0: exact values)
     simulate_sensor: str = SENSOR.default
-    sensor_level: float = 1.0
+    sensor_level: float | None = None  # None: the data's (below), else 1
     # its holes: the sensor's own, or none / physical / random:RATE / physical+random:RATE
     # (vbgs.sensors.holes.parse_holes), apart from the level
     sensor_holes: str = SENSOR_HOLES_DEFAULT
     # how the training depth was measured, as the learners model it (VBGS:
-    # vbgs.mapping.SensorConfig; the gradient baseline weights its depth L1 by 1/sigma)
-    sensor: str = MEASURED_BY.default
+    # vbgs.mapping.SensorConfig; the gradient baseline weights its depth L1 by 1/sigma);
+    # None: the data's (vbgs.data.sensor_record.data_sensor: a folder's record, the
+    # format's default, else exact), its level too when sensor_level is None
+    sensor: str | None = MEASURED_BY.default
     background: str = "auto"  # auto (from pixels without depth, as frames arrive) | R,G,B
     # a dataset folder's camera and depth PNG scale instead of the folder's or the
     # format's (vbgs.data.calibration): (fx, fy, cx, cy) in pixels of the stored images
@@ -145,6 +148,7 @@ class SceneTask:
             raise ValueError(f"components {self.components!r} is chosen by VBGS as frames "
                              f"arrive (--init stream); {which} takes a number of "
                              f"components: give one")
+        self._resolve_sensor()
         for name in ("frames", "steps_per_frame", "steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
@@ -196,6 +200,24 @@ class SceneTask:
             raise ValueError(f"colour_ridge must be > 0 (pixels' worth of weight on the "
                              f"posterior colour), got {self.colour_ridge!r}")
 
+    def _resolve_sensor(self) -> None:
+        """``sensor`` and ``sensor_level`` left None become the data's (a folder's
+        record, its format's default; a level the record does not give is 1); a
+        simulated sensor on a folder whose record says its training depth already came
+        from one is refused."""
+        data = data_sensor(self.scene, self.format)
+        if self.sensor is None:
+            object.__setattr__(self, "sensor", data.sensor)
+        if self.sensor_level is None:
+            object.__setattr__(self, "sensor_level",
+                               data.level if self.sensor == data.sensor else 1.0)
+        if self.simulate_sensor != "exact" and data.recorded and data.sensor != "exact":
+            raise ValueError(f"scene {self.scene}: its training depth was measured by "
+                             f"{data.sensor!r} already ({data.source}); simulating "
+                             f"{self.simulate_sensor!r} on top of it would corrupt it twice: "
+                             f"drop --simulate-sensor (the folder's sensor is the default "
+                             f"--sensor)")
+
 
 def load_task_scene(task: SceneTask) -> Scene:
     """The scene of a task at the task's size and frame counts, with at most
@@ -233,6 +255,10 @@ def prepare_scene(task) -> tuple[Scene, dict]:
         return scene, {}
     scene, report = simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,
                                             task.seed, task.sensor_holes)
+    if task.simulate_sensor == "exact" and Path(task.scene).is_dir():  # a folder's own depth
+        data = data_sensor(task.scene, task.format)
+        report = {**report, "depth_sensor": data.sensor, "depth_sensor_level": data.level,
+                  **data.measured}  # a record's holes and error: over the frames written
     return learned_surface(scene, report, task.sensor, task.sensor_level)
 
 
@@ -355,7 +381,9 @@ def what_ran(task: SceneTask, scene: Scene) -> dict:
         cam = scene.train[0].camera
         camera = {"intrinsics": [float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)],
                   "image_size": [int(cam.width), int(cam.height)]}
-    return {**ran, **asked, **camera, **scene.record}
+    data = data_sensor(task.scene, task.format)
+    sensor = {"sensor_from": "given" if task.sensor != data.sensor else data.source}
+    return {**ran, **asked, **camera, **scene.record, **sensor}
 
 
 # A share of the training points left unlearned above this is said on stderr.

@@ -77,11 +77,13 @@ SENSOR = Choice(SENSOR_NAMES, "exact",
                 "depth sensor simulated on the training frames (vbgs.sensors): exact, a "
                 "kinect v1, a realsense active stereo or a mono depth network; test and "
                 "validation views keep their exact depth")
-MEASURED_BY = Choice(SENSOR_NAMES, "exact",
+MEASURED_BY = Choice(SENSOR_NAMES, None,
                      "how the training depth was measured, as the learners take it into "
                      "account (VBGS: the noise along each ray, holes that are not "
                      "background; the gradient baseline: its depth L1 weighted by 1/sigma); "
-                     "exact: the depth is the surface's")
+                     "exact: the depth is the surface's. Default: the data's "
+                     "(vbgs.data.sensor_record: a folder's depth_sensor.json, written by "
+                     "write-scene; else TUM kinect; else exact), the JSON's sensor_from")
 POSES = Choice(("given", "track", "odometry"), "given",
                "training poses: given (ground truth), track (each frame registered against "
                "the map from a constant-velocity guess; the first pose given) or odometry "

@@ -42,7 +42,7 @@ from skimage import io as skio
 
 from vbgs.data.calibration import check_depth_scale, provenance
 from vbgs.data.calibration import check_intrinsics as given_intrinsics
-from vbgs.data.depth_png import MILLIMETRES, read_depth_png, write_depth_png
+from vbgs.data.depth_png import MILLIMETRES, fits_depth_png, read_depth_png, write_depth_png
 from vbgs.data.images import read_rgb
 from vbgs.data.scene import (
     Frame,
@@ -261,7 +261,10 @@ def load_blender(
                  calibration)
 
 
-def write_blender(scene: Scene, folder) -> Path:
+DEPTH_FILES = ("png", "npy", "auto")  # write_blender's depth files; auto: png where all fit
+
+
+def write_blender(scene: Scene, folder, progress=None, depth: str = "png") -> Path:
     """Write ``scene`` in the Blender layout that :func:`load_blender` reads; return the folder.
 
     Files: ``train/r_000.png`` (8-bit RGB), ``train/r_000_depth.png`` (16-bit mm,
@@ -269,34 +272,67 @@ def write_blender(scene: Scene, folder) -> Path:
     views), and ``transforms_train.json`` / ``transforms_test.json`` (/
     ``transforms_val.json``) with ``camera_angle_x``, ``fl_x, fl_y, cx, cy, w, h``
     and per-frame ``transform_matrix`` in OpenGL axes. Colour is quantised to
-    1/255 and depth to 1 mm; depth beyond 65.535 scene units is refused.
+    1/255 and depth to 1 mm; depth beyond 65.535 scene units is refused. ``depth="npy"``
+    writes ``r_000_depth.npy`` instead (float32 metres, exact, any range; a PNG of the
+    same name is removed: the loader would prefer it); ``"auto"``: PNGs when every
+    frame's depth fits them, else npy for all. The transforms files are written last,
+    so an interrupted write leaves a folder the loader refuses. ``progress(items,
+    total)`` wraps the loop over the frames (a bar).
     """
     folder = Path(folder)
     splits = [("train", scene.train), ("test", scene.test)] + ([("val", scene.val)]
                                                                if scene.val else [])
-    for split, frames in splits:
-        cams = {(f.camera.fx, f.camera.fy, f.camera.cx, f.camera.cy) + f.rgb.shape[1::-1]
-                for f in frames}  # fmt: skip
-        if len(cams) > 1:
-            raise ValueError(
-                f"write_blender: {split} frames have {len(cams)} different intrinsics or sizes; "
-                f"the Blender layout stores one camera per split (resize the frames first)"
-            )
-        meta: dict = {"frames": []}
-        if frames:
-            fx, fy, cx, cy, w, h = (float(x) for x in cams.pop())
-            meta.update(
-                camera_angle_x=2 * float(np.arctan(0.5 * w / fx)),
-                fl_x=fx, fl_y=fy, cx=cx, cy=cy, w=int(w), h=int(h),
-            )  # fmt: skip
+    metas = {split: _split_meta(split, frames) for split, frames in splits}
+    items = [(split, i, f) for split, frames in splits for i, f in enumerate(frames)]
+    depth = depth_files(scene, depth)
+    for split, i, f in (items if progress is None else progress(items, len(items))):
         (folder / split).mkdir(parents=True, exist_ok=True)
-        for i, f in enumerate(frames):
-            stem = f"{split}/r_{i:03d}"
-            rgb8 = np.round(np.clip(f.rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
-            write_atomic(folder / f"{stem}.png",
-                         lambda tmp, rgb8=rgb8: skio.imsave(tmp, rgb8, check_contrast=False))
+        stem = f"{split}/r_{i:03d}"
+        rgb8 = np.round(np.clip(f.rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+        write_atomic(folder / f"{stem}.png",
+                     lambda tmp, rgb8=rgb8: skio.imsave(tmp, rgb8, check_contrast=False))
+        if depth == "png":
             write_depth_png(folder / f"{stem}_depth.png", f.depth, MILLIMETRES)
-            pose_gl = opengl_to_opencv(f.camera.pose)  # the axis flip is its own inverse
-            meta["frames"].append({"file_path": f"./{stem}", "transform_matrix": pose_gl.tolist()})
+        else:
+            (folder / f"{stem}_depth.png").unlink(missing_ok=True)
+            write_atomic(folder / f"{stem}_depth.npy",
+                         lambda tmp, d=np.asarray(f.depth, np.float32): np.save(tmp, d))
+        pose_gl = opengl_to_opencv(f.camera.pose)  # the axis flip is its own inverse
+        metas[split]["frames"].append({"file_path": f"./{stem}",
+                                       "transform_matrix": pose_gl.tolist()})
+    for split, meta in metas.items():
+        (folder / split).mkdir(parents=True, exist_ok=True)
         write_text_atomic(folder / f"transforms_{split}.json", json.dumps(meta, indent=2))
+    if not scene.val:  # an earlier write's validation split would be read as this scene's
+        (folder / "transforms_val.json").unlink(missing_ok=True)
     return folder
+
+
+def depth_files(scene: Scene, depth: str = "auto") -> str:
+    """``"png"`` or ``"npy"``: the depth files :func:`write_blender` writes for ``depth``
+    (``"auto"``: PNGs when every frame's depth fits 16-bit millimetres)."""
+    if depth not in DEPTH_FILES:
+        raise ValueError(f"depth files {depth!r}: use one of {', '.join(DEPTH_FILES)}")
+    if depth != "auto":
+        return depth
+    frames = [*scene.train, *scene.test, *scene.val]
+    return "png" if all(fits_depth_png(f.depth, MILLIMETRES) for f in frames) else "npy"
+
+
+def _split_meta(split: str, frames: list[Frame]) -> dict:
+    """A split's transforms file without its frames: the one camera of its frames."""
+    cams = {(f.camera.fx, f.camera.fy, f.camera.cx, f.camera.cy) + f.rgb.shape[1::-1]
+            for f in frames}  # fmt: skip
+    if len(cams) > 1:
+        raise ValueError(
+            f"write_blender: {split} frames have {len(cams)} different intrinsics or sizes; "
+            f"the Blender layout stores one camera per split (resize the frames first)"
+        )
+    meta: dict = {"frames": []}
+    if frames:
+        fx, fy, cx, cy, w, h = (float(x) for x in cams.pop())
+        meta.update(
+            camera_angle_x=2 * float(np.arctan(0.5 * w / fx)),
+            fl_x=fx, fl_y=fy, cx=cx, cy=cy, w=int(w), h=int(h),
+        )  # fmt: skip
+    return meta

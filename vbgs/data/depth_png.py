@@ -57,9 +57,7 @@ def write_depth_png(path: str | Path, depth: np.ndarray, scale: float = MILLIMET
     depth = np.asarray(depth, np.float64)
     if depth.ndim != 2:
         raise ValueError(f"depth must be a 2-D array [h, w], got shape {depth.shape}")
-    with np.errstate(invalid="ignore"):
-        valid = np.isfinite(depth) & (depth > 0)
-    code = np.where(valid, np.round(np.where(valid, depth, 0.0) * scale), 0.0)
+    valid, code = _codes(depth, scale)
     if code.max(initial=0.0) > _MAX_CODE:
         raise ValueError(
             f"depth up to {depth[valid].max():.3f} does not fit a 16-bit PNG at scale {scale} "
@@ -67,3 +65,17 @@ def write_depth_png(path: str | Path, depth: np.ndarray, scale: float = MILLIMET
         )
     code16 = code.astype(np.uint16)
     write_atomic(path, lambda tmp: skio.imsave(tmp, code16, check_contrast=False))
+
+
+def _codes(depth: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The valid pixels ``[h, w]`` (finite, > 0) and their codes ``round(depth * scale)``
+    (0 elsewhere), float64, before any range check."""
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(depth) & (depth > 0)
+    return valid, np.where(valid, np.round(np.where(valid, depth, 0.0) * scale), 0.0)
+
+
+def fits_depth_png(depth, scale: float = MILLIMETRES) -> bool:
+    """Whether :func:`write_depth_png` can store ``depth`` at ``scale`` (its largest
+    code within 16 bits)."""
+    return bool(_codes(np.asarray(depth, np.float64), scale)[1].max(initial=0.0) <= _MAX_CODE)

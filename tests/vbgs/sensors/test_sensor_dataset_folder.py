@@ -31,3 +31,21 @@ def test_corrupted_training_depth_round_trips(name, tmp_path):
         exact, read = getattr(scene, split)[0], getattr(back, split)[0]
         np.testing.assert_array_equal(read.depth == 0, exact.depth == 0)
         assert np.abs(read.depth - exact.depth).max() <= HALF_MM
+
+
+def test_depth_beyond_a_16_bit_png_is_written_as_npy(tmp_path):
+    scene = object_scene(size=16, n_train=2, n_test=1, n_val=1)
+    far = scene._replace(train=[scene.train[0]._replace(depth=scene.train[0].depth * 20)]
+                         + scene.train[1:])  # up to ~90 units: beyond 65.535 m in mm
+    with pytest.raises(ValueError, match="does not fit a 16-bit PNG"):
+        write_blender(far, tmp_path / "png")
+    back = load_blender(write_blender(far, tmp_path / "auto", depth="auto"))
+    for written, read in zip(far.train + far.test, back.train + back.test, strict=True):
+        np.testing.assert_array_equal(read.depth, written.depth)  # float32: exact
+    assert not list((tmp_path / "auto").rglob("*_depth.png"))
+    again = write_blender(scene, tmp_path / "auto", depth="auto")  # fits: PNGs
+    assert list((tmp_path / "auto").rglob("*_depth.png"))
+    write_blender(far, again, depth="npy")  # a stale PNG the loader would prefer is removed
+    assert not list((tmp_path / "auto").rglob("*_depth.png"))
+    with pytest.raises(ValueError, match="depth files 'tiff'"):
+        write_blender(scene, tmp_path / "x", depth="tiff")
