@@ -168,6 +168,9 @@ class Stepper:
     ``grows``: the reference will grow (:meth:`grow`); candidates then come from the
     host KD-tree (see the module docstring).
 
+    ``follow``: batches are padded to the power of two that holds them, smaller ones
+    too (:meth:`padded_size`), for streams whose batches shrink as the map learns.
+
     ``reach``: points farther than this from every mean of the assigning model (world
     units) are left out of the update (weight 0). No component
     explains them, and responsibilities, which sum to one whatever the distance, would
