@@ -84,7 +84,7 @@ from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
 from vbgs.components import AUTO_BUCKET
-from vbgs.mapping import saturation
+import vbgs.mapping.saturation as saturation
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
