@@ -22,7 +22,9 @@ What one :func:`update` does with a frame (a :class:`vbgs.data.scene.Frame`: cam
 RGB, z-depth):
 
 1. its valid depth pixels become coloured world points (:func:`vbgs.render.camera.unproject`;
-   at most ``budget.points`` of them, :mod:`vbgs.mapping.budget`), which
+   at most ``budget.points`` of them, :mod:`vbgs.mapping.budget`; under
+   ``budget.saturation`` those of growth cells already learned that often are skipped,
+   :mod:`vbgs.mapping.saturation`), which
    :func:`update_points` learns (2 and 3):
 2. a map started empty (``init`` without a ``prior``) grows components where the batch
    shows ground the map has none for (:func:`vbgs.inference.grow.grow`); the first
