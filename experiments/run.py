@@ -116,7 +116,7 @@ def _add_fit_scene(sub):
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
                         "a random offset (vbgs.mapping.budget; 0: all)")
-    p.add_argument("--budget-saturation", type=int, default=0,
+    p.add_argument("--budget-saturation", type=int, default=0,  # BudgetConfig's default
                    metavar="N", help="VBGS learns at most about N points per cell of its "
                    "map: points of cells learned that often are skipped before any "
                    "expensive work (vbgs.mapping.saturation; 0: no limit)")
