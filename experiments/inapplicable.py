@@ -34,6 +34,9 @@ RULES = {
         ("budget_points", "--budget-points", lambda a: a.method != "gradient",
          "thins the frames VBGS learns (vbgs.mapping.budget); the gradient baseline samples "
          "its own pixels each step"),
+        ("budget_saturation", "--budget-saturation", lambda a: a.method != "gradient",
+         "skips points of cells VBGS has learned often (vbgs.mapping.saturation); the "
+         "gradient baseline samples its own pixels each step"),
         ("opacity", "--opacity", lambda a: a.opacity_rule == "constant",
          "sets the opacity of --opacity-rule constant; under the default rule (evidence) each "
          "splat's opacity comes from the rays that hit or pass it; add --opacity-rule constant"),

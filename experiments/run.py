@@ -118,6 +118,10 @@ def _add_fit_scene(sub):
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
                         "a random offset (vbgs.mapping.budget; 0: all)")
+    p.add_argument("--budget-saturation", type=int, default=0,  # BudgetConfig's default
+                   metavar="N", help="VBGS learns at most about N points per cell of its "
+                   "map: points of cells learned that often are skipped before any "
+                   "expensive work (vbgs.mapping.saturation; 0: no limit)")
     add_choice(p, "--order", ORDER)
     add_choice(p, "--assign", ASSIGN)
     add_choice(p, "--estep", ESTEP)
@@ -279,7 +283,8 @@ def _fit_scene(args) -> dict:
                      opacity_rule=args.opacity_rule, colour_rule=args.colour_rule,
                      simulate_sensor=args.simulate_sensor, sensor_level=args.sensor_level,
                      sensor_holes=args.sensor_holes, sensor=args.sensor, poses=args.poses,
-                     drift=args.drift, budget=BudgetConfig(points=args.budget_points),
+                     drift=args.drift, budget=BudgetConfig(points=args.budget_points,
+                                                               saturation=args.budget_saturation),
                      **_calibration(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views

@@ -82,6 +82,9 @@ class VbgsLearner:
         extra = {}
         if self.state.growing and self.config.estep == "sparse":
             extra["points_unlearned"] = self.state.points_unlearned
+        if self.config.budget.saturation:  # valid points skipped as already explained
+            seen = self.state.n_points + self.state.n_skipped
+            extra["points_skipped"] = self.state.n_skipped / max(seen, 1)
         if self.config.auto and self.state.mixture is not None:  # the K the data chose
             prior = self.state.mixture.prior
             extra.update(components_chosen=int(is_active(prior).sum()),

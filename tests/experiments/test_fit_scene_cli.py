@@ -62,6 +62,18 @@ def test_depth_study_recovers_alignment(tmp_path):
     assert est["psnr"] > rows.loc["sensor", "psnr"] - 4.5
 
 
+def test_fit_scene_skips_points_already_learned(capsys):
+    """``--budget-saturation``: points of cells learned that often are skipped and the
+    JSON says their share."""
+    assert main(["fit-scene", "--scene", "room", "--size", "48x32", "--components", "200",
+                 "--frames", "4", "--test-views", "1", "--budget-saturation", "8",
+                 "--json"]) == 0
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert r["budget"]["saturation"] == 8
+    # measured: 65% of the points skipped, 15.89 dB
+    assert 0.4 < r["points_skipped"] < 0.9 and r["psnr"] > 15.0
+
+
 def test_fit_scene_non_square_frames_with_a_budget(capsys):
     """``--size 48x32`` end to end, the frames thinned to a quarter (``--budget-points``)."""
     assert main(["fit-scene", "--scene", "room", "--size", "48x32", "--components", "200",
@@ -69,7 +81,7 @@ def test_fit_scene_non_square_frames_with_a_budget(capsys):
                  "--json"]) == 0
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert r["size"] == [48, 32]
-    assert r["budget"] == {"points": 400, "weighted": False}
+    assert r["budget"] == {"points": 400, "weighted": False, "saturation": 0}
     # measured 16.57 dB with 140 components drawn (16.81 with the points weighted)
     assert r["psnr"] > 14.0 and 0 < r["components_used"] <= 200
     with pytest.raises(SystemExit) as refused:  # argparse: exit status 2, the reason said

@@ -15,7 +15,7 @@ from experiments.sweep.config import SETTINGS
 RENAMED = {"test_views": "n_test", "val_views": "n_val", "image": "image", "scene": "scene"}
 NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "reassign", "opacity",
                    "splat_scale", "splat_blur", "view", "methods", "anchor",
-                   "budget_points"}  # budget_points: the nested field budget.points
+                   "budget_points", "budget_saturation"}  # the nested budget.points, .saturation
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:

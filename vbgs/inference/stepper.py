@@ -58,6 +58,9 @@ class StepInfo(NamedTuple):
 
 # Headroom left when the padded size grows (see Stepper.padded_size).
 GROWTH = 1.25
+# The smallest padded size of a stepper whose padding follows its batches (a smaller
+# one would only add compilations for batches that cost little either way).
+FOLLOW_MIN = 4096
 
 
 class StepConfig(NamedTuple):
@@ -165,6 +168,9 @@ class Stepper:
     ``grows``: the reference will grow (:meth:`grow`); candidates then come from the
     host KD-tree (see the module docstring).
 
+    ``follow``: batches are padded to the power of two that holds them, smaller ones
+    too (:meth:`padded_size`), for streams whose batches shrink as the map learns.
+
     ``reach``: points farther than this from every mean of the assigning model (world
     units) are left out of the update (weight 0). No component
     explains them, and responsibilities, which sum to one whatever the distance, would
@@ -181,7 +187,7 @@ class Stepper:
                  config: PriorConfig = PriorConfig(), estep: EStep = "dense",
                  n_candidates: int = candidates.DEFAULT_CANDIDATES,
                  max_points: int | None = None, search: Search = "auto",
-                 grows: bool = False, reach: float | None = None):
+                 grows: bool = False, reach: float | None = None, follow: bool = False):
         if assign not in ("prior", "posterior"):
             raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
         if estep not in ("dense", "sparse"):
@@ -217,6 +223,7 @@ class Stepper:
             self.fixed = Fixed(_prior_terms(prior, estep, self.colour_noise),
                                jnp.zeros((), prior.alpha.dtype), lists)
         self.size = model.bucket_size(max_points) if max_points else 0
+        self.follow = bool(follow)
         self._origin = np.asarray(prior.origin)
         if reach is not None and (self.estep != "sparse" or self.spec is not None
                                   or not reach > 0):
@@ -254,7 +261,13 @@ class Stepper:
     def padded_size(self, n: int) -> int:
         """The size batches of ``n`` points are padded to: it only grows, and when it
         does it leaves :data:`GROWTH` headroom, so frames of a stream that vary in size
-        a little share one compiled step."""
+        a little share one compiled step. A stepper built with ``follow=True`` pads to
+        the power of two that holds ``n`` instead (at least :data:`FOLLOW_MIN`): a
+        stream whose batches shrink (points already explained skipped,
+        :mod:`vbgs.mapping.saturation`) pays for the points it has, at one compilation
+        per octave of batch size rather than one per batch."""
+        if self.follow:
+            return max(FOLLOW_MIN, 1 << (max(n, 1) - 1).bit_length())
         if n > self.size:
             self.size = model.bucket_size(int(n * GROWTH))
         return self.size

@@ -29,9 +29,11 @@ on validation views (``results/tuning/budget``: the room at 640 x 480, 100k comp
 weighted. The budget bounds the cost; it cannot go far below a few points per
 component and frame.
 
-Pixels already explained within their noise could be skipped instead; deciding that
-needs each pixel scored against the map (a projection of the components, or the
-E-step itself), i.e. the expensive work this is meant to avoid. With ``points = 0``
+Scoring each pixel against the map to skip those already explained would need a
+projection of the components or the E-step itself, the expensive work this is meant to
+avoid; :mod:`vbgs.mapping.saturation` skips instead the points of growth cells that have
+already taken ``budget.saturation`` points (a count per cell, no component read). With
+``points = 0``
 (the default) every valid pixel is learned, bit for bit as before; frames whose pixel
 count is within the budget are not thinned either.
 """

@@ -200,11 +200,15 @@ class BudgetConfig:
     points: the most points one frame gives (every ``s``-th pixel along each axis from a
         random offset); 0: every valid pixel;
     weighted: each kept point counts ``s^2`` (the statistics an unbiased estimate of the
-        whole frame's) rather than 1 (the default: better on validation views).
+        whole frame's) rather than 1 (the default: better on validation views);
+    saturation: the most points a growing map learns per cell over the stream (points
+        of cells already learned that often are skipped before any expensive work,
+        :mod:`vbgs.mapping.saturation`); 0: no such limit.
     """
 
     points: int = 0
     weighted: bool = BUDGET_WEIGHTED
+    saturation: int = 0
 
     def __post_init__(self):
         if not isinstance(self.points, int) or isinstance(self.points, bool) or self.points < 0:
@@ -212,6 +216,10 @@ class BudgetConfig:
                              f"{self.points!r}")
         if not isinstance(self.weighted, bool):
             raise ValueError(f"budget.weighted must be true or false, got {self.weighted!r}")
+        if (not isinstance(self.saturation, int) or isinstance(self.saturation, bool)
+                or self.saturation < 0):
+            raise ValueError(f"budget.saturation must be an integer >= 0 (0: no limit), got "
+                             f"{self.saturation!r}")
 
 
 def _choice(name: str, value, choices: tuple[str, ...]) -> None:

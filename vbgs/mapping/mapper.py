@@ -22,7 +22,9 @@ What one :func:`update` does with a frame (a :class:`vbgs.data.scene.Frame`: cam
 RGB, z-depth):
 
 1. its valid depth pixels become coloured world points (:func:`vbgs.render.camera.unproject`;
-   at most ``budget.points`` of them, :mod:`vbgs.mapping.budget`), which
+   at most ``budget.points`` of them, :mod:`vbgs.mapping.budget`; under
+   ``budget.saturation`` those of growth cells already learned that often are skipped,
+   :mod:`vbgs.mapping.saturation`), which
    :func:`update_points` learns (2 and 3):
 2. a map started empty (``init`` without a ``prior``) grows components where the batch
    shows ground the map has none for (:func:`vbgs.inference.grow.grow`); the first
@@ -84,6 +86,7 @@ from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
 from vbgs.components import AUTO_BUCKET
+import vbgs.mapping.saturation as saturation
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
@@ -108,6 +111,8 @@ class MapState(NamedTuple):
     growing: bool  # started empty: components are grown as frames arrive
     n_frames: int = 0  # frames learned
     capped: bool = False  # components="auto" reached its most components (merged to go on)
+    seen: saturation.Seen | None = None  # points learned per cell (budget.saturation)
+    n_skipped: int = 0  # valid points skipped as already explained (budget.saturation)
 
     @property
     def points_unlearned(self) -> float:
@@ -177,8 +182,13 @@ def update(state: MapState, frame: Frame, config: Config,
     sensor = config.sensor
     ray = point_rays(frame.camera, depth, sensor.model, sensor.level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
+    state, kept = _unexplained(state, xyz, footprint, config)
+    if kept is not None:
+        xyz, rgb, ray, footprint, weight = (None if a is None else a[kept]
+                                            for a in (xyz, rgb, ray, footprint, weight))
     state, info = update_points(state, xyz, rgb, config, ray=ray, footprint=footprint,
                                 weight=weight)
+    state = _count_seen(state, xyz, footprint, config)
     if config.render.opacity_rule == "evidence":  # against the model that assigned
         geometry = mixture_geometry(state.mixture.prior if config.assign == "prior"
                                     else info.before)
@@ -350,6 +360,38 @@ def _within_budget(state: MapState, frame: Frame, config: Config
     return state._replace(key=key), depth, weight
 
 
+def _unexplained(state: MapState, xyz, footprint, config: Config
+                 ) -> tuple[MapState, np.ndarray | None]:
+    """The frame's points to learn under ``budget.saturation``
+    (:mod:`vbgs.mapping.saturation`: a point of a cell already learned that often is
+    skipped), as a mask ``[n]``, and the state with its key split and the skipped points
+    counted; None (every point) without the limit or before the growth rule is fixed."""
+    cap = config.budget.saturation
+    if cap <= 0 or state.rule is None or state.seen is None:
+        return state, None
+    key, sub = jax.random.split(state.key)
+    keys = _cell_keys(state, xyz, footprint)
+    kept = saturation.keep(state.seen, keys, cap, key=sub)
+    if not kept.any():  # nothing new: one point keeps the step's shapes and counters
+        kept[0] = True
+    return state._replace(key=key, n_skipped=state.n_skipped + int((~kept).sum())), kept
+
+
+def _count_seen(state: MapState, xyz, footprint, config: Config) -> MapState:
+    """The state with the frame's learned points ``xyz [n, 3]`` counted in their cells
+    (``budget.saturation`` only; the table starts with the growth rule)."""
+    if config.budget.saturation <= 0 or state.rule is None:
+        return state
+    seen = state.seen if state.seen is not None else saturation.nothing_seen()
+    return state._replace(seen=saturation.add(seen, _cell_keys(state, xyz, footprint)))
+
+
+def _cell_keys(state: MapState, xyz, footprint) -> np.ndarray:
+    """``[n]`` the growth cells of the points ``xyz`` (their own coarse level)."""
+    return saturation.cell_keys(state.rule, xyz, state.mixture.prior.origin,
+                                grow.point_levels(state.rule, footprint))
+
+
 def _make_room(state: MapState, xyz, ray, levels, config: Config
                ) -> tuple[MapState, np.ndarray]:
     """Free slots by merging (:mod:`vbgs.inference.merge`) when the frame shows more new
@@ -485,7 +527,8 @@ def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapStat
         if state.growing and config.estep == "sparse":
             reach = grow.reach_of(state.rule, config.growth.reach_cells)
         step = Stepper(prior, assign=config.assign, config=config.prior, estep=config.estep,
-                       n_candidates=config.candidates, grows=state.growing, reach=reach)
+                       n_candidates=config.candidates, grows=state.growing, reach=reach,
+                       follow=config.budget.saturation > 0)
     elif len(slots):
         step = state.stepper.grow(prior, slots)
     else:

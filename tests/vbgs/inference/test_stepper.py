@@ -110,6 +110,28 @@ def test_stepper_compiles_once_for_a_stream(scene_points):
     assert stepper._step._cache_size() - before <= 1  # ...and share one compiled step
 
 
+def test_padding_that_follows_the_batch_pays_for_its_points(scene_points):
+    """``follow=True``: a batch is padded to the power of two that holds it (at least
+    FOLLOW_MIN), smaller after a larger one, with the statistics of the padding-that-only-
+    grows stepper."""
+    prior, pts = scene_points
+    grows = stepper.Stepper(prior, estep="sparse", search="kdtree")
+    follows = stepper.Stepper(prior, estep="sparse", search="kdtree", follow=True)
+    assert [follows.padded_size(n) for n in (1, 4096, 4097, 70000, 5000)] == \
+        [4096, 4096, 8192, 131072, 8192]
+    assert grows.padded_size(70000) == model.bucket_size(int(70000 * stepper.GROWTH))
+    assert grows.padded_size(5000) == grows.padded_size(70000)  # it only grows
+    a, b = model.start(prior), model.start(prior)
+    xyz = np.concatenate([pts[0][0], pts[1][0]])
+    rgb = np.concatenate([pts[0][1], pts[1][1]])
+    for x, c in ((xyz, rgb), pts[2]):  # a large batch, then a small one
+        a, _ = grows(a, x, c)
+        b, _ = follows(b, x, c)
+    np.testing.assert_allclose(b.stats.count, a.stats.count, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(b.posterior.space.mean, a.posterior.space.mean, rtol=1e-5,
+                               atol=1e-5)
+
+
 def test_stepper_refuses_unknown_settings(scene_points):
     prior, _ = scene_points
     with pytest.raises(ValueError, match="candidate search"):
