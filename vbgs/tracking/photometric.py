@@ -40,13 +40,17 @@ is 0/0); the step is applied with the true exponential. A step is kept only if i
 lowers the cost (each evaluation renders once with its Jacobian, so a refused step
 costs one render), as the geometric tracker does.
 
-Coarse to fine: the frame is rendered first at ``widths[0]`` px wide (``1/s`` of its
-size, ``s`` a whole factor) (a camera
-with the intrinsics divided by the factor: pixel centres sit at ``index + 0.5``,
-:mod:`vbgs.render.pixels`, so a block of ``s x s`` pixels is one pixel of the camera
-with ``fx / s, fy / s, cx / s, cy / s``), the frame's colours averaged over the same
-blocks (and its depth where the whole block has a reading), then finer. Coarse
-renders are cheap and blur the colour edges, which widens the basin.
+Coarse to fine: each level renders ``widths[i]`` px wide, ``1/s`` of the frame's size
+for a whole factor ``s`` (pixel centres sit at ``index + 0.5``, :mod:`vbgs.render.pixels`,
+so a block of ``s x s`` pixels is one pixel of the camera with ``fx / s, fy / s, cx /
+s, cy / s``), with the pixel filter that the block mean implies (:func:`level_blur`),
+against the frame's colours averaged over the same blocks (and its depth where the
+whole block has a reading). Coarse renders are cheap and blur the colour edges, which
+widens the basin; on a young map built from a sensor's quantised depth they are also
+the more accurate ones (:data:`WIDTHS`).
+
+Search (:func:`search`): the same cost at each of a set of candidate poses, rendered
+``search_width`` px wide without a Jacobian: a start where no motion guess is near.
 
 Uncertainty: ``sqrt(diag(H^-1))`` of the final normal equations (a Laplace
 approximation in units of the noise; pixels are far from independent, so it is
@@ -126,6 +130,7 @@ class PhotoConfig:
     # registration has used the depth already
     depth: bool = False
     search_width: int = SEARCH_WIDTH
+    uncovered: bool = True  # a measured pixel the map leaves uncovered costs rho(c^2)
     tile: int = TILE
     capacity: int = CAPACITY
 
@@ -220,6 +225,7 @@ class _Level(NamedTuple):
     depth: jax.Array
     inv_sigma: jax.Array
     measured: jax.Array  # [h, w] bool: the frame has a surface there (valid depth)
+    uncovered: jax.Array  # [] 1.0: an uncovered measured pixel costs (module docstring)
     background: jax.Array
 
 
@@ -243,7 +249,7 @@ def _residuals(splats, level: _Level, pose, xi, colour_noise, min_alpha, near, *
     rd = jnp.where(covered & (level.inv_sigma > 0), (surface - level.depth) * level.inv_sigma,
                    0.0)
     r = jnp.concatenate([rc.reshape(-1), rd.reshape(-1)])
-    return r, covered, jnp.sum(level.measured & ~covered)
+    return r, covered, jnp.sum(level.measured & ~covered) * level.uncovered
 
 
 def _robust(r, covered, missed, robust):
@@ -332,7 +338,8 @@ def _level(camera: Camera, rgb, depth, depth_sigma, scale: int, background, blur
         d = inv = np.zeros(target.shape[:2])
     level = _Level(jnp.asarray([cam.fx, cam.fy, cam.cx, cam.cy], dtype),
                    jnp.asarray(target, dtype), jnp.asarray(d, dtype), jnp.asarray(inv, dtype),
-                   jnp.asarray(measured), jnp.broadcast_to(jnp.asarray(background, dtype), (3,)))
+                   jnp.asarray(measured), jnp.asarray(float(config.uncovered), dtype),
+                   jnp.broadcast_to(jnp.asarray(background, dtype), (3,)))
     static = dict(width=int(cam.width), height=int(cam.height), tile=int(config.tile),
                   capacity=int(config.capacity), blur=level_blur(blur, scale))
     return level, static
