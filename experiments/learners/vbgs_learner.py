@@ -19,7 +19,10 @@ from vbgs.inference.bound import StreamBound
 from vbgs.inference.grow import is_active
 from vbgs.mapping.measurement import point_rays
 from vbgs.render.splats import Splats
-from vbgs.tracking import register
+from vbgs.render.camera import valid_depth
+from vbgs.sensors import sensor as sensor_model
+from vbgs.tracking import photometric, register
+from vbgs.tracking.photometric import PhotoConfig
 from vbgs.tracking.register import Registration, TrackConfig
 
 
@@ -92,11 +95,33 @@ class VbgsLearner:
                          components_capped=bool(self.state.capped))
         return {**self.bound.summary(), **extra}
 
-    def locate(self, frame: Frame, guess, config: TrackConfig, seed: int = 0) -> Registration:
+    def _photo_inputs(self, frame: Frame, background) -> dict:
+        """The frame's depth, the sensor's sigma_z at each reading (None with exact
+        depth: no depth term), the background and the pixel filter of the renders."""
+        sensor = self.config.sensor
+        depth = np.asarray(frame.depth, np.float64)
+        sigma = None
+        if sensor.noisy:
+            ok = valid_depth(depth)
+            sigma = np.zeros_like(depth)
+            sigma[ok] = sensor_model(sensor.model).sigma_z(depth[ok], frame.camera, sensor.level)
+        return dict(depth=depth, depth_sigma=sigma, blur=self.blur,
+                    background=np.zeros(3) if background is None else background)
+
+    def photo_costs(self, frame: Frame, poses, photo: PhotoConfig, background=None):
+        """The frame's photometric cost at each of ``poses [m, 4, 4]`` against the map
+        (:func:`vbgs.tracking.photometric.search`)."""
+        return photometric.search(self.splats(), frame.camera, frame.rgb, poses, photo,
+                                  **self._photo_inputs(frame, background))
+
+    def locate(self, frame: Frame, guess, config: TrackConfig, seed: int = 0, *,
+               photo: PhotoConfig | None = None, background=None) -> Registration:
         """The frame's pose registered against the map learned so far, from ``guess``
         (:func:`vbgs.tracking.register.register`; the frame's own pose is not read), with
         its colours and the task's sensor noise along the rays when the depth is
-        measured."""
+        measured; with ``photo``, then refined against the map's splats rendered over
+        ``background`` (:func:`vbgs.tracking.photometric.refine`, the measured depth
+        weighted by the sensor's ``1 / sigma_z^2``), whose uncertainty it then reports."""
         state, sensor = self.state, self.config.sensor
         if state.mixture is None:
             raise ValueError("the map has seen no frame yet: give the first pose")
@@ -105,5 +130,11 @@ class VbgsLearner:
             camera = frame.camera._replace(pose=np.eye(4))
             ray = point_rays(camera, frame.depth, sensor.model, sensor.level)
         found = register.target(state.mixture.posterior, state.mixture.prior)
-        return register.register(found, frame.camera, frame.depth, guess, config,
-                                 rgb=frame.rgb, ray=ray, seed=seed)
+        found = register.register(found, frame.camera, frame.depth, guess, config,
+                                  rgb=frame.rgb, ray=ray, seed=seed)
+        if photo is None:
+            return found
+        refined = photometric.refine(self.splats(), frame.camera, frame.rgb, found.pose, photo,
+                                     **self._photo_inputs(frame, background))
+        return found._replace(pose=refined.pose, sigma_t=refined.sigma_t,
+                              sigma_r_deg=refined.sigma_r_deg)

@@ -39,3 +39,22 @@ def test_fit_scene_refuses_what_tracking_cannot_run(capsys):
     for extra, message in cases:
         assert main(["fit-scene", *TINY, *extra]) == 2, extra
         assert message in capsys.readouterr().err, extra
+
+
+def test_fit_scene_tracks_photometrically(monkeypatch, capsys):
+    # the photometric refinement is off by default (experiments.tracking.PHOTOMETRIC);
+    # on, a tiny walk under a Kinect (depth on the near road only: every frame refined,
+    # the second from the search) runs end to end
+    import experiments.tracking as tracking
+
+    monkeypatch.setattr(tracking, "PHOTOMETRIC", True)
+    calls = []
+    monkeypatch.setattr(tracking.TrackedLearner, "search",
+                        lambda self, *a, _s=tracking.TrackedLearner.search: calls.append(1)
+                        or _s(self, *a))
+    walk = ["--scene", "walk", "--components", "600", "--frames", "6", "--test-views", "2",
+            "--size", "32", "--simulate-sensor", "kinect", "--sensor", "kinect"]
+    assert main(["fit-scene", *walk, "--poses", "track", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert np.isfinite(r["ate_rmse"]) and np.isfinite(r["psnr"]) and calls == [1]
+    assert len(r["pose_sigmas"]) == 5 and np.all(np.isfinite(r["pose_sigmas"]))
