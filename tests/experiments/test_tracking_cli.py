@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from experiments.run import main
 
@@ -41,6 +42,7 @@ def test_fit_scene_refuses_what_tracking_cannot_run(capsys):
         assert message in capsys.readouterr().err, extra
 
 
+@pytest.mark.slow  # the refinement is off by default (experiments.tracking.PHOTOMETRIC)
 def test_fit_scene_tracks_photometrically(monkeypatch, capsys):
     # the photometric refinement is off by default (experiments.tracking.PHOTOMETRIC);
     # on, a tiny walk under a Kinect (depth on the near road only: every frame refined,
