@@ -18,7 +18,7 @@ from vbgs.inference import grow
 from vbgs.components import AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, parse_components
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
-from vbgs.mapping import holes
+from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
@@ -85,8 +85,8 @@ class GrowthConfig:
     auto_merge_every: int = AUTO_MERGE_EVERY
     refine_gain: float = AUTO_REFINE_GAIN
     refine_footprints: float = grow.REFINE_FOOTPRINTS
-    hole_radius: int = holes.HOLE_RADIUS
-    hole_colour_tol: float = holes.HOLE_COLOUR_TOL
+    hole_radius: int = HOLE_RADIUS
+    hole_colour_tol: float = HOLE_COLOUR_TOL
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)

@@ -21,7 +21,8 @@ none). It is kept only on the far side of an edge or inside a surface: a filled 
 within ``radius + 1`` pixels of an empty pixel, or of a surface farther than it by more
 than :data:`EDGE_FOOTPRINTS` pixel footprints, is the near side (a rim), which other views
 see head-on; filled there, a rounded rim's depth is far off and draws a fringe around
-the silhouettes (object 128 px, validation: 22.81 dB with rims filled, 23.98 without).
+the silhouettes (object 128 px / 20k / 60 frames, Kinect, validation, radius 1 and
+tol 0.3: 22.81 dB with rims filled, 23.98 without; 23.66 with no fill).
 The filled pixels become points like the others; the opacity evidence still reads the
 measured depth (a hole proves nothing about what a ray passed through,
 :mod:`vbgs.render.opacity`).
