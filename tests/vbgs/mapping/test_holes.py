@@ -37,28 +37,32 @@ def test_the_far_side_of_an_edge_is_filled_with_its_plane_and_the_rim_is_not():
     outer = ndimage.binary_dilation(box) & ~box  # the plane just behind the edge (far side)
     holed = depth.copy()
     holed[(box & ~inner) | outer] = 0.0
-    holed[25, 5] = 0.0  # a random hole inside the plane
+    holed[25, 5] = 0.0  # a random hole inside the plane: other views see that ground
     empty = np.zeros(depth.shape, bool)
     filled = fill_holes(holed, rgb, empty, FOCAL)
-    np.testing.assert_allclose(filled[outer], plane[outer], rtol=1e-4)  # a plane continued
-    assert filled[25, 5] == pytest.approx(plane[25, 5], rel=1e-4)
+    got = filled[outer] > 0  # all but the ring's ends, beyond reach of the measured box
+    assert got.mean() >= 0.8  # 32 of the 40
+    np.testing.assert_allclose(filled[outer][got], plane[outer][got], rtol=1e-4)  # continued
+    assert filled[25, 5] == 0
     assert np.all(filled[box & ~inner] == 0)  # the box's rim: other views see it head-on
     assert np.array_equal(filled[holed > 0], holed[holed > 0])  # measured pixels unchanged
-    # a hole beside an empty pixel is a rim too; radius 0 changes nothing
-    empty[25, 6] = True
-    assert fill_holes(holed, rgb, empty, FOCAL)[25, 5] == 0
     assert fill_holes(holed, rgb, empty, FOCAL, radius=0) is holed
+    # beside an empty pixel the far side is a rim too
+    near_empty = empty.copy()
+    near_empty[9, 15] = True
+    assert fill_holes(holed, rgb, near_empty, FOCAL)[9, 14] == 0
+    assert fill_holes(holed, rgb, empty, FOCAL)[9, 14] > 0
     # a neighbour of another colour is another surface
     other = rgb.copy()
-    other[25, 5] = [0.9, 0.9, 0.1]
-    assert fill_holes(holed, other, np.zeros_like(empty), FOCAL)[25, 5] == 0
+    other[9, 14] = [0.9, 0.9, 0.1]
+    assert fill_holes(holed, other, empty, FOCAL)[9, 14] == 0
 
 
 def test_a_kinects_physical_holes_are_filled_on_the_surface_behind_them():
     """Six object frames at 64 px with a Kinect's physical holes (level 0: exact values):
-    about 15% of the holes are filled (the far sides of edges whose colour matches; 283
-    of 1872 measured), none on the background, 94% within a pixel footprint of the true
-    depth (median error below 1 mm)."""
+    about 12% of the holes are filled (the far sides of edges whose colour matches; 218
+    of 1872 measured), none on the background, 95% within a pixel footprint of the true
+    depth (median error below 1 mm). Without the fill none is."""
     scene = load_scene("object", size=64, n_train=6, n_test=1, seed=0)
     spec = sensors.HoleSpec(physical=True, dropout=0.0)
     n_holes, errors, feet, on_background = 0, [], [], 0
