@@ -43,9 +43,9 @@ RGB, z-depth):
    a measured depth (``Config.sensor``) the hit band widens by the sensor's noise and a
    missing pixel is a pass only where it shows nothing
    (:func:`vbgs.render.background.empty_pixels`: away from the surfaces, or along them
-   where it has the ``background``'s colour), never in a hole of a surface; such a
-   hole on the far side of a depth edge or inside a surface became points of the depth
-   of the surface it continues before step 1 (:mod:`vbgs.mapping.holes`);
+   where it has the ``background``'s colour), never in a hole of a surface; a hole on
+   the far side of a depth edge became points at the depth of the surface it continues
+   before step 1 (:mod:`vbgs.mapping.holes`);
 5. under ``render.colour_rule == "fit"`` the frame's colour least-squares terms are
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
