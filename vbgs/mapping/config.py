@@ -18,6 +18,7 @@ from vbgs.inference import grow
 from vbgs.components import AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, parse_components
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
+from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
@@ -64,7 +65,11 @@ class GrowthConfig:
     refine_gain, refine_footprints: ``components="auto"`` only: a point seeds a finer
         component when its component explains its colour worse by more than this many
         nats, in cells no finer than this many pixel footprints
-        (:func:`vbgs.inference.grow.refinement_levels`; gain 0: no refinement).
+        (:func:`vbgs.inference.grow.refinement_levels`; gain 0: no refinement);
+    hole_radius, hole_colour_tol: measured depth only (``sensor`` not exact): a hole behind
+        a depth edge or inside a surface takes the depth extrapolated from the nearest
+        pixel within ``hole_radius`` px whose colour differs by at most ``hole_colour_tol``
+        per channel (:mod:`vbgs.mapping.holes`; radius 0: holes stay holes).
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -80,9 +85,15 @@ class GrowthConfig:
     auto_merge_every: int = AUTO_MERGE_EVERY
     refine_gain: float = AUTO_REFINE_GAIN
     refine_footprints: float = grow.REFINE_FOOTPRINTS
+    hole_radius: int = HOLE_RADIUS
+    hole_colour_tol: float = HOLE_COLOUR_TOL
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
+        if not isinstance(self.hole_radius, int) or self.hole_radius < 0:
+            raise ValueError(f"growth.hole_radius must be an integer >= 0 (pixels; 0: holes "
+                             f"stay holes), got {self.hole_radius!r}")
+        _positive("growth", "hole_colour_tol", self.hole_colour_tol)
         if not (isinstance(self.auto_points, (int, float)) and math.isfinite(self.auto_points)
                 and self.auto_points >= 1):
             raise ValueError(f"growth.auto_points must be a number >= 1 (a level-0 cell holds "

@@ -45,7 +45,9 @@ RGB, z-depth):
    a measured depth (``Config.sensor``) the hit band widens by the sensor's noise and a
    missing pixel is a pass only where it shows nothing
    (:func:`vbgs.render.background.empty_pixels`: away from the surfaces, or along them
-   where it has the ``background``'s colour), never in a hole of a surface;
+   where it has the ``background``'s colour), never in a hole of a surface; a hole on
+   the far side of a depth edge became points at the depth of the surface it continues
+   before step 1 (:mod:`vbgs.mapping.holes`);
 5. under ``render.colour_rule == "fit"`` the frame's colour least-squares terms are
    added against the splats of the posterior that has just learned it
    (:mod:`vbgs.render.colour_fit`).
@@ -89,6 +91,7 @@ from vbgs.components import AUTO_BUCKET
 import vbgs.mapping.saturation as saturation
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
+from vbgs.mapping.holes import fill_holes
 from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
@@ -175,11 +178,18 @@ def update(state: MapState, frame: Frame, config: Config,
     without a splat show; the colour fit reads it, and with a measured depth the opacity
     evidence (a depth-less pixel of its colour beside a silhouette shows it; pixels
     without depth are not points)."""
-    state, depth, weight = _within_budget(state, frame, config)
+    sensor = config.sensor
+    measured, empty = frame, None
+    if not sensor.exact:  # holes in surfaces are neither background nor free space
+        empty = empty_pixels(frame.depth, holes=True, rgb=frame.rgb, background=background)
+        g, cam = config.growth, frame.camera
+        measured = frame._replace(depth=fill_holes(
+            frame.depth, frame.rgb, empty, 0.5 * (float(cam.fx) + float(cam.fy)),
+            g.hole_radius, g.hole_colour_tol))
+    state, depth, weight = _within_budget(state, measured, config)
     xyz, rgb = unproject(frame.camera, frame.rgb, depth)
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
-    sensor = config.sensor
     ray = point_rays(frame.camera, depth, sensor.model, sensor.level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
     state, kept = _unexplained(state, xyz, footprint, config)
@@ -197,8 +207,7 @@ def update(state: MapState, frame: Frame, config: Config,
         evidence = opacity.observe(state.evidence, *geometry, frame.camera, frame.depth,
                                    pass_sigmas=config.evidence.pass_sigmas,
                                    sensor_var=variance,
-                                   empty=empty_pixels(frame.depth, holes=not sensor.exact,
-                                                      rgb=frame.rgb, background=background))
+                                   empty=empty)
         state = state._replace(evidence=evidence)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
