@@ -97,6 +97,9 @@ import numpy as np
 from vbgs.render.camera import Camera, valid_depth
 from vbgs.render.raster import BLUR_VARIANCE, NEAR, _rasterize
 from vbgs.render.splats import Splats, check_splats
+# the initial Levenberg-Marquardt damping (relative to the Hessian's diagonal) and its
+# factors on a refused / kept step: the geometric tracker's
+from vbgs.tracking.register import DAMP_DOWN, DAMP_UP, DAMPING
 from vbgs.tracking.se3 import from_rt, hat, orthonormalise, se3_exp
 
 # The levels' widths (px), coarse to fine (each level renders at the frame's width over
@@ -120,9 +123,6 @@ COLOUR_NOISE = 0.05
 ROBUST = 3.0
 # A pixel counts where the splats cover it this much (the rasterizer's SURFACE_ALPHA).
 MIN_ALPHA = 0.5
-# Initial damping (relative to the Hessian's diagonal) and its factors on a refused /
-# kept step (as the geometric tracker's).
-DAMPING, DAMP_UP, DAMP_DOWN = 1e-4, 10.0, 0.3
 # Tile side and splats kept per tile (nearest first): small tiles keep each tile's list
 # short at the coarse level, where one tile spans a large part of the view; overlaps
 # beyond the capacity (the farthest, mostly hidden) are left out of the tracking render.
