@@ -12,7 +12,10 @@ them again (or load them from the persistent compilation cache).
 The suite never writes into a user's caches (``~/.cache/vbgs``: compiled executables,
 resized photos): unless ``VBGS_CACHE_DIR`` or ``VBGS_COMPILE_CACHE`` is set, the session
 points ``VBGS_CACHE_DIR`` at a temporary folder, which the commands the tests start in
-subprocesses inherit, and removes it at the end.
+subprocesses inherit, and removes it at the end. Under pytest-xdist (``-n 2``, the
+default options in pyproject.toml) the controlling process makes the folder before it
+starts the workers, which inherit it: the workers share one persistent compilation
+cache, and each checks its own mappings.
 """
 
 from __future__ import annotations

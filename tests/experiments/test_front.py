@@ -70,13 +70,29 @@ def test_image_front_times_warm_fits(tmp_path):
     assert (table.compile_seconds >= 0).all() and (out / "astronaut.png").exists()
 
 
-def test_an_image_checkpoint_is_the_fit_of_its_length():
+class TickClock:
+    """A clock that moves one second at each reading: a checkpoint's bookkeeping (its
+    training counted, earlier checkpoints' scoring left out) without wall-clock noise (the
+    real clock failed this test once, a 30-step checkpoint's render stretched by 50 ms on
+    a loaded machine)."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+def test_an_image_checkpoint_is_the_fit_of_its_length(monkeypatch):
     """The image front scores one gradient fit at several step counts (per-step schedule;
     candidate refreshes every REFRESH_EVERY steps from the start)."""
+    from experiments import image_task
     from experiments.image_task import ImageTask, gradient_image_path, run_gradient_image
 
     task = ImageTask(image="astronaut", size=16, components=20, method="gradient", steps=40)
     alone = run_gradient_image(task, steps=30)  # compiles (a checkpoint's render is timed)
+    monkeypatch.setattr(image_task, "time", TickClock())
     path = {r["steps"]: r for r in gradient_image_path(task, (30, 40))}
     np.testing.assert_array_equal(path[30]["images"]["render"], alone["images"]["render"])
     assert path[30]["loss"] == alone["loss"] and len(path[40]["loss"]) == 40

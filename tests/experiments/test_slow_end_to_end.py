@@ -37,23 +37,23 @@ def test_quick_sweep_end_to_end(tmp_path):
         assert len(rows), (task, method, init, where)
         return rows["psnr"]
 
-    # committed minima (results/quick/cells.csv, 248 cells, evidence.pass_sigmas 4): image
-    # VBGS batch (data) 23.28 dB, 31.74 at 2000 components; scene VBGS stream on the object
-    # 19.78, the room 19.00, the walk 19.52 (an open path; the oracle data start 20.56);
-    # every oracle data start 16.64; scene gradient (stream start) 18.66; image gradient:
-    # astronaut seed 0 gives 38.09 dB in today's environment (50.16 before, old code too),
-    # so its floor is on the median of the four cells (51.54). The tables mark oracle
-    # starts in the init column ("data (oracle)"): a stream that read frames before they
-    # arrived. Floors about 1 dB under each.
-    assert psnr("image", "vbgs", "data", stream="none", components=2000).min() > 30.9
-    assert psnr("image", "vbgs", "data", stream="none").min() > 22.4
+    # committed minima (results/quick/cells.csv, 248 cells, made again in 3df98af with the
+    # image batch and 2-D gradient cells at 128 px, 775c235; this run gave the image cells
+    # bit-identical): image VBGS batch (data) 20.57 dB, 26.21 at 2000 components; scene
+    # VBGS stream on the object 19.78, the room 19.00, the walk 19.52 (an open path; the
+    # oracle data start 20.56); every oracle data start 16.64; scene gradient (stream start)
+    # 18.77; image gradient: the median of the four cells 34.52 (32.66 to 36.94). The
+    # tables mark oracle starts in the init column ("data (oracle)"): a stream that read
+    # frames before they arrived. Floors about 1 dB under each.
+    assert psnr("image", "vbgs", "data", stream="none", components=2000).min() > 25.2
+    assert psnr("image", "vbgs", "data", stream="none").min() > 19.6
     assert psnr("scene", "vbgs", "stream", dataset="object").min() > 18.9
     assert psnr("scene", "vbgs", "stream", dataset="room").min() > 18.1
     assert psnr("scene", "vbgs", "stream", dataset="walk").min() > 18.6
     assert psnr("scene", "vbgs", "data (oracle)", dataset="walk").min() > 19.6
     assert psnr("scene", "vbgs", "data (oracle)").min() > 15.7
     assert psnr("scene", "gradient", "stream").min() > 17.7
-    assert psnr("image", "gradient", "data").median() > 50.6
+    assert psnr("image", "gradient", "data").median() > 33.5
     tables = (out / "tables.md").read_text()
     assert "## scene task" in tables and "## image task" in tables
     for name in ("forgetting.png", "psnr_vs_components.png", "renders.png"):
