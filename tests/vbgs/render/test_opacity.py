@@ -96,3 +96,19 @@ def test_the_sensor_noise_widens_the_hit_band():
                             sensor_var=np.full(4, 0.05**2))
     assert np.asarray(exact.hits)[0] == 0 and np.asarray(exact.passes)[0] > 0
     assert np.asarray(noisy.hits)[0] > 0 and np.asarray(noisy.passes)[0] == 0
+
+
+def test_an_indefinite_covariance_gets_no_evidence_and_spoils_no_other():
+    """A float32 posterior covariance can come out indefinite (posterior assignment left
+    one so on the room); its projection is no ellipse, and its area was inf or NaN."""
+    cam, depth, means, covs = toy()
+    clean = opacity.observe(opacity.no_evidence(4), means, covs, cam, depth)
+    bad = covs.copy()
+    bad[1] = np.diag([-0.05, 0.02**2, 0.02**2])  # one negative eigenvalue
+    ev = opacity.observe(opacity.no_evidence(4), means, bad, cam, depth)
+    hits, passes = np.asarray(ev.hits), np.asarray(ev.passes)
+    assert np.isfinite(hits).all() and np.isfinite(passes).all()
+    assert hits[1] == 0 and passes[1] == 0
+    keep = [0, 2, 3]
+    np.testing.assert_array_equal(hits[keep], np.asarray(clean.hits)[keep])
+    np.testing.assert_array_equal(passes[keep], np.asarray(clean.passes)[keep])
