@@ -192,13 +192,13 @@ def update(state: MapState, frame: Frame, config: Config,
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
     ray = point_rays(frame.camera, depth, sensor.model, sensor.level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
-    state, kept = _unexplained(state, xyz, footprint, config)
+    state, kept, keys = _unexplained(state, xyz, footprint, config)
     if kept is not None:
-        xyz, rgb, ray, footprint, weight = (None if a is None else a[kept]
-                                            for a in (xyz, rgb, ray, footprint, weight))
+        xyz, rgb, ray, footprint, weight, keys = (
+            None if a is None else a[kept] for a in (xyz, rgb, ray, footprint, weight, keys))
     state, info = update_points(state, xyz, rgb, config, ray=ray, footprint=footprint,
                                 weight=weight)
-    state = _count_seen(state, xyz, footprint, config)
+    state = _count_seen(state, xyz, footprint, config, keys)
     if config.render.opacity_rule == "evidence":  # against the model that assigned
         geometry = mixture_geometry(state.mixture.prior if config.assign == "prior"
                                     else info.before)
@@ -370,29 +370,33 @@ def _within_budget(state: MapState, frame: Frame, config: Config
 
 
 def _unexplained(state: MapState, xyz, footprint, config: Config
-                 ) -> tuple[MapState, np.ndarray | None]:
+                 ) -> tuple[MapState, np.ndarray | None, np.ndarray | None]:
     """The frame's points to learn under ``budget.saturation``
     (:mod:`vbgs.mapping.saturation`: a point of a cell already learned that often is
-    skipped), as a mask ``[n]``, and the state with its key split and the skipped points
-    counted; None (every point) without the limit or before the growth rule is fixed."""
+    skipped), as a mask ``[n]``, the cells of the points ``[n]`` and the state with its
+    key split and the skipped points counted; None, None (every point) without the limit
+    or before the growth rule is fixed."""
     cap = config.budget.saturation
     if cap <= 0 or state.rule is None or state.seen is None:
-        return state, None
+        return state, None, None
     key, sub = jax.random.split(state.key)
     keys = _cell_keys(state, xyz, footprint)
     kept = saturation.keep(state.seen, keys, cap, key=sub)
     if not kept.any():  # nothing new: one point keeps the step's shapes and counters
         kept[0] = True
-    return state._replace(key=key, n_skipped=state.n_skipped + int((~kept).sum())), kept
+    return state._replace(key=key, n_skipped=state.n_skipped + int((~kept).sum())), kept, keys
 
 
-def _count_seen(state: MapState, xyz, footprint, config: Config) -> MapState:
+def _count_seen(state: MapState, xyz, footprint, config: Config, keys=None) -> MapState:
     """The state with the frame's learned points ``xyz [n, 3]`` counted in their cells
-    (``budget.saturation`` only; the table starts with the growth rule)."""
+    (``budget.saturation`` only; the table starts with the growth rule). ``keys [n]``:
+    their cells when :func:`_unexplained` found them (the rule and origin are fixed by
+    then); None: found here (the first frame, which fixes them)."""
     if config.budget.saturation <= 0 or state.rule is None:
         return state
     seen = state.seen if state.seen is not None else saturation.nothing_seen()
-    return state._replace(seen=saturation.add(seen, _cell_keys(state, xyz, footprint)))
+    keys = _cell_keys(state, xyz, footprint) if keys is None else keys
+    return state._replace(seen=saturation.add(seen, keys))
 
 
 def _cell_keys(state: MapState, xyz, footprint) -> np.ndarray:
