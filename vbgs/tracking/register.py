@@ -57,7 +57,7 @@ import numpy as np
 
 from vbgs.inference import candidates as cands
 from vbgs.inference import model
-from vbgs.render.camera import Camera, depth_points, valid_depth
+from vbgs.render.camera import Camera, depth_points, rigid, valid_depth
 from vbgs.tracking.se3 import from_rt, orthonormalise, se3_exp
 
 # Points per level, coarse to fine (fixed: one compiled solver per count, whatever the
@@ -347,7 +347,7 @@ def register(map_target: MapTarget, camera: Camera, depth: np.ndarray, guess,
         u = np.zeros_like(p) if ray is None else np.asarray(ray, np.float32)[idx]
         c = jnp.asarray(colours[idx])
         for _ in range(int(passes)):
-            world = p.astype(np.float64) @ pose[:3, :3].T + pose[:3, 3]
+            world = rigid(p.astype(np.float64), pose)
             cand = map_target.used[cands.query(map_target.tree, world, k)]
             out, cost, h, w_used = _solve(
                 jnp.asarray(pose, dtype), jnp.asarray(p), jnp.asarray(u), c, jnp.asarray(w),
