@@ -17,10 +17,8 @@ from vbgs import mapping
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference.bound import StreamBound
 from vbgs.inference.grow import is_active
-from vbgs.mapping.measurement import point_rays
+from vbgs.mapping.measurement import depth_sigmas, point_rays
 from vbgs.render.splats import Splats
-from vbgs.render.camera import valid_depth
-from vbgs.sensors import sensor as sensor_model
 from vbgs.tracking import photometric, register
 from vbgs.tracking.photometric import PhotoConfig
 from vbgs.tracking.register import Registration, TrackConfig
@@ -95,16 +93,14 @@ class VbgsLearner:
                          components_capped=bool(self.state.capped))
         return {**self.bound.summary(), **extra}
 
-    def _photo_inputs(self, frame: Frame, background) -> dict:
+    def _photo_inputs(self, frame: Frame, background, photo: PhotoConfig) -> dict:
         """The frame's depth, the sensor's sigma_z at each reading (None with exact
-        depth: no depth term), the background and the pixel filter of the renders."""
+        depth, or when ``photo`` has no depth term), the background and the pixel filter
+        of the renders."""
         sensor = self.config.sensor
         depth = np.asarray(frame.depth, np.float64)
-        sigma = None
-        if sensor.noisy:
-            ok = valid_depth(depth)
-            sigma = np.zeros_like(depth)
-            sigma[ok] = sensor_model(sensor.model).sigma_z(depth[ok], frame.camera, sensor.level)
+        sigma = (depth_sigmas(depth, frame.camera, sensor.model, sensor.level)
+                 if sensor.noisy and photo.depth else None)
         return dict(depth=depth, depth_sigma=sigma, blur=self.blur,
                     background=np.zeros(3) if background is None else background)
 
@@ -112,7 +108,7 @@ class VbgsLearner:
         """The frame's photometric cost at each of ``poses [m, 4, 4]`` against the map
         (:func:`vbgs.tracking.photometric.search`)."""
         return photometric.search(self.splats(), frame.camera, frame.rgb, poses, photo,
-                                  **self._photo_inputs(frame, background))
+                                  **self._photo_inputs(frame, background, photo))
 
     def locate(self, frame: Frame, guess, config: TrackConfig, seed: int = 0, *,
                photo: PhotoConfig | None = None, background=None) -> Registration:
@@ -135,6 +131,6 @@ class VbgsLearner:
         if photo is None:
             return found
         refined = photometric.refine(self.splats(), frame.camera, frame.rgb, found.pose, photo,
-                                     **self._photo_inputs(frame, background))
+                                     **self._photo_inputs(frame, background, photo))
         return found._replace(pose=refined.pose, sigma_t=refined.sigma_t,
                               sigma_r_deg=refined.sigma_r_deg)

@@ -68,19 +68,29 @@ def depth_variance(means, camera: Camera, model: str, level: float = 1.0) -> np.
     return np.where(z > 0, sigma**2, 0.0).astype(np.float32)
 
 
+def depth_sigmas(depth: np.ndarray, camera: Camera, model: str, level: float = 1.0
+                 ) -> np.ndarray:
+    """``[h, w]`` float64: the sensor's ``sigma_z`` of each depth reading, 0 where the
+    pixel has no depth."""
+    depth = np.asarray(depth)
+    mask = valid_depth(depth)
+    out = np.zeros(depth.shape, np.float64)
+    if mask.any():
+        out[mask] = sensor(model).sigma_z(depth[mask].astype(np.float64), camera, level)
+    return out
+
+
 def depth_weights(depth: np.ndarray, camera: Camera, model: str, level: float = 1.0
                   ) -> np.ndarray:
     """``[h, w]`` weights of a depth L1 term (the gradient baseline's,
     :mod:`vbgs.baseline.loss`): ``s_ref / sigma_z(d)`` at pixels with depth, ``s_ref``
     the median of ``sigma_z`` over them (so the weights average about 1 and the term
     keeps its scale); 1 elsewhere (those pixels take no part anyway)."""
-    depth = np.asarray(depth)
-    mask = valid_depth(depth)
-    out = np.ones(depth.shape, np.float32)
+    mask = valid_depth(np.asarray(depth))
+    out = np.ones(mask.shape, np.float32)
     if not mask.any():
         return out
-    sigma = np.asarray(sensor(model).sigma_z(depth[mask].astype(np.float64), camera, level),
-                       np.float64)
+    sigma = depth_sigmas(depth, camera, model, level)[mask]
     if not (sigma > 0).all():
         return out  # an exact sensor (or level 0): every reading counts the same
     out[mask] = np.median(sigma) / sigma
