@@ -22,10 +22,13 @@ TF32 cannot round anything. Block shapes are static powers of two (the tile must
 a power of two; the slot axis is padded to one), so the kernel lowers to Triton on
 a GPU; elsewhere it runs with ``interpret=True`` (slow, for tests).
 
-Gradients. :func:`composite_tiles_pallas` is a ``jax.custom_vjp`` whose backward
-pass is the VJP of the XLA path (:func:`vbgs.render.composite.composite_tiles`) at the same
-inputs: it recomputes the XLA forward to differentiate it, so the gradients are the
-XLA path's exactly, and a backward pass costs what it costs there.
+Gradients. :func:`composite_tiles_pallas` is a ``jax.custom_jvp`` whose tangent is the
+XLA path's (:func:`vbgs.render.composite.composite_tiles`) at the same inputs; reverse
+mode transposes it, so the gradients are the XLA path's and a backward pass costs what
+it costs there (the XLA forward's intermediates are computed beside the kernel's
+output). Forward mode works too (``jax.jacfwd``, as the colour fit's tests use). The
+kernel computes in float32; other dtypes (float64 under ``jax.enable_x64``) take the
+XLA path.
 """
 
 from __future__ import annotations
@@ -105,28 +108,25 @@ def _pallas_forward(tiles: TileSplats, n_tiles_x: int, tile: int, interpret: boo
     return log_t, jnp.stack([red, green, blue], -1), dep
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(1, 2, 3))
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2, 3))
 def _composite(tiles: TileSplats, n_tiles_x: int, tile: int, interpret: bool):
     return _pallas_forward(tiles, n_tiles_x, tile, interpret)
 
 
-def _composite_fwd(tiles, n_tiles_x, tile, interpret):
-    return _pallas_forward(tiles, n_tiles_x, tile, interpret), tiles
-
-
-def _composite_bwd(n_tiles_x, tile, interpret, tiles, cotangent):
-    """VJP of the XLA path at the same inputs (the integer counts get no cotangent)."""
-    del interpret
+@_composite.defjvp
+def _composite_jvp(n_tiles_x, tile, interpret, primals, tangents):
+    """The kernel's output and the XLA path's tangent at the same inputs (the integer
+    counts carry none). Linear in the tangents, so reverse mode transposes it: the
+    gradients are the XLA path's, and forward mode (``jax.jvp``, ``jax.jacfwd``) works
+    too, which a custom VJP would refuse."""
+    (tiles,), (d_tiles,) = primals, tangents
 
     def xla(uv, conic, opacity, colour, depth):
         return composite_tiles(TileSplats(uv, conic, opacity, colour, depth, tiles.count),
                                n_tiles_x=n_tiles_x, tile=tile)
 
-    _, vjp = jax.vjp(xla, *tiles[:5])
-    return (TileSplats(*vjp(cotangent), None),)
-
-
-_composite.defvjp(_composite_fwd, _composite_bwd)
+    _, out_dot = jax.jvp(xla, tuple(tiles[:5]), tuple(d_tiles[:5]))
+    return _pallas_forward(tiles, n_tiles_x, tile, interpret), out_dot
 
 
 def composite_tiles_pallas(tiles: TileSplats, *, n_tiles_x: int, tile: int,
@@ -134,7 +134,10 @@ def composite_tiles_pallas(tiles: TileSplats, *, n_tiles_x: int, tile: int,
     """Front-to-back compositing of every tile by the Pallas kernel: ``(log T [t, p],
     C [t, p, 3], D [t, p])``, p = tile², as :func:`vbgs.render.composite.composite_tiles` returns.
     ``tile`` must be a power of two; ``interpret=True`` runs the kernel without a GPU.
-    Differentiable through a custom VJP: the XLA path's VJP at the same inputs."""
+    Differentiable in both modes through a custom JVP: the XLA path's tangent at the same
+    inputs. Inputs other than float32 take the XLA path."""
     if tile <= 0 or tile & (tile - 1):
         raise ValueError(f"the Pallas rasterizer needs a power-of-two tile, got {tile}")
+    if tiles.uv.dtype != jnp.float32:  # the kernel computes in float32: float64 (x64
+        return composite_tiles(tiles, n_tiles_x=n_tiles_x, tile=tile)  # tests) stays exact
     return _composite(tiles, n_tiles_x, tile, interpret)

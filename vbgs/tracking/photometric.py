@@ -100,7 +100,7 @@ from vbgs.render.splats import Splats, check_splats
 # the initial Levenberg-Marquardt damping (relative to the Hessian's diagonal) and its
 # factors on a refused / kept step: the geometric tracker's
 from vbgs.tracking.register import DAMP_DOWN, DAMP_UP, DAMPING
-from vbgs.tracking.se3 import from_rt, hat, orthonormalise, se3_exp
+from vbgs.tracking.se3 import compose, from_rt, hat, orthonormalise, se3_exp
 
 # The levels' widths (px), coarse to fine (each level renders at the frame's width over
 # the nearest whole factor, at least 1), and the Levenberg-Marquardt evaluations at
@@ -256,7 +256,7 @@ def _residuals(splats, level: _Level, pose, xi, colour_noise, min_alpha, near, *
     # the exponential's first order (module docstring): only evaluated at xi = 0
     bump = jnp.eye(4, dtype=pose.dtype) + jnp.zeros((4, 4), pose.dtype).at[:3, :3].set(
         hat(xi[3:])).at[:3, 3].set(xi[:3])
-    out = _rasterize(splats, fx, fy, cx, cy, pose @ bump, level.background, near,
+    out = _rasterize(splats, fx, fy, cx, cy, compose(pose, bump), level.background, near,
                      width=width, height=height, tile=tile, capacity=capacity, blur=blur,
                      impl="xla")
     covered = jax.lax.stop_gradient(out.alpha) > min_alpha
@@ -327,7 +327,7 @@ def _solve(splats, level: _Level, pose, colour_noise, robust, min_alpha, damping
         a = h + jnp.diag(lam * diag + 1e-12 * jnp.max(diag) + 1e-30)
         step = -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(a), g)
         step = jnp.where(jnp.all(jnp.isfinite(step)), step, 0.0)
-        return rot, t, cost, g, h, n_cov, lam, from_rt(rot, t) @ se3_exp(step)
+        return rot, t, cost, g, h, n_cov, lam, compose(from_rt(rot, t), se3_exp(step))
 
     zero = jnp.zeros((), pose.dtype)
     rot, t, cost, _, h, n_cov, _, _ = jax.lax.fori_loop(

@@ -58,7 +58,7 @@ import numpy as np
 from vbgs.inference import candidates as cands
 from vbgs.inference import model
 from vbgs.render.camera import Camera, depth_points, rigid, valid_depth
-from vbgs.tracking.se3 import from_rt, orthonormalise, se3_exp
+from vbgs.tracking.se3 import compose, from_rt, orthonormalise, se3_exp
 
 # Points per level, coarse to fine (fixed: one compiled solver per count, whatever the
 # map's size).
@@ -294,7 +294,7 @@ def _solve(pose, p, u, rgb, w, cols, origin, inflate, robust, reach, damping, co
         diag = jnp.diag(h)
         a = h + jnp.diag(lam * diag + 1e-12 * jnp.max(diag) + 1e-30)
         step = -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(a), g)
-        return rot, t, cost, g, h, lam, from_rt(rot, t) @ se3_exp(step)
+        return rot, t, cost, g, h, lam, compose(from_rt(rot, t), se3_exp(step))
 
     start = from_rt(rot, t)
     zero = jnp.zeros((), pose.dtype)

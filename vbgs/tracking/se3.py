@@ -43,6 +43,17 @@ def _xp(x):
     return jnp
 
 
+def _mm(a, b):
+    """``a @ b``; for JAX arrays at full float32 precision (:mod:`vbgs.inference.precision`):
+    a GPU's default TF32 would round a pose's entries to 10 bits (5e-4 relative: half a
+    millimetre at a metre), which composed frame after frame is the tracker's error."""
+    if _xp(a) is np and _xp(b) is np:
+        return a @ b
+    from vbgs.inference.precision import matmul
+
+    return matmul(a, b)
+
+
 def hat(w):
     """``[w]_x [..., 3, 3]``: the cross-product matrix, ``hat(w) @ p = w x p``."""
     xp = _xp(w)
@@ -90,7 +101,7 @@ def so3_exp(w):
     a, b, _ = _coefficients(_norm(w))
     k = hat(w)
     eye = xp.eye(3, dtype=k.dtype)
-    return eye + a[..., None, None] * k + b[..., None, None] * (k @ k)
+    return eye + a[..., None, None] * k + b[..., None, None] * _mm(k, k)
 
 
 def rotation_angle(rot):
@@ -126,7 +137,7 @@ def _v_matrix(w):
     xp = _xp(w)
     _, b, c = _coefficients(_norm(w))
     k = hat(w)
-    return xp.eye(3, dtype=k.dtype) + b[..., None, None] * k + c[..., None, None] * (k @ k)
+    return xp.eye(3, dtype=k.dtype) + b[..., None, None] * k + c[..., None, None] * _mm(k, k)
 
 
 def _v_inverse(w):
@@ -139,7 +150,7 @@ def _v_inverse(w):
     d = xp.where(small, 1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0 + t2**3 / 1209600.0,
                  (1.0 - 0.5 * safe / xp.tan(0.5 * safe)) / (safe * safe))
     k = hat(w)
-    return xp.eye(3, dtype=k.dtype) - 0.5 * k + d[..., None, None] * (k @ k)
+    return xp.eye(3, dtype=k.dtype) - 0.5 * k + d[..., None, None] * _mm(k, k)
 
 
 def from_rt(rot, t):
@@ -154,7 +165,7 @@ def from_rt(rot, t):
 def se3_exp(xi):
     """The rigid transform ``[..., 4, 4]`` of twists ``xi = (v, w) [..., 6]``."""
     v, w = xi[..., :3], xi[..., 3:]
-    t = (_v_matrix(w) @ v[..., :, None])[..., 0]
+    t = _mm(_v_matrix(w), v[..., :, None])[..., 0]
     return from_rt(so3_exp(w), t)
 
 
@@ -163,7 +174,7 @@ def se3_log(pose):
     :func:`se3_exp` for rotation angles under pi)."""
     xp = _xp(pose)
     w = so3_log(pose[..., :3, :3])
-    v = (_v_inverse(w) @ pose[..., :3, 3:4])[..., 0]
+    v = _mm(_v_inverse(w), pose[..., :3, 3:4])[..., 0]
     return xp.concatenate([v, w], -1)
 
 
@@ -171,7 +182,7 @@ def inverse(pose):
     """``T^-1`` of rigid transforms ``[..., 4, 4]`` (transpose, no matrix inversion)."""
     xp = _xp(pose)
     rt = xp.swapaxes(pose[..., :3, :3], -1, -2)
-    return from_rt(rt, -(rt @ pose[..., :3, 3:4])[..., 0])
+    return from_rt(rt, -_mm(rt, pose[..., :3, 3:4])[..., 0])
 
 
 def orthonormalise(pose):
@@ -182,14 +193,14 @@ def orthonormalise(pose):
     grows, and :func:`inverse` (a transpose) is only right for a rotation."""
     xp = _xp(pose)
     u, _, vt = xp.linalg.svd(pose[..., :3, :3])
-    det = xp.linalg.det(u @ vt)
+    det = xp.linalg.det(_mm(u, vt))
     flip = xp.stack([xp.ones_like(det), xp.ones_like(det), det], -1)
-    return from_rt((u * flip[..., None, :]) @ vt, pose[..., :3, 3])
+    return from_rt(_mm(u * flip[..., None, :], vt), pose[..., :3, 3])
 
 
 def compose(a, b):
     """``a b``: the transform applying ``b`` first, then ``a``."""
-    return a @ b
+    return _mm(a, b)
 
 
 def relative(a, b):

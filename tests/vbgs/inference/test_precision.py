@@ -140,6 +140,10 @@ def test_render_unchanged_under_tf32(splat_scene, monkeypatch):
     assert np.abs(unprotected - reference).max() > 1e-3
 
 
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason=(
+    "a CPU emulation of a GPU's TF32: on a GPU the products already run so, and Adam "
+    "turns its scatter-adds' run-to-run rounding on near-zero rotation gradients into "
+    "1e-5 steps (seen on an H200), which this test's 1e-6 cannot tell from TF32"))
 def test_baseline_fit_unchanged_under_tf32(splat_scene):
     ref_losses, ref_params = _baseline_fit(*splat_scene)
     with tf32.emulated_tf32():

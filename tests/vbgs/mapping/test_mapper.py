@@ -80,7 +80,7 @@ def test_a_growing_map_depends_on_the_order(scene):
         np.testing.assert_allclose(float(state.mixture.stats.count.sum()), learned, rtol=1e-4)
 
 
-def test_update_leaves_its_input_state_as_it_was(scene):
+def test_update_leaves_its_input_state_as_it_was(scene, assert_same):
     """Pure: the same state updated twice with the same frame gives the same map, and the
     state before is untouched (growth makes a new stepper; it does not change the old)."""
     config = mapping.Config(components=K)
@@ -92,18 +92,18 @@ def test_update_leaves_its_input_state_as_it_was(scene):
     assert info_a.n_new > 0  # the second frame grew components...
     assert state.stepper is stepper and state.mixture.prior is prior  # ...not in place
     assert a.stepper.prior is a.mixture.prior and stepper.prior is prior
-    np.testing.assert_array_equal(a.mixture.posterior.space.mean, b.mixture.posterior.space.mean)
+    assert_same(a.mixture.posterior.space.mean, b.mixture.posterior.space.mean)
     assert info_a.n_points == info_b.n_points and len(info_a.xyz) == info_a.n_learned <= info_a.n_points
 
 
-def test_mapper_binds_the_config(scene):
+def test_mapper_binds_the_config(scene, assert_same):
     config = mapping.Config(components=K, render=mapping.RenderConfig(splat_scale=1.0))
     bound = mapping.mapper(config)
     state = bound.init(key=jax.random.key(0))
     state, _ = bound.update(state, scene.train[0])
     direct, _ = mapping.update(mapping.init(config, key=jax.random.key(0)), scene.train[0],
                                config)
-    np.testing.assert_array_equal(bound.splats(state).covs, mapping.splats(direct, config).covs)
+    assert_same(bound.splats(state).covs, mapping.splats(direct, config).covs)
     wider = dataclasses.replace(config, render=mapping.RenderConfig(splat_scale=2.0))
     np.testing.assert_allclose(mapping.splats(state, wider).covs,
                                4.0 * bound.splats(state).covs, rtol=1e-5)

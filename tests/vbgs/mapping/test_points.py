@@ -200,7 +200,7 @@ def test_a_surface_prior_stream_far_from_the_origin():
 
 # ------------------------------------------------------------------ frames are points
 
-def test_a_frame_is_learned_as_its_points():
+def test_a_frame_is_learned_as_its_points(assert_same):
     """``update`` takes a frame's unprojected points through ``update_points``: without the
     frame's own extras (opacity evidence, colour fit) the two streams are the same to the
     bit, growth included."""
@@ -218,5 +218,5 @@ def test_a_frame_is_learned_as_its_points():
             again.n_points, again.n_learned, again.n_new)
     for a, b in zip(jax.tree.leaves(frames.mixture), jax.tree.leaves(points.mixture),
                     strict=True):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        assert_same(a, b)
     assert frames.n_points == points.n_points and frames.n_frames == points.n_frames == 3

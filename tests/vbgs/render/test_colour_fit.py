@@ -45,7 +45,7 @@ def test_terms_equal_the_explicit_weight_matrix():
     def render(c):  # W c over black, linear in c: [h, w, 3]
         return rasterize(splats._replace(colours=c), frame.camera).rgb
 
-    jac = jax.jacfwd(render)(splats.colours)  # [h, w, 3, k, 3]
+    jac = jax.jacfwd(render)(splats.colours)  # [h, w, 3, k, 3]; forward mode, Pallas too
     w = np.asarray(jac[:, :, 0, :, 0]).reshape(-1, 2)  # [p, k] blending weights α_i T_i
     alpha = w.sum(1)  # [p]
     np.testing.assert_allclose(alpha, np.asarray(rasterize(splats, frame.camera).alpha).ravel(),

@@ -77,6 +77,39 @@ def test_pallas_gradients_equal_xla_gradients():
                                    err_msg=name)
 
 
+def test_pallas_forward_mode_equals_xla():
+    """``jax.jvp`` through the kernel (a custom JVP) gives the XLA path's tangent; a custom
+    VJP refused forward mode (the colour fit's tests take ``jax.jacfwd`` of a render)."""
+    splats, camera = mixed_scene(4, k=40, width=16, height=16)
+    direction = Splats(*(jax.random.normal(jax.random.key(i), jnp.shape(a), jnp.float32)
+                         for i, a in enumerate(splats)))
+
+    def render(s, impl):
+        out = rasterize(s, camera, tile=8, capacity=64, impl=impl)
+        return out.rgb, out.depth, out.alpha
+
+    _, t_xla = jax.jvp(lambda s: render(s, "xla"), (splats,), (direction,))
+    _, t_pallas = jax.jvp(lambda s: render(s, "pallas"), (splats,), (direction,))
+    for a, b in zip(t_xla, t_pallas, strict=True):
+        assert np.abs(np.asarray(a)).max() > 1e-3  # a real tangent
+        np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-5 * np.abs(np.asarray(a)).max())
+
+
+def test_float64_takes_the_xla_path():
+    """The kernel computes in float32: float64 splats (``jax.enable_x64``) are composited
+    by the XLA path, to the bit, and differentiate in float64."""
+    with jax.enable_x64(True):
+        splats, camera = mixed_scene(5, k=30, width=16, height=16)
+        splats = Splats(*(jnp.asarray(a, jnp.float64) for a in splats))
+        xla = rasterize(splats, camera, tile=8, capacity=64, impl="xla")
+        pallas = rasterize(splats, camera, tile=8, capacity=64, impl="pallas")
+        assert pallas.rgb.dtype == jnp.float64
+        np.testing.assert_array_equal(pallas.rgb, xla.rgb)
+        grad = jax.grad(lambda s: jnp.sum(rasterize(s, camera, tile=8, capacity=64,
+                                                    impl="pallas").rgb))(splats)
+        assert grad.means.dtype == jnp.float64 and np.abs(np.asarray(grad.means)).max() > 0
+
+
 def test_impl_choice_and_bad_names(monkeypatch):
     monkeypatch.delenv(raster.IMPL_ENV, raising=False)
     gpu = jax.default_backend() == "gpu"
