@@ -19,15 +19,18 @@ def astronaut64():
 def assert_same():
     """``assert_same(a, b)``: two computations that should agree to the bit. They do on a
     CPU. On a GPU, XLA's scatter-adds and sums use atomics whose order, and so float32
-    rounding, changes from run to run (the same update run twice on an H200 differed in
-    1e-6 of a mean): there, equal to float32 rounding (``rtol`` 1e-5, ``atol`` 1e-6)."""
+    rounding, changes from run to run (on an H200 the same update run twice differed in
+    1e-6 of a mean, and a scatter matrix's small entries, left by cancellation, in 5e-5 of
+    its largest): there, equal to that rounding (``rtol`` 1e-5, ``atol`` 1e-4 of the
+    array's largest magnitude)."""
     exact = jax.default_backend() == "cpu"
 
     def check(a, b, err_msg=""):
+        a, b = np.asarray(a), np.asarray(b)
         if exact:
-            np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=err_msg)
+            np.testing.assert_array_equal(a, b, err_msg=err_msg)
         else:
-            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-6,
-                                       err_msg=err_msg)
+            scale = float(np.max(np.abs(b))) if b.size else 0.0
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-4 * scale, err_msg=err_msg)
 
     return check
