@@ -51,3 +51,15 @@ def test_a_ray_in_the_surface_takes_no_step():
     steps = quadric.ray_steps(normal, np.array([0.01, 0.01]),
                               np.array([[0.01, 0.0, 0.0], [0.0, 0.0, 0.005]]))
     np.testing.assert_allclose(steps, [0.0, 1.0])
+
+
+def test_exact_points_under_a_noise_model_stay_on_a_sphere():
+    """Depth without noise learned as a Kinect's: the seeds stay on the surface (the
+    plane of the first version slid them up to SEED_SIGMAS along their rays)."""
+    pts = _sphere_cap(n=60)
+    camera = np.array([0.6, 0.0, 1.2])
+    d = pts - camera
+    ray = 0.004 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    chosen = np.arange(0, len(pts), 53)
+    _, seeds = grow.seeds_on_patches(pts, chosen, ray)
+    assert np.abs(np.linalg.norm(seeds, axis=1) - 0.3).max() < 1e-5
