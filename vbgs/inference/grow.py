@@ -87,13 +87,16 @@ COARSE_FROM = 4.0
 # against 1: object 26.38 / 25.83 dB, room 24.09 / 23.74, with about twice the components.
 REFINE_FOOTPRINTS = 0.5
 # Measured points: the cells a point is looked up in reach this many sigma of its noise
-# along its ray, before and behind it (see _pick).
+# along its ray, before and behind it (see _pick). Checked on validation views (object,
+# 128 px / 20k / 60 frames, the Kinect's own noise and holes, quadric seeds): 1: 24.17 dB,
+# 2: 24.47, 3: 24.09.
 NOISE_SIGMAS = 2.0
 # Measured points: a grown component's seed is moved along its ray onto the quadric of its
 # patch, at most this many sigma of its noise (seeds_on_patches). Chosen on validation
 # views (object, 128 px / 20k / 60 frames, Kinect noise without holes, 24 neighbours;
 # a one-off script setting this constant, not a tune grid: not a Config field yet):
-# 1.5: 24.20 dB, 3: 24.33, 6: 24.31.
+# 1.5: 24.20 dB, 3: 24.33, 6: 24.31. With the quadric of vbgs.inference.quadric (object,
+# the Kinect's own noise and holes, validation views): 1.5: 24.06, 3: 24.47, 6: 24.36.
 SEED_SIGMAS = 3.0
 # Measured points: neighbours in the patch that gives a grown component's normal and seed
 # plane (more than NORMAL_NEIGHBOURS: the noise along the rays must average out). Same
@@ -569,7 +572,7 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
             s = s * 4.0 ** -split.astype(np.float64)
         if ray is None:
             normals = local_normals(x, chosen)
-        else:  # measured points: seeds on their patches' planes
+        else:  # measured points: seeds on their patches' quadrics
             normals, seeds = seeds_on_patches(x, chosen, ray)
         scales = surface_scales(s, normals, config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, seeds.astype(dtype),
