@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.inference import quadric
 from vbgs.inference.model import (
     Mixture,
     PriorConfig,
@@ -86,18 +87,22 @@ COARSE_FROM = 4.0
 # against 1: object 26.38 / 25.83 dB, room 24.09 / 23.74, with about twice the components.
 REFINE_FOOTPRINTS = 0.5
 # Measured points: the cells a point is looked up in reach this many sigma of its noise
-# along its ray, before and behind it (see _pick).
+# along its ray, before and behind it (see _pick). Checked on validation views (object,
+# 128 px / 20k / 60 frames, the Kinect's own noise and holes, quadric seeds): 1: 24.17 dB,
+# 2: 24.47, 3: 24.09.
 NOISE_SIGMAS = 2.0
-# Measured points: a grown component's seed is moved along its ray onto the plane of its
+# Measured points: a grown component's seed is moved along its ray onto the quadric of its
 # patch, at most this many sigma of its noise (seeds_on_patches). Chosen on validation
 # views (object, 128 px / 20k / 60 frames, Kinect noise without holes, 24 neighbours;
 # a one-off script setting this constant, not a tune grid: not a Config field yet):
-# 1.5: 24.20 dB, 3: 24.33, 6: 24.31.
+# 1.5: 24.20 dB, 3: 24.33, 6: 24.31. With the quadric of vbgs.inference.quadric (object,
+# the Kinect's own noise and holes, validation views): 1.5: 24.06, 3: 24.47, 6: 24.36.
 SEED_SIGMAS = 3.0
 # Measured points: neighbours in the patch that gives a grown component's normal and seed
 # plane (more than NORMAL_NEIGHBOURS: the noise along the rays must average out). Same
 # validation views: 12: 23.68 dB, 24: 24.33, 48: 24.45, 96: 23.94 (exact depth 26.58;
-# seeded on the noisy point itself: 22.89).
+# seeded on the noisy point itself: 22.89). With the quadric of vbgs.inference.quadric
+# (object, Kinect's own noise and holes, validation views): 24: 23.95, 48: 24.47, 96: 24.49.
 NOISY_NORMAL_NEIGHBOURS = 48
 
 class GrowInfo(NamedTuple):
@@ -187,56 +192,31 @@ def _empty_about(xyz, n_components: int, cell: float, config: PriorConfig) -> Mi
 
 
 def local_normals(x: np.ndarray, chosen: np.ndarray,
-                  neighbours: int = NORMAL_NEIGHBOURS, ray: np.ndarray | None = None
-                  ) -> np.ndarray:
+                  neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
     """Unit surface normals ``[m, 3]`` at the points ``x[chosen]`` of a batch ``x [n, 3]``:
     the eigenvector of the smallest eigenvalue of the covariance of each point's
     ``neighbours`` nearest batch points (local PCA; the sign is arbitrary, as a normal's
-    is in a covariance). ``ray [n, 3]``: measured points' noise along their rays; its
-    covariance ``u u^T`` is taken off the patch's (a noisy patch seen head-on is
-    thickest along the ray, which is near its true normal: deconvolved, the plane's
-    own directions stay the largest)."""
-    return local_patches(x, chosen, neighbours, ray)[0]
-
-
-def local_patches(x: np.ndarray, chosen: np.ndarray,
-                  neighbours: int = NORMAL_NEIGHBOURS, ray: np.ndarray | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`local_normals` and the patches' centres ``[m, 3]`` (their points' mean)."""
-    from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
-
-    k = min(neighbours, len(x))
-    _, idx = cKDTree(x).query(x[chosen], k=k, workers=-1)
-    patch = x[np.asarray(idx).reshape(len(chosen), k)]  # [m, k, 3]
-    centre = patch.mean(1)
-    centred = patch - centre[:, None]
-    cov = np.einsum("mki,mkj->mij", centred, centred) / k
-    if ray is not None:  # measured points: the patch's spread less its noise u u^T
-        u = np.asarray(ray, np.float64)[np.asarray(idx).reshape(len(chosen), k)]  # [m, k, 3]
-        cov = cov - np.einsum("mki,mkj->mij", u, u) / k
-    return np.linalg.eigh(cov)[1][:, :, 0], centre  # eigenvalues ascending: the smallest's
+    is in a covariance). Measured points take :func:`seeds_on_patches` instead."""
+    return quadric.patch_axes(quadric.patches(x, chosen, neighbours))[:, :, 0]
 
 
 def seeds_on_patches(x: np.ndarray, chosen: np.ndarray, ray: np.ndarray,
                      neighbours: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Measured points: the normals ``[m, 3]`` of the patches about ``x[chosen]`` and the
-    seeds ``[m, 3]``, each chosen point slid along its ray ``u`` onto its patch's plane
-    (through the patch's centre, across its normal), by at most ``SEED_SIGMAS`` of its
-    noise.
+    """Measured points: the normals ``[m, 3]`` of the surfaces about ``x[chosen]`` and the
+    seeds ``[m, 3]``, each chosen point slid along its ray ``u`` onto the quadric fitted
+    to its ``neighbours`` nearest batch points (:mod:`vbgs.inference.quadric`), by at
+    most ``SEED_SIGMAS`` of its noise.
 
     Why: a grown component's prior mean is the reference that, under prior assignment,
     places every later point's latent surface point (:func:`vbgs.inference.candidates.
     candidate_latent`): seeded on one noisy point it sits a sensor sigma off the surface
     (2.6 cm at 4 m for a Kinect), which the latent points then inherit as in-plane
-    displacement at oblique views; the patch's plane averages ``neighbours`` points."""
+    displacement at oblique views; the fitted surface averages ``neighbours`` points."""
     neighbours = NOISY_NORMAL_NEIGHBOURS if neighbours is None else neighbours
-    normals, centre = local_patches(x, chosen, neighbours, ray)
-    u = ray[chosen]
-    off = np.einsum("mi,mi->m", normals, x[chosen] - centre)  # distance to the plane
-    along = np.einsum("mi,mi->m", normals, u)  # the ray's noise across the plane
-    safe = np.where(np.abs(along) > 1e-12, along, 1e-12)
-    t = np.clip(-off / safe, -SEED_SIGMAS, SEED_SIGMAS)
-    return normals, x[chosen] + t[:, None] * u
+    normal, height = quadric.quadric_patches(x, chosen, neighbours)
+    t = np.clip(quadric.ray_steps(normal, height, ray[chosen]), -SEED_SIGMAS, SEED_SIGMAS)
+    unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
+    return unit, x[chosen] + t[:, None] * ray[chosen]
 
 
 def surface_scales(s, normals: np.ndarray, thickness: float) -> np.ndarray:
@@ -592,7 +572,7 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
             s = s * 4.0 ** -split.astype(np.float64)
         if ray is None:
             normals = local_normals(x, chosen)
-        else:  # measured points: seeds on their patches' planes
+        else:  # measured points: seeds on their patches' quadrics
             normals, seeds = seeds_on_patches(x, chosen, ray)
         scales = surface_scales(s, normals, config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, seeds.astype(dtype),

@@ -22,7 +22,7 @@ holes, validation views (exact depth 26.58 dB): the exact map's covariances swap
 the deconvolved ones fell to 22.80 dB (its means: 26.16, colours and opacities: no
 change); learned on the exact map's components, the noisy data gave 22.53 dB
 deconvolved and 26.02 with the latent points. A stream's grown components are that
-reference: seeded on their patch's plane (:func:`vbgs.inference.grow.seeds_on_patches`).
+reference: seeded on the quadric their patch fits (:func:`vbgs.inference.grow.seeds_on_patches`).
 
 The sensors and their ``sigma_z`` are :mod:`vbgs.sensors`; a map's sensor is
 ``Config.sensor`` (``exact``: nothing to take into account, no extra work).
