@@ -34,6 +34,26 @@ residual on top of it, never a copy that drifts away.
    :data:`vbgs.baseline.anchor.ANCHOR_WEIGHT`; static, 0 (a free polish: every frame is
    in every step's draw, so there is nothing to forget, and the free polish scored best
    on validation views). The residual and the carry stay either way.
+3. *The past weighs what it saw against the frames drawn* (:func:`draw_points`). Each
+   step's loss is one frame's mean per pixel, drawn from the current frame and the
+   buffer, ``D``; so the steps minimise ``mean_{f∈D} ℓ_f(θ) + w A(θ) / P`` (``A`` the
+   anchor's nats, ``w`` the weight). Read ``ℓ`` as a negative log-likelihood per pixel
+   in units of ``b`` (ANCHOR_WEIGHT's note): the posterior of the splats given ``D`` and
+   the past, ``-log p(θ | D, past) = Σ_{f∈D} n_f ℓ_f / b + A(θ)``, divided by the draw's
+   ``|D| n̄`` points (``n̄`` the posterior's points per frame), is that objective with
+   ``P = |D| n̄``. Dividing by every point the posterior learned from (``P = t n̄``
+   after ``t`` frames, as before) let the past weigh one frame's worth however long the
+   stream, so each new frame overwrote what earlier views needed; with ``P = |D| n̄``
+   it weighs ``t / |D|`` times the draw: without replay the anchor grows along the
+   stream, with a FIFO of 8 it is 9 times weaker (the replayed frames hold their own
+   ground). Static: ``D`` is every training frame, ``P`` all the points, as before.
+4. *A step moves only what the drawn frame sees* (continual;
+   :func:`vbgs.baseline.train.make_step` ``seen_only``). A splat the frame's picture does
+   not depend on has no evidence in the step: its value is what the frames that saw it
+   fitted, and the penalty alone (and Adam's momentum from those frames) would pull it
+   back to the posterior's splat, undoing that fit with nothing in the step to say so.
+   Such a splat and its Adam moments are left as they are. (Static: every frame is in
+   the draw, the step is the plain one.)
 
 Not done: no densification (the rows are VBGS's components, and a moved row would lose
 its anchor). The learning rates are the baseline's schedule of the step alone (the
@@ -101,6 +121,18 @@ def anchored_step(config, optimizer):
     return make_step(config, optimizer, penalty=anchor_penalty)
 
 
+def anchored_seen_step(config, optimizer):
+    """:func:`anchored_step` moving only the rows the drawn frame sees (a stream's)."""
+    return make_step(config, optimizer, penalty=anchor_penalty, seen_only=True)
+
+
+def draw_points(points: float, n_learned: int, n_draw: int) -> float:
+    """``P = |D| n̄``: the points of the ``n_draw`` frames the steps draw from, at the
+    posterior's mean points per frame (``points`` learned from ``n_learned`` frames);
+    the anchor's nats are divided by it (module docstring, item 3)."""
+    return points * n_draw / max(n_learned, 1)
+
+
 class PolishLearner:
     """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
 
@@ -116,6 +148,7 @@ class PolishLearner:
         self.extent = (camera_extent([f.camera.position for f in scene.train])
                        if task.protocol == "static" else None)
         self.trainer = self.state = self.anchor = self._base = None
+        self._step_fn = anchored_seen_step if task.protocol == "continual" else anchored_step
         self.losses: list[np.ndarray] = []
         self.seconds = {"vbgs": 0.0, "polish": 0.0, "compiling": 0.0}
 
@@ -160,11 +193,12 @@ class PolishLearner:
             dof=post.space.dof, colour_precision=post.colour.kappa / cfg.prior.colour_noise**2,
             opacity_count=(evidence.prior_hits + evidence.prior_passes
                            + state.evidence.hits + state.evidence.passes),
-            points=float(jnp.sum(post.alpha - mix.prior.alpha)), weight=anchor_weight(self.task))
+            points=draw_points(float(jnp.sum(post.alpha - mix.prior.alpha)), state.n_frames,
+                               len(frames)), weight=anchor_weight(self.task))
         capacity = max(exact_capacity(splats, f.camera, blur=self.blur) for f in frames)
         if self.trainer is None or capacity > self.trainer.config.raster_capacity:
             self.trainer = Trainer(replace(self.config, raster_capacity=capacity),
-                                   extent=self.extent, make_step_fn=anchored_step)
+                                   extent=self.extent, make_step_fn=self._step_fn)
         if self.state is None:
             key = jax.random.fold_in(init_key(self.task), TRAIN_KEY)
             self.state = self.trainer.init(base, key=key)

@@ -18,8 +18,10 @@ from the base splat whose curvature is the posterior's precision, zero at the ba
 
 A splat the posterior knows from many points moves little; one it barely saw is free.
 The sum over splats is in nats of the posterior; ``weight`` turns it into the loss's
-units: ANCHOR_WEIGHT divided by the points the posterior learned from, so the penalty is
-the posterior's log density per point beside the photometric loss per pixel.
+units: ANCHOR_WEIGHT divided by ``points``, the points of the pictures the loss averages
+over (the polish passes those of the frames its steps draw from, its docstring's item 3),
+so the penalty is the posterior's log density per point beside the photometric loss per
+pixel.
 
 :func:`carry` moves polished splats with their base when the posterior changes (a new
 frame): the polish is a residual on top of the posterior.
@@ -62,8 +64,8 @@ class Anchor(NamedTuple):
 
 def make_anchor(base: Params, *, mean_strength, dof, colour_precision, opacity_count,
                 points: float, weight: float = ANCHOR_WEIGHT) -> Anchor:
-    """An :class:`Anchor` on ``base`` with the per-splat precisions ``[K]`` and the number
-    of ``points`` the posterior learned from (the penalty is per point)."""
+    """An :class:`Anchor` on ``base`` with the per-splat precisions ``[K]``; the penalty
+    is per point of ``points`` (module docstring)."""
     if not weight >= 0:
         raise ValueError(f"the anchor weight must be >= 0 (0: a free polish), got {weight!r}")
     f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
