@@ -13,7 +13,7 @@ from experiments.protocol import stream_frames
 from experiments.run import main
 from experiments.scene_task import SceneTask, prepare_scene
 from vbgs.baseline.anchor import ANCHOR_WEIGHT, anchor_terms
-from vbgs.baseline.params import trainable
+from vbgs.baseline.params import params_from_splats, trainable
 from vbgs.compilation import enable_persistent_cache
 from vbgs.data.streams import stream_order
 from vbgs.render.raster import rasterize
@@ -99,7 +99,8 @@ def test_continual_polish_with_fifo_replay(capsys):
 def test_the_anchor_is_per_point_of_the_frames_drawn(scene):
     """Continual, FIFO of 2: after 4 frames the steps draw from 3, so the anchor weighs
     ANCHOR_WEIGHT per point of 3 frames' worth (4/3 times the old per-point-of-all
-    weight), and the step moves only what the drawn frame sees."""
+    weight), holds the polish where the frames before left it, and the step moves only
+    what the drawn frame sees."""
     assert draw_points(1200.0, 30, 9) == 360.0  # 9 frames of 40 points
     assert draw_points(1200.0, 30, 30) == 1200.0  # static: every frame, every point
     task = SceneTask(**TINY, replay="fifo:2", steps_per_frame=3)
@@ -112,6 +113,9 @@ def test_the_anchor_is_per_point_of_the_frames_drawn(scene):
     np.testing.assert_allclose(float(learner.anchor.weight), ANCHOR_WEIGHT * 4 / (3 * points),
                                rtol=1e-5)
     assert learner._step_fn is anchored_seen_step
+    # the centre is the polish as frames 1-3 left it (carried), not the posterior's splats
+    posterior = params_from_splats(learner.vbgs.splats())
+    assert float(np.abs(learner.anchor.base.means - posterior.means).max()) > 1e-4
     assert PolishLearner(replace(task, protocol="static", replay="none"),
                          scene)._step_fn is not anchored_seen_step
 
