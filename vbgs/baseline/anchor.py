@@ -125,20 +125,24 @@ def anchor_penalty(theta: Params, anchor: Anchor) -> jax.Array:
     return anchor.weight * jnp.sum(anchor_terms(theta, anchor))
 
 
-def _axes(params: Params, rows) -> np.ndarray:
-    """``A = R diag(s)`` ``[m, 3, 3]`` (float64) of ``rows``: ``Σ = A Aᵀ``."""
+def _log_covs(params: Params, rows) -> np.ndarray:
+    """``log Σ = R diag(2 log s) Rᵀ`` ``[m, 3, 3]`` (float64) of ``rows``."""
     rot = np.asarray(rotations_from_quaternions(params.rotations[rows]), np.float64)
-    return rot * np.exp(np.asarray(params.log_scales[rows], np.float64))[:, None, :]
+    log_var = 2.0 * np.asarray(params.log_scales[rows], np.float64)
+    return (rot * log_var[:, None, :]) @ np.swapaxes(rot, -1, -2)
 
 
 def carry(params: Params, old: Params, new: Params) -> tuple[Params, np.ndarray]:
     """``params`` polished from the base ``old``, moved onto the base ``new``: the residual
-    kept. Means, colour and opacity logits add the base's change; a covariance goes
-    through the map taking the old base's onto the new one (``M = A_new A_old⁻¹`` with
-    ``A = R diag(s)``: ``Σ' = M Σ Mᵀ``, equal to the new base's where the polish had
-    not moved it). Returns the params and the rows whose base changed ``[K]`` bool (their
-    scales and rotations are decomposed anew, see
-    :func:`vbgs.render.splats.scale_rotation_from_covs`)."""
+    kept. Means, colour and opacity logits add the base's change; a covariance adds it in
+    its logarithm, ``log Σ' = log Σ + log Σ_new - log Σ_old`` (the log-Euclidean residual:
+    the new base's covariance where the polish had not moved it, the polished one where
+    the base did not move, always positive definite). The linear map ``M = A_new A_old⁻¹``
+    (``A = R diag(s)``, ``Σ' = M Σ Mᵀ``) used before multiplied a polished splat's tilt out
+    of a flat base (its thin axis at the 1e-6 floor) by the ratio of the new and old thin
+    scales: on the walk a few splats grew hundreds of times their base's size within 30
+    frames. Returns the params and the rows whose base changed ``[K]`` bool (their scales
+    and rotations are decomposed anew, see :func:`vbgs.render.splats.scale_rotation_from_covs`)."""
     fields = ("means", "log_scales", "rotations", "opacity_logits", "colour_logits")
     changed = np.zeros(params.capacity, bool)
     for name in fields:
@@ -150,9 +154,10 @@ def carry(params: Params, old: Params, new: Params) -> tuple[Params, np.ndarray]
     out = {name: np.array(getattr(params, name)) for name in fields}
     for name in ("means", "opacity_logits", "colour_logits"):
         out[name][rows] += np.asarray(getattr(new, name))[rows] - np.asarray(getattr(old, name))[rows]
-    a_old, a_new, a_pol = _axes(old, rows), _axes(new, rows), _axes(params, rows)
-    moved = a_new @ np.linalg.solve(a_old, a_pol)  # M A_pol, M = A_new A_old⁻¹
-    scales, quats = scale_rotation_from_covs(moved @ np.swapaxes(moved, -1, -2))
+    log_cov = _log_covs(params, rows) + _log_covs(new, rows) - _log_covs(old, rows)
+    log_var, axes = np.linalg.eigh(0.5 * (log_cov + np.swapaxes(log_cov, -1, -2)))
+    covs = (axes * np.exp(log_var)[:, None, :]) @ np.swapaxes(axes, -1, -2)
+    scales, quats = scale_rotation_from_covs(covs)
     out["log_scales"][rows], out["rotations"][rows] = np.log(scales), quats
     return params._replace(**{k: jnp.asarray(v, jnp.float32) for k, v in out.items()},
                            active=new.active), changed
