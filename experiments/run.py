@@ -141,7 +141,8 @@ def _add_fit_scene(sub):
                    help="gradient, vbgs-polish: steps on all frames (static protocol)")
     p.add_argument("--anchor", type=float, default=None, metavar="W",
                    help="vbgs-polish: weight of the posterior's anchor on the polished "
-                        "splats (0: a free polish; default: 0.01 continual, 0 static)")
+                        "splats (0: a free polish; default: vbgs.baseline.anchor."
+                        "ANCHOR_WEIGHT continual, 0 static)")
     add_choice(p, "--protocol", PROTOCOL)
     p.add_argument("--cl-segments", type=int, nargs="?", const=CL_SEGMENTS_DEFAULT, default=0,
                    metavar="S",

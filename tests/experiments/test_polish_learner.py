@@ -2,16 +2,18 @@
 the posterior."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from experiments.learners import PolishLearner, VbgsLearner
+from experiments.learners.polish_learner import anchored_seen_step, draw_points
 from experiments.protocol import stream_frames
 from experiments.run import main
 from experiments.scene_task import SceneTask, prepare_scene
-from vbgs.baseline.anchor import anchor_terms
-from vbgs.baseline.params import trainable
+from vbgs.baseline.anchor import ANCHOR_WEIGHT, anchor_terms
+from vbgs.baseline.params import params_from_splats, trainable
 from vbgs.compilation import enable_persistent_cache
 from vbgs.data.streams import stream_order
 from vbgs.render.raster import rasterize
@@ -92,6 +94,30 @@ def test_continual_polish_with_fifo_replay(capsys):
     assert record["seconds_vbgs"] > 0 and record["seconds_polish"] > 0
     assert record["seconds"] == pytest.approx(record["seconds_vbgs"] + record["seconds_polish"])
     assert record["psnr"] > 10
+
+
+def test_the_anchor_is_per_point_of_the_frames_drawn(scene):
+    """Continual, FIFO of 2: after 4 frames the steps draw from 3, so the anchor weighs
+    ANCHOR_WEIGHT per point of 3 frames' worth (4/3 times the old per-point-of-all
+    weight), holds the polish where the frames before left it, and the step moves only
+    what the drawn frame sees."""
+    assert draw_points(1200.0, 30, 9) == 360.0  # 9 frames of 40 points
+    assert draw_points(1200.0, 30, 30) == 1200.0  # static: every frame, every point
+    task = SceneTask(**TINY, replay="fifo:2", steps_per_frame=3)
+    learner = PolishLearner(task, scene)
+    for _, frame, background in stream_frames(task, scene, stream_order(4, task.order)):
+        learner.learn(frame, background)
+    mix = learner.vbgs.state.mixture
+    points = float(np.sum(mix.posterior.alpha - mix.prior.alpha))
+    assert learner.vbgs.state.n_frames == 4
+    np.testing.assert_allclose(float(learner.anchor.weight), ANCHOR_WEIGHT * 4 / (3 * points),
+                               rtol=1e-5)
+    assert learner._step_fn is anchored_seen_step
+    # the centre is the polish as frames 1-3 left it (carried), not the posterior's splats
+    posterior = params_from_splats(learner.vbgs.splats())
+    assert float(np.abs(learner.anchor.base.means - posterior.means).max()) > 1e-4
+    assert PolishLearner(replace(task, protocol="static", replay="none"),
+                         scene)._step_fn is not anchored_seen_step
 
 
 def test_static_polish_refuses_a_replay_buffer(capsys):

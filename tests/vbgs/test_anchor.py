@@ -72,3 +72,23 @@ def test_carry_keeps_the_residual():
     carried, changed = carry(polished, old, same)
     assert not changed[0] and changed[1:].all()
     np.testing.assert_array_equal(carried.means[0], polished.means[0])
+
+
+def test_carry_of_a_tilted_flat_splat_stays_its_size():
+    """A flat base (thin axis at 1e-6) polished with a 0.05 rad tilt, then the base's thin
+    axis widens to 1e-4: the carried disc keeps its size (the linear map of the axes used
+    before stretched it to 1.53, five times its 0.3)."""
+    base = init_params(np.zeros((1, 3)), np.full((1, 3), 0.5), 0.3)
+    flat = base._replace(log_scales=jnp.log(jnp.array([[0.3, 0.3, 1e-6]], jnp.float32)))
+    half = 0.025  # a 0.05 rad tilt about x
+    tilted = flat._replace(rotations=jnp.array([[np.cos(half), np.sin(half), 0.0, 0.0]],
+                                               jnp.float32))
+    wider = flat._replace(log_scales=jnp.log(jnp.array([[0.3, 0.3, 1e-4]], jnp.float32)))
+    carried, changed = carry(tilted, flat, wider)
+    assert changed.all()
+    scales = np.sort(np.exp(np.asarray(carried.log_scales[0])))
+    np.testing.assert_allclose(scales[1:], 0.3, rtol=0.03)  # the disc keeps its size
+    assert scales[0] < 0.3 * 0.05  # and stays thin: at most the tilt's reach
+    # the tilt is kept, not undone (0.079 rad: the log-space sum mixes it a little)
+    normal = np.linalg.eigh(np.asarray(covariances(carried))[0])[1][:, 0]
+    assert 0.04 < np.arccos(abs(normal[2])) < 0.1

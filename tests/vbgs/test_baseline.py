@@ -22,6 +22,7 @@ from vbgs.baseline import (
     parse_replay,
     relocate,
     reset_moments,
+    seen_rows,
     to_splats,
     trainable,
 )
@@ -150,6 +151,36 @@ def test_trace_counter_sees_a_single_trace():
         background = np.full(3, 0.3 * i, np.float32)  # re-estimated backgrounds: no retrace
         params, opt_state, loss = step(params, opt_state, *frame_arrays(frame), background)
     assert np.isfinite(float(loss)) and len(traces) == 1
+
+
+def test_seen_only_step_leaves_unseen_splats_and_their_moments():
+    """Two splats, the second far outside the view: with ``seen_only`` a penalty on both
+    moves only the first, and the second's Adam moments stay zero; without, both move."""
+    frame = object_scene(size=8, n_train=1, n_test=0).train[0]
+    params = init_params(np.array([[0.0, 0.0, 0.0], [50.0, 50.0, 50.0]]),
+                         np.full((2, 3), 0.5), 0.2)
+    theta = trainable(params)
+    assert seen_rows(theta).tolist() == [True, True]  # every row of nonzero leaves
+    assert seen_rows(jax.tree.map(lambda x: x.at[1].set(0.0), theta)).tolist() == [True, False]
+    cfg = TrainConfig(densify=None)
+    optimizer = make_optimizer(cfg, 1.0)
+    target = jnp.full((2, 3), 1.0)
+
+    def pull(theta, target):  # every row pulled towards `target`
+        return jnp.sum((theta.means - target) ** 2)
+
+    moved = {}
+    for seen_only in (True, False):
+        step = make_step(cfg, optimizer, penalty=pull, seen_only=seen_only)
+        p, opt_state = params, optimizer.init(theta)
+        for _ in range(3):
+            p, opt_state, loss = step(p, opt_state, *frame_arrays(frame), np.zeros(3), target)
+        moved[seen_only] = np.abs(np.asarray(p.means - params.means)).max(-1)
+        mu = np.asarray(opt_state[ADAM].mu.means)
+        assert np.isfinite(float(loss)) and np.abs(mu[0]).max() > 0
+        assert (np.abs(mu[1]).max() == 0) == seen_only
+    assert moved[True][0] > 1e-4 and moved[True][1] == 0.0
+    assert moved[False][1] > 1e-4
 
 
 # --------------------------------------------------------------------------- densify

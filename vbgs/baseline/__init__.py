@@ -34,6 +34,7 @@ from vbgs.baseline.train import (
     make_optimizer,
     make_step,
     reset_moments,
+    seen_rows,
 )
 
 __all__ = [
@@ -41,5 +42,6 @@ __all__ = [
     "Replay", "TrainConfig", "TrainState", "Trainer", "camera_extent", "colours", "count_live",
     "covariances", "depth_loss", "frame_arrays", "frame_loss", "image_loss", "init_params",
     "learning_rates", "live", "make_optimizer", "make_step", "opacities", "params_from_prior",
-    "params_from_splats", "parse_replay", "relocate", "reset_moments", "to_splats", "trainable",
+    "params_from_splats", "parse_replay", "relocate", "reset_moments", "seen_rows", "to_splats",
+    "trainable",
 ]

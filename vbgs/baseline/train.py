@@ -120,16 +120,39 @@ def make_optimizer(config: TrainConfig, extent: float) -> optax.GradientTransfor
                              (LEARNING_RATES, scale_by_learning_rates(learning_rates(config, extent))))
 
 
+def _rows_where(rows: jax.Array, a, b):
+    """Per row of every leaf: ``a`` where ``rows [K]`` (bool), else ``b`` (equal pytrees)."""
+    return jax.tree.map(lambda x, y: jnp.where(rows.reshape((-1,) + (1,) * (x.ndim - 1)), x, y),
+                        a, b)
+
+
+def _with_moments(opt_state, mu, nu):
+    out = opt_state.copy()  # the same mapping type (an OrderedDict): the same pytree structure
+    out[ADAM] = opt_state[ADAM]._replace(mu=mu, nu=nu)
+    return out
+
+
 def reset_moments(opt_state, rows: jax.Array):
     """Zero Adam's first and second moments of the rows ``rows [K]`` (bool)."""
     adam = opt_state[ADAM]
+    zeros = functools.partial(jax.tree.map, jnp.zeros_like)
+    return _with_moments(opt_state, _rows_where(rows, zeros(adam.mu), adam.mu),
+                         _rows_where(rows, zeros(adam.nu), adam.nu))
 
-    def zero(x):
-        return jnp.where(rows.reshape((-1,) + (1,) * (x.ndim - 1)), 0.0, x)
 
-    out = opt_state.copy()  # the same mapping type (an OrderedDict): the same pytree structure
-    out[ADAM] = adam._replace(mu=jax.tree.map(zero, adam.mu), nu=jax.tree.map(zero, adam.nu))
-    return out
+def seen_rows(grads: Params) -> jax.Array:
+    """``[K]`` bool: the rows with any nonzero gradient (the splats a frame's picture
+    depends on; a splat outside the view, or culled, gets exactly 0)."""
+    leaves = [jnp.abs(x).reshape(x.shape[0], -1).max(-1) for x in jax.tree.leaves(grads)]
+    return jnp.stack(leaves).max(0) > 0
+
+
+def keep_rows(new_state, old_state, rows: jax.Array):
+    """``new_state``'s Adam moments on the rows ``rows [K]`` (bool), ``old_state``'s
+    elsewhere (the step counts are ``new_state``'s: the schedule is the run's)."""
+    new, old = new_state[ADAM], old_state[ADAM]
+    return _with_moments(new_state, _rows_where(rows, new.mu, old.mu),
+                         _rows_where(rows, new.nu, old.nu))
 
 
 def gradient_score(opt_state) -> jax.Array:
@@ -163,7 +186,7 @@ def frame_arrays(frame, pixel_weight=None) -> FrameArrays:
 
 
 def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, on_trace=None,
-              frozen: tuple[str, ...] = (), penalty=None):
+              frozen: tuple[str, ...] = (), penalty=None, seen_only: bool = False):
     """The jitted ``step(params, opt_state, rgb, depth, camera, pixel_weight, background)
     -> (params, opt_state, loss)`` (``*frame_arrays(frame)`` gives rgb, depth, camera and
     the depth term's pixel weights, None for exact depth):
@@ -174,15 +197,32 @@ def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, o
     names Params fields whose gradients are zeroed, so Adam leaves them where they are.
     ``penalty(theta, *extra) -> scalar`` (optional) is added to the loss, ``extra`` being
     the step's arguments after ``background`` (e.g. the anchor of
-    :mod:`vbgs.baseline.anchor`); the returned loss includes it."""
+    :mod:`vbgs.baseline.anchor`); the returned loss includes it. ``seen_only``: the
+    step moves only the rows the frame's picture depends on (:func:`seen_rows` of the
+    photometric gradient); the others, and their Adam moments, stay as they are, penalty
+    or not (the polish's rule, :mod:`experiments.learners.polish_learner`)."""
+
+    def photometric(theta: Params, active, rgb, depth, camera: Camera, pixel_weight,
+                    background):
+        out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
+                        tile=config.tile, capacity=config.raster_capacity, blur=config.blur)
+        return frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
+                          depth_weight=config.depth_weight, pixel_weight=pixel_weight)
 
     def loss_fn(theta: Params, active, rgb, depth, camera: Camera, pixel_weight, background,
                 *extra):
-        out = rasterize(to_splats(theta._replace(active=active)), camera, background=background,
-                        tile=config.tile, capacity=config.raster_capacity, blur=config.blur)
-        loss = frame_loss(out, rgb, depth, ssim_weight=config.ssim_weight,
-                          depth_weight=config.depth_weight, pixel_weight=pixel_weight)
+        loss = photometric(theta, active, rgb, depth, camera, pixel_weight, background)
         return loss if penalty is None else loss + penalty(theta, *extra)
+
+    def seen_grads(theta: Params, active, rgb, depth, camera, pixel_weight, background, *extra):
+        """The loss and its gradient on the seen rows, with those rows ``[K]``."""
+        loss, grads = jax.value_and_grad(photometric)(theta, active, rgb, depth, camera,
+                                                      pixel_weight, background)
+        rows = seen_rows(grads)
+        if penalty is not None:
+            cost, more = jax.value_and_grad(penalty)(theta, *extra)
+            loss, grads = loss + cost, jax.tree.map(jnp.add, grads, more)
+        return loss, _rows_where(rows, grads, jax.tree.map(jnp.zeros_like, grads)), rows
 
     @jax.jit
     def step(params: Params, opt_state, rgb, depth, camera: Camera, pixel_weight, background,
@@ -190,12 +230,18 @@ def make_step(config: TrainConfig, optimizer: optax.GradientTransformation, *, o
         if on_trace is not None:
             on_trace()
         theta = trainable(params)
-        loss, grads = jax.value_and_grad(loss_fn)(theta, params.active, rgb, depth, camera,
-                                                  pixel_weight, background, *extra)
+        args = (theta, params.active, rgb, depth, camera, pixel_weight, background, *extra)
+        if seen_only:
+            loss, grads, rows = seen_grads(*args)
+        else:
+            loss, grads = jax.value_and_grad(loss_fn)(*args)
         grads = grads._replace(**{f: jnp.zeros_like(getattr(grads, f)) for f in frozen})
-        updates, opt_state = optimizer.update(grads, opt_state, theta)
+        updates, new_state = optimizer.update(grads, opt_state, theta)
+        if seen_only:
+            updates = _rows_where(rows, updates, jax.tree.map(jnp.zeros_like, updates))
+            new_state = keep_rows(new_state, opt_state, rows)
         theta = optax.apply_updates(theta, updates)
-        return theta._replace(active=params.active), opt_state, loss
+        return theta._replace(active=params.active), new_state, loss
 
     return step
 
