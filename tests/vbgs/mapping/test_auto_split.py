@@ -42,9 +42,9 @@ def active_after(config, xyz, rgb, footprint=None):
     return counts, state
 
 
-def auto(gain=2.0, floor=1.0, components="auto"):
+def auto(gain=0.0, floor=1.0, components="auto", split=True):
     return mapping.Config(components=components, growth=mapping.GrowthConfig(
-        refine_gain=gain, refine_footprints=floor, merge=False))
+        split=split, refine_gain=gain, refine_footprints=floor, merge=False))
 
 
 def test_a_patch_whose_colours_its_components_mix_is_split():
@@ -61,7 +61,7 @@ def test_a_patch_its_components_explain_is_not_split():
 
 
 def test_without_the_rule_the_resolution_is_the_first_frame_s():
-    (first, second), _ = active_after(auto(gain=0.0), *patch(checker=True))
+    (first, second), _ = active_after(auto(split=False), *patch(checker=True))
     # measured 400, then 435: new ground only (the colours pull the means about, so a
     # few level-0 cells are left without one), no refinement
     assert first == 400 and second < 1.2 * first
@@ -105,6 +105,8 @@ def test_split_children_get_their_own_cell_s_prior_scale():
 
 def test_refine_gain_is_checked():
     with pytest.raises(ValueError, match="refine_gain"):
-        mapping.GrowthConfig(refine_gain=-1.0)
+        mapping.GrowthConfig(refine_gain=float("inf"))
+    with pytest.raises(ValueError, match="split"):
+        mapping.GrowthConfig(split=1)
     with pytest.raises(ValueError, match="refine_footprints"):
         mapping.GrowthConfig(refine_footprints=0.0)
