@@ -426,22 +426,23 @@ def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray
 
 
 def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-           key: jax.Array, ray: np.ndarray | None = None, levels=None, finest=None
+           key: jax.Array, ray: np.ndarray | None = None, levels=None, earns=None
            ) -> tuple[np.ndarray, int]:
     """Where a batch adds components: indices into ``x [n, d]`` (positions about the
     grid's origin) given the means ``taken [m, d]`` of the components in use and
     ``n_empty`` free slots. First one per cell holding no component (new ground,
     :func:`new_ground`), then refinement at finer levels within its share of the slots
-    left; at most ``rule.max_new`` in all; random choices under ``key``. ``finest [n]``
-    int: the finest refinement level each point may seed (:func:`vbgs.mapping.splits.finest_levels`;
-    -1: none); None: every point, every level. Returns ``(indices, n_ground)``."""
+    left; at most ``rule.max_new`` in all; random choices under ``key``. ``earns [n,
+    rule.levels]`` bool: the refinement levels each point may seed
+    (:func:`vbgs.mapping.splits.earned_levels`); None: every point, every level. Returns
+    ``(indices, n_ground)``."""
     chosen, n_ground, _ = _select(x, taken, n_empty, rule, key=key, ray=ray, levels=levels,
-                                  finest=finest)
+                                  earns=earns)
     return chosen, n_ground
 
 
 def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-            key: jax.Array, ray=None, levels=None, finest=None
+            key: jax.Array, ray=None, levels=None, earns=None
             ) -> tuple[np.ndarray, int, np.ndarray]:
     """:func:`select`, and the refinement level of each chosen point ``[m]`` (0: new
     ground)."""
@@ -454,7 +455,7 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
     for level in range(1, rule.levels):
         if refine <= 0:
             break
-        seeds = order if finest is None else order[finest[order] >= level]
+        seeds = order if earns is None else order[earns[order, level]]
         more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level, seeds,
                      refine, ray)
         chosen = np.concatenate([chosen, more])
@@ -464,15 +465,15 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
-         config: PriorConfig = PriorConfig(), ray=None, levels=None, finest=None
+         config: PriorConfig = PriorConfig(), ray=None, levels=None, earns=None
          ) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`);
-    ``levels [n]``: the points' coarse levels (:func:`point_levels`); ``finest [n]``: the
-    finest refinement level each point may seed (:func:`vbgs.mapping.splits.finest_levels`)."""
+    ``levels [n]``: the points' coarse levels (:func:`point_levels`); ``earns [n, levels]``:
+    the refinement levels each point may seed (:func:`vbgs.mapping.splits.earned_levels`)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
-                               config=config, ray=ray, levels=levels, finest=finest)
+                               config=config, ray=ray, levels=levels, earns=earns)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
@@ -488,15 +489,15 @@ def _about_origin(prior: Mixture, posterior: Mixture, xyz, ray=None):
     return x, taken, active, None if ray is None else np.asarray(ray, np.float64)
 
 
-def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, finest=None
+def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=None
               ) -> int:
     """How many more components the new ground of the batch ``xyz [n, d]`` wants (at most
     ``rule.max_new``, as :func:`select` counts it) than there are empty slots: above 0
     when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it). With
-    ``finest [n]`` (:func:`vbgs.mapping.splits.finest_levels`) the refinement those points seed counts too
+    ``earns [n, levels]`` (:func:`vbgs.mapping.splits.earned_levels`) the refinement those points seed counts too
     (as :func:`select` counts it with every slot free, in the points' own order)."""
     x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray)
-    if finest is None:
+    if earns is None:
         wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
     else:
         order = np.arange(len(x))
@@ -506,21 +507,21 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, finest=
             if quota <= 0:
                 break
             more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level,
-                         order[finest >= level], quota, ray)
+                         order[earns[:, level]], quota, ray)
             chosen = np.concatenate([chosen, more])
         wanted = len(chosen)
     return wanted - int((~active).sum())
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
-                 key: jax.Array, config: PriorConfig, ray=None, levels=None, finest=None
+                 key: jax.Array, config: PriorConfig, ray=None, levels=None, earns=None
                  ) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     x, taken, active, ray = _about_origin(prior, posterior, xyz, ray)
     empty = np.flatnonzero(~active)
     chosen, n_ground, split = _select(x, taken, len(empty), rule, key=key, ray=ray,
-                                      levels=levels, finest=finest)
+                                      levels=levels, earns=earns)
     n_new = len(chosen)
     if n_new == 0:
         return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
@@ -529,7 +530,7 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     scales = None
     coarse = levels is not None and bool(levels[chosen].any())
     seeds = x[chosen]
-    fine = finest is not None and bool(split.any())  # auto's splits: their own cells
+    fine = earns is not None and bool(split.any())  # auto's splits: their own cells
     if prior.dim == 3 and (config.surface_thickness != 1.0 or coarse or fine) and len(x) >= 3:
         s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
         if coarse:  # a component on a coarse cell of side cell 2^j: variance 4^j times

@@ -345,15 +345,15 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     key, sub = jax.random.split(state.key)
     levels = grow.point_levels(rule, footprint)
     state = state._replace(mixture=mixture, rule=rule)
-    finest = None
+    earns = None
     if config.auto:
         state, merged = _auto_room(state, xyz, ray, levels, config)
-        state, finest = _split_levels(state, xyz, rgb, footprint, config)
-        state = _auto_widen(state, xyz, ray, levels, finest, config)
+        state, earns = _split_levels(state, xyz, rgb, footprint, config)
+        state = _auto_widen(state, xyz, ray, levels, earns, config)
     else:
         state, merged = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
-                              ray=ray, levels=levels, finest=finest)
+                              ray=ray, levels=levels, earns=earns)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
@@ -491,7 +491,7 @@ def _widened(state: MapState, wanted: int, config: Config) -> MapState:
 
 def _split_levels(state: MapState, xyz, rgb, footprint, config: Config
                   ) -> tuple[MapState, np.ndarray | None]:
-    """``components="auto"``: the finest refinement level each point of the batch may seed
+    """``components="auto"``: the refinement levels ``[n, levels]`` each point of the batch may seed
     (:mod:`vbgs.mapping.splits`: where a child's log Bayes factor, from every colour its
     cell has shown, exceeds ``growth.refine_gain``, in cells no finer than
     ``growth.refine_footprints`` pixel footprints), and the state with the batch's colours
@@ -501,20 +501,19 @@ def _split_levels(state: MapState, xyz, rgb, footprint, config: Config
         return state, None
     mixture = state.mixture
     table = splits.no_colours() if state.colours is None else state.colours
-    finest, table = splits.finest_levels(
+    earns, table = splits.earned_levels(
         state.rule, mixture.posterior, grow.is_active(mixture.prior), xyz, rgb, table,
-        colour_noise=config.prior.colour_noise, strength=config.prior.colour_strength,
-        gain=g.refine_gain, footprint=footprint, floor=g.refine_footprints)
-    return state._replace(colours=table), finest
+        prior=config.prior, gain=g.refine_gain, footprint=footprint, floor=g.refine_footprints)
+    return state._replace(colours=table), earns
 
 
-def _auto_widen(state: MapState, xyz, ray, levels, finest, config: Config) -> MapState:
-    """Capacity for the refinement ``finest`` asks for as well as the new ground (births
+def _auto_widen(state: MapState, xyz, ray, levels, earns, config: Config) -> MapState:
+    """Capacity for the refinement ``earns`` asks for as well as the new ground (births
     beyond the ceiling are not made: refinement never merges to make room)."""
-    if finest is None or not (finest >= 1).any():
+    if earns is None or not earns.any():
         return state
     short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels,
-                           finest=finest)
+                           earns=earns)
     if short <= 0:
         return state
     return _widened(state, state.mixture.prior.n_components + short, config)

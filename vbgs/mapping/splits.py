@@ -33,22 +33,35 @@ so the child's log Bayes factor is
                                                  / (2 (n + lambda_0)))]
         - (d / 2) log(1 + n / lambda_0).
 
-The last term is the child's Occam factor: the price of its colour mean, which grows
-with the evidence (``log n``) while a miss the component makes at the cell grows the
-first term linearly in ``n``; a cell whose points scatter as much about ``c_bar`` as
-``c_bar`` lies from ``m`` (texture below the cell's side) earns nothing however many
-points it holds, where the rule this replaces (the colour gain of one frame's points,
-noise fixed at ``sigma_c``: ``n |c_bar - m|^2 / (2 sigma_c^2) > 1`` nat) split every
-cell of fine texture, the walk's grass to the 131k ceiling. The spatial terms are left
-out on both sides: a child's density over its cell is what its parent's was there, so
-its likelihood gain and the Occam factor of its mean and scatter are taken to cancel.
-A point seeds a child at the finest level whose cell has ``L > growth.refine_gain``
-(the prior log odds against a split; 0: the more probable explanation wins), never in a
-cell finer than ``growth.refine_footprints`` of the point's pixel footprints (a
-component need not be much finer than the pixels it is seen with). The sums include
-the batch being grown (a cell's evidence is every point it has shown, this frame's
-too); the comparison is against the component nearest each point now, so once a child
-sits in the cell its own colour answers for it.
+The last term is the Occam factor of the child's colour mean: it grows with the
+evidence (``log n``) while a miss the component makes at the cell grows the first term
+linearly in ``n``; a cell whose points scatter as much about ``c_bar`` as ``c_bar`` lies
+from ``m`` (texture below the cell's side) earns nothing however many points it holds,
+where the rule this replaces (the colour gain of one frame's points, noise fixed at
+``sigma_c``: ``n |c_bar - m|^2 / (2 sigma_c^2) > 1`` nat) split every cell of fine
+texture, the walk's grass to the 131k ceiling.
+
+The child's other parameters are paid for too, as the streaming bound pays each
+component's KL to its prior: on the surfaces a depth camera sees, a child's density
+over its cell is what its parent's was there (its weight falls as its area does), so
+its spatial likelihood gain is taken as zero, while the Occam factors of its spatial
+mean (``kappa_0 = prior.mean_strength`` pseudo-points), covariance (``nu_0 =
+prior.cov_strength``) and weight (``alpha = prior.alpha``) remain, each ``1/2 log(1 + n /
+strength)`` per free parameter (the Laplace form of the KL of a conjugate posterior from
+``n`` points; :func:`spatial_occam`):
+
+    S = (D / 2) log(1 + n / kappa_0) + (D (D + 1) / 4) log(1 + n / nu_0)
+        + (1 / 2) log(1 + n / alpha),                      D = 3 spatial dimensions.
+
+A point's cell at level ``l`` earns a child when ``L - S > growth.refine_gain`` (the
+prior log odds against a split; 0: the more probable explanation wins), in cells no
+finer than ``growth.refine_footprints`` of the point's pixel footprints (a component
+need not be much finer than the pixels it is seen with). The sums include the batch
+being grown (a cell's evidence is every point it has shown, this frame's too); the
+comparison is against the component nearest each point now, so once a child sits in
+the cell its own colour answers for it. What the rule does not count is a child's
+spatial gain where the surface bends or ends (a sphere's curve, a silhouette): there
+the parent's flat density misses the points, which colour alone does not see.
 
 The table (like :mod:`vbgs.mapping.saturation`'s) has ``2^TABLE_BITS`` slots addressed
 by a hash of the cell (its level and integer coordinates); a cell whose slot holds
@@ -63,6 +76,7 @@ from typing import NamedTuple
 import numpy as np
 
 from vbgs.inference import grow
+from vbgs.inference.model import PriorConfig
 from vbgs.mapping import saturation
 
 # 2^21 slots (56 MiB: keys, counts and colour sums): the fine cells a 128 px stream of
@@ -106,12 +120,22 @@ def add(table: CellColours, keys: np.ndarray, rgb: np.ndarray) -> tuple[CellColo
     return out, np.where(mine, slot, -1)
 
 
+def spatial_occam(n, dim: int, prior: PriorConfig) -> np.ndarray:
+    """``[p]`` nats: the Occam factor of a child's spatial parameters and weight, fitted to
+    ``n [p]`` points of ``dim``-D space (module docstring): ``(dim / 2) log(1 + n /
+    kappa_0) + (dim (dim + 1) / 4) log(1 + n / nu_0) + (1 / 2) log(1 + n / alpha)``."""
+    n = np.asarray(n, np.float64)
+    return (0.5 * dim * np.log1p(n / prior.mean_strength)
+            + 0.25 * dim * (dim + 1) * np.log1p(n / prior.cov_strength)
+            + 0.5 * np.log1p(n / prior.alpha))
+
+
 def log_bayes_factor(n, total, square, m, *, colour_noise: float, strength: float
                      ) -> np.ndarray:
-    """``[p]`` the log Bayes factor ``L`` of a child of a cell (module docstring) from the
-    cell's ``n [p]`` points, their colour sum ``total [p, d]`` and sum of ``|c|^2``
-    ``square [p]``, against the colour mean ``m [p, d]`` of the component that explains
-    them now; ``colour_noise`` is ``sigma_c``, ``strength`` is ``lambda_0``."""
+    """``[p]`` the colour log Bayes factor ``L`` of a child of a cell (module docstring)
+    from the cell's ``n [p]`` points, their colour sum ``total [p, d]`` and sum of
+    ``|c|^2`` ``square [p]``, against the colour mean ``m [p, d]`` of the component that
+    explains them now; ``colour_noise`` is ``sigma_c``, ``strength`` is ``lambda_0``."""
     n = np.maximum(np.asarray(n, np.float64), 1e-12)
     total, m = np.asarray(total, np.float64), np.asarray(m, np.float64)
     d = total.shape[-1]
@@ -125,25 +149,25 @@ def log_bayes_factor(n, total, square, m, *, colour_noise: float, strength: floa
     return (a0 + 0.5 * n * d) * np.log(h0 / h1) - 0.5 * d * np.log1p(n / strength)
 
 
-def finest_levels(rule: grow.Growth, posterior, active: np.ndarray, xyz, rgb,
-                  table: CellColours, *, colour_noise: float, strength: float,
-                  gain: float, footprint=None, floor: float = grow.REFINE_FOOTPRINTS
-                  ) -> tuple[np.ndarray, CellColours]:
-    """``[n]`` int: the finest refinement level each point of the batch ``xyz [n, d]``,
-    ``rgb [n, 3]`` may seed (-1: none; see the module docstring), and the table with the
-    batch's colours added. ``posterior``: the mixture whose active components
-    (``active [k]``) explain the points now; ``footprint [n]``: the points' pixel
-    footprints (:func:`vbgs.mapping.measurement.point_footprints`; None: every level)."""
+def earned_levels(rule: grow.Growth, posterior, active: np.ndarray, xyz, rgb,
+                  table: CellColours, *, prior: PriorConfig, gain: float, footprint=None,
+                  floor: float = grow.REFINE_FOOTPRINTS) -> tuple[np.ndarray, CellColours]:
+    """``[n, rule.levels]`` bool: the refinement levels each point of the batch ``xyz [n,
+    d]``, ``rgb [n, 3]`` may seed a child at (its cell there earns one: the module
+    docstring; column 0, new ground, is False), and the table with the batch's colours
+    added. ``posterior``: the mixture whose active components (``active [k]``) explain the
+    points now; ``footprint [n]``: the points' pixel footprints
+    (:func:`vbgs.mapping.measurement.point_footprints`; None: every level)."""
     origin = np.asarray(posterior.origin, np.float64)
     x = np.asarray(xyz, np.float64) - origin
     n = len(x)
-    finest = np.full(n, -1, np.int64)
+    earns = np.zeros((n, rule.levels), bool)
     allowed = np.full(n, rule.levels - 1, np.int64)
     if footprint is not None:
         ratio = rule.cell / (floor * np.maximum(np.asarray(footprint, np.float64), 1e-30))
         allowed = np.minimum(allowed, np.floor(np.log2(ratio)).astype(np.int64))
     if n == 0 or allowed.max() < 1:
-        return finest, table
+        return earns, table
     m = None  # the colours of the components nearest the points (none yet: no split)
     if np.any(active):
         from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
@@ -161,6 +185,8 @@ def finest_levels(rule: grow.Growth, posterior, active: np.ndarray, xyz, rgb,
             continue
         s = slot[ok]
         score = log_bayes_factor(table.count[s], table.total[s], table.square[s], m[here[ok]],
-                                 colour_noise=colour_noise, strength=strength)
-        finest[here[ok][score > gain]] = level
-    return finest, table
+                                 colour_noise=prior.colour_noise,
+                                 strength=prior.colour_strength)
+        score = score - spatial_occam(table.count[s], x.shape[1], prior)
+        earns[here[ok][score > gain], level] = True
+    return earns, table
