@@ -77,7 +77,7 @@ import numpy as np
 
 from vbgs.inference import grow
 from vbgs.inference.model import PriorConfig
-from vbgs.mapping import saturation
+import vbgs.mapping.saturation as saturation
 
 # 2^21 slots (56 MiB: keys, counts and colour sums): the fine cells a 128 px stream of
 # 60 frames shows at levels 1-3 with few clashes (each only delays a split).
