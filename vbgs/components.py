@@ -25,6 +25,9 @@ AUTO_MAX_COMPONENTS = 131072
 # 21.89 / 21.83 / 20.15 dB at 4 / 2 / 1 (object 23.94 / 24.55 / 24.10 with 5153 / 9009 /
 # 15300 components; room 22.71 / 23.07 / 23.05 with 22.9k / 41.8k / 70.5k; walk 19.03 /
 # 17.87 / 13.29 with 13.4k / 36.9k / 131k: finer cells leave the walk's views holed).
+# Under the Bayes-factor split rule (vbgs.mapping.splits, gain 0), 8 against 4 (`--grid
+# growth.auto_points=8`, the same views): object 25.47 / 25.66 (18.1k / 18.0k), room
+# 23.51 / 24.21 (49.4k / 61.4k), walk 22.28 / 22.33 (36.9k / 46.7k); 4 kept.
 AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
 # bound_pairs); 0: none (at auto:MAX the budget's merges still make room). Off since auto

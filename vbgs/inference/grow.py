@@ -494,8 +494,9 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
     """How many more components the new ground of the batch ``xyz [n, d]`` wants (at most
     ``rule.max_new``, as :func:`select` counts it) than there are empty slots: above 0
     when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it). With
-    ``earns [n, levels]`` (:func:`vbgs.mapping.splits.earned_levels`) the refinement those points seed counts too
-    (as :func:`select` counts it with every slot free, in the points' own order)."""
+    ``earns [n, levels]`` (:func:`vbgs.mapping.splits.earned_levels`) the refinement those
+    points seed counts too (as :func:`select` counts it with every slot free, in the
+    points' own order)."""
     x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray)
     if earns is None:
         wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))

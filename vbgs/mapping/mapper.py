@@ -54,8 +54,9 @@ RGB, z-depth):
 
 With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows new
 ground at the resolution of the first frame's points (``growth.auto_points`` of them per
-cell), splits where the bound's colour term asks for a finer cell
-(:mod:`vbgs.mapping.splits`: the Bayes factor of a child, no finer than the pixel footprint allows),
+cell), splits where a child in a finer cell earns its place (:mod:`vbgs.mapping.splits`:
+its Bayes factor from the colours the cell has shown, no finer than the pixel footprint
+allows),
 optionally merges every few frames the neighbours whose merge raises the bound
 (:func:`vbgs.inference.merge.bound_pairs`; off by default) and grows the slots in buckets
 (:mod:`vbgs.inference.capacity`) up to MAX (``MapState.capped`` once reached); see
@@ -491,8 +492,8 @@ def _widened(state: MapState, wanted: int, config: Config) -> MapState:
 
 def _split_levels(state: MapState, xyz, rgb, footprint, config: Config
                   ) -> tuple[MapState, np.ndarray | None]:
-    """``components="auto"``: the refinement levels ``[n, levels]`` each point of the batch may seed
-    (:mod:`vbgs.mapping.splits`: where a child's log Bayes factor, from every colour its
+    """``components="auto"``: the refinement levels ``[n, levels]`` each point of the
+    batch may seed (:mod:`vbgs.mapping.splits`: where a child's log Bayes factor, from every colour its
     cell has shown, exceeds ``growth.refine_gain``, in cells no finer than
     ``growth.refine_footprints`` pixel footprints), and the state with the batch's colours
     counted; None when splits are off (``growth.split``)."""
