@@ -175,18 +175,18 @@ def earned_levels(rule: grow.Growth, posterior, active: np.ndarray, xyz, rgb,
         means = np.asarray(posterior.space.mean, np.float64)[active]
         _, nearest = cKDTree(means).query(x, k=1, workers=-1)
         m = np.asarray(posterior.colour.mean, np.float64)[active][nearest]
-    for level in range(1, int(allowed.max()) + 1):
-        here = np.flatnonzero(allowed >= level)
-        keys = saturation.cell_keys(rule, x[here], np.zeros(x.shape[1]),
-                                    np.full(len(here), -level))
-        table, slot = add(table, keys, np.asarray(rgb)[here])
-        ok = slot >= 0
-        if m is None:
-            continue
-        s = slot[ok]
-        score = log_bayes_factor(table.count[s], table.total[s], table.square[s], m[here[ok]],
-                                 colour_noise=prior.colour_noise,
-                                 strength=prior.colour_strength)
-        score = score - spatial_occam(table.count[s], x.shape[1], prior)
-        earns[here[ok][score > gain], level] = True
+    # every level's cells in one pass over the table (one copy of it per batch)
+    here = [np.flatnonzero(allowed >= l) for l in range(1, int(allowed.max()) + 1)]
+    rows = np.concatenate(here)  # the points, level after level
+    level = np.concatenate([np.full(len(h), l) for l, h in enumerate(here, 1)])
+    keys = saturation.cell_keys(rule, x[rows], np.zeros(x.shape[1]), -level)
+    table, slot = add(table, keys, np.asarray(rgb)[rows])
+    if m is None:
+        return earns, table
+    ok = slot >= 0
+    s, rows, level = slot[ok], rows[ok], level[ok]
+    score = log_bayes_factor(table.count[s], table.total[s], table.square[s], m[rows],
+                             colour_noise=prior.colour_noise, strength=prior.colour_strength)
+    score = score - spatial_occam(table.count[s], x.shape[1], prior)
+    earns[rows[score > gain], level[score > gain]] = True
     return earns, table
