@@ -26,7 +26,7 @@ AUTO_MAX_COMPONENTS = 131072
 # 15300 components; room 22.71 / 23.07 / 23.05 with 22.9k / 41.8k / 70.5k; walk 19.03 /
 # 17.87 / 13.29 with 13.4k / 36.9k / 131k: finer cells leave the walk's views holed).
 # Under the Bayes-factor split rule (vbgs.mapping.splits, gain 0), 8 against 4 (`--grid
-# growth.auto_points=8`, the same views): object 25.47 / 25.66 (18.1k / 18.0k), room
+# growth.auto_points=8`, the same views): object 25.47 / 25.65 (18.1k / 18.0k), room
 # 23.51 / 24.21 (49.4k / 61.4k), walk 22.28 / 22.33 (36.9k / 46.7k); 4 kept.
 AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
@@ -48,7 +48,7 @@ AUTO_MERGE_EVERY = 0
 # `python -m experiments.val_probe fit-scene --scene S --components auto` at 0 and 1;
 # val_psnr, components):
 #   gain -8: object 26.78 (73.1k), room 24.10 (131k: the ceiling), walk 22.35 (131k)
-#   gain  0: object 25.66 (18.0k), room 24.21 (61.4k), walk 22.33 (46.7k)
+#   gain  0: object 25.65 (18.0k), room 24.21 (61.4k), walk 22.33 (46.7k)
 #   gain  1: object 25.55 (17.2k), room 24.22 (59.1k), walk 22.31 (44.4k)
 #   gain  8: object 25.00 (14.0k), room 23.90 (50.0k), walk 21.97 (36.7k)
 #   fixed K 20000 / 50000 (the same views): object 26.58 / 27.35, room 22.67 / 24.03,
