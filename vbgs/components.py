@@ -4,9 +4,10 @@ Plain Python (no JAX, outside :mod:`vbgs.mapping`, whose package imports JAX): t
 command line and the sweep's config check read it before
 anything heavy is imported. What ``auto`` does is in :mod:`vbgs.mapping.mapper`
 (``_auto_room``), :mod:`vbgs.inference.grow` (births on new ground at the first frame's
-resolution, splits where the bound's colour term asks for a finer cell:
-``refinement_levels``), :mod:`vbgs.inference.merge` (merges scored by the bound, off by
-default) and :mod:`vbgs.inference.capacity` (slots grown in buckets).
+resolution, children in finer cells), :mod:`vbgs.mapping.splits` (where a child earns
+its place: its Bayes factor from the colours its cell has shown), :mod:`vbgs.inference.merge`
+(merges scored by the bound, off by default) and :mod:`vbgs.inference.capacity` (slots
+grown in buckets).
 """
 
 from __future__ import annotations
@@ -24,6 +25,9 @@ AUTO_MAX_COMPONENTS = 131072
 # 21.89 / 21.83 / 20.15 dB at 4 / 2 / 1 (object 23.94 / 24.55 / 24.10 with 5153 / 9009 /
 # 15300 components; room 22.71 / 23.07 / 23.05 with 22.9k / 41.8k / 70.5k; walk 19.03 /
 # 17.87 / 13.29 with 13.4k / 36.9k / 131k: finer cells leave the walk's views holed).
+# Under the Bayes-factor split rule (vbgs.mapping.splits, gain 0), 8 against 4 (`--grid
+# growth.auto_points=8`, the same views): object 25.47 / 25.65 (18.1k / 18.0k), room
+# 23.51 / 24.21 (49.4k / 61.4k), walk 22.28 / 22.33 (36.9k / 46.7k); 4 kept.
 AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
 # bound_pairs); 0: none (at auto:MAX the budget's merges still make room). Off since auto
@@ -35,26 +39,31 @@ AUTO_POINTS = 4.0
 # footprints 0.5: object 25.20 (26k), room 23.51 (75k), walk 22.08 (96k). The bound
 # scores points, and the merges it allows cost pictures 0.6-1.9 dB; they held the count.
 AUTO_MERGE_EVERY = 0
-# "auto": the split rule (vbgs.inference.grow.refinement_levels): a child in a finer cell
-# when the colour term of the bound it wins back over its cell's points in a frame
-# exceeds this many nats, cells no finer than grow.REFINE_FOOTPRINTS pixel footprints.
-# Without it the resolution is the first frame's (auto_points) and auto was 1.7-2.9 dB
-# short of the best fixed K on test views. Chosen on VALIDATION views (128 px, 60 frames,
-# no bound merges, footprints 0.5), `python -m experiments.run tune --scene object room
-# walk --components auto --grid growth.refine_gain=4,16 growth.refine_footprints=0.5
-# growth.auto_merge_every=1000` and the same at refine_gain=1 (val_psnr, components):
-#   gain  1: object 26.38 (42.3k), room 24.09 (119k), walk 22.83 (131k: the ceiling)
-#   gain  4: object 25.24 (26.4k), room 23.91 (77.8k), walk 22.58 (81.1k)
-#   gain 16: object 23.99 (14.8k), room 23.75 (52.9k), walk 22.00 (41.6k)
-#   no split (auto_points 4, merges every 4, as before): object 24.26 (5.2k),
-#   room 22.78 (22.9k), walk 19.53 (13.4k)
-# Footprints 1 against 0.5 at gain 1, no merges: object 25.83 (19.3k) / 26.38 (42.3k),
-# room 23.74 (56k) / 24.09 (119k). A coarser first frame with the same splits is worse
-# at about the same count (auto_points 8 / 16: object 25.63 / 24.64, room 23.25 /
-# 22.72). The smallest gain tried is best everywhere: the picture wants more components
-# than a component's Occam factor (tens of nats) would allow, and the count is what the
-# scene's texture asks for (the walk's grass: the ceiling).
-AUTO_REFINE_GAIN = 1.0
+# "auto": the split rule (vbgs.mapping.splits, derived there): a child in a finer cell
+# when its log Bayes factor, the colour evidence of every point its cell has shown less
+# the Occam factors of all its parameters (from the prior's strengths), exceeds this many
+# nats: the prior log odds against a split, 0 (even odds) as derived. Confirmed, not
+# re-chosen, on VALIDATION views (128 px, 60 frames, 4 views; `python -m experiments.run
+# tune --scene object room walk --components auto --grid growth.refine_gain=-8,8`, and
+# `python -m experiments.val_probe fit-scene --scene S --components auto` at 0 and 1;
+# val_psnr, components):
+#   gain -8: object 26.78 (73.1k), room 24.10 (131k: the ceiling), walk 22.35 (131k)
+#   gain  0: object 25.65 (18.0k), room 24.21 (61.4k), walk 22.33 (46.7k)
+#   gain  1: object 25.55 (17.2k), room 24.22 (59.1k), walk 22.31 (44.4k)
+#   gain  8: object 25.00 (14.0k), room 23.90 (50.0k), walk 21.97 (36.7k)
+#   fixed K 20000 / 50000 (the same views): object 26.58 / 27.35, room 22.67 / 24.03,
+#   walk 21.59 / 21.07
+# Below 0 only the object's picture rises, at 4 times its components, while room and walk
+# go to the ceiling for nothing; above 0 every scene loses 0.3-0.65 dB. Without the
+# spatial Occam factors (the colour mean's alone, gain 1): object 26.53 (32.8k), room
+# 24.70 (104k), walk 22.91 (99k). The rule it replaced (one frame's colour gain at noise
+# sigma_c > 1 nat): object 26.38 (42.3k), room 24.09 (119k), walk 22.83 (131k); at 16
+# nats 23.99 (14.8k), 23.75 (52.9k), 22.00 (41.6k). What the object still misses against
+# fixed K is not the count: under this rule (gain 1) a finer first frame (auto_points 1 /
+# 2: 25.36 dB with 29.3k / 25.23 with 20.8k) or children at the level-0 prior scale
+# (24.75, 17.5k) do worse; fixed K refines everywhere at random, and the rule counts
+# colour, not the geometry of curved surfaces and silhouettes.
+AUTO_REFINE_GAIN = 0.0
 AUTO = "auto"
 
 

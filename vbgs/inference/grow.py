@@ -81,7 +81,7 @@ COARSE_LEVELS = 5
 # fine cells; a street's end, 10x, does not.
 COARSE_FROM = 4.0
 # components="auto": a refinement cell is at least this many pixel footprints a side
-# (refinement_levels; a component need not be much finer than the pixels it is seen
+# (vbgs.mapping.splits; a component need not be much finer than the pixels it is seen
 # with). Half a footprint: 60 views of a surface resolve it below one view's pixel. On
 # validation views (128 px, 60 frames, gain 1, no bound merges; vbgs.components) 0.5
 # against 1: object 26.38 / 25.83 dB, room 24.09 / 23.74, with about twice the components.
@@ -282,60 +282,6 @@ def point_levels(rule: Growth, footprint) -> np.ndarray | None:
     return np.clip(level, 0, rule.coarse).astype(np.int64)
 
 
-def refinement_levels(rule: Growth, posterior: Mixture, active: np.ndarray, xyz, rgb, *,
-                      colour_noise: float, gain: float, footprint=None,
-                      floor: float = REFINE_FOOTPRINTS) -> np.ndarray:
-    """``[n]`` int: the finest refinement level (cells of side ``rule.cell / 2^l``) each
-    point of the batch ``xyz [n, d]``, ``rgb [n, 3]`` may seed, -1 for none: the split
-    rule of ``components="auto"`` (``mapper._auto_room``; figures in
-    :mod:`vbgs.components`).
-
-    Each point's component is the active one of ``posterior`` (``active [k]``) whose mean
-    is nearest (the sparse E-step's first candidate), with colour mean ``m_n``. A child
-    in a cell that took the cell's points would explain them with their own mean colour
-    ``c_bar``; the colour term of the bound (``-|c - m|^2 / (2 sigma_c^2)`` per point,
-    ``sigma_c = colour_noise``) then rises by
-
-        G = [sum_n |c_n - m_n|^2 - sum_n |c_n - c_bar|^2] / (2 sigma_c^2)
-
-    nats over the cell's points of this batch (the colour noise within the cell cancels:
-    only what the component misses on average counts). The child is worth its place when
-    ``G`` exceeds its Occam factor (its KL to its prior, a few nats per parameter;
-    ``gain``, chosen on validation views). A point may seed levels ``1 .. l`` for the
-    finest ``l`` whose cell earns that, and whose side is at least ``floor`` pixel
-    footprints ``footprint [n]`` (:func:`vbgs.mapping.measurement.point_footprints`: a
-    component need not be finer than the pixels it is seen with; without footprints every
-    level ``< rule.levels``). The spatial terms are left out (a flat patch is explained
-    about as well by one component as by two)."""
-    x = np.asarray(xyz, np.float64) - np.asarray(posterior.origin, np.float64)
-    n = len(x)
-    finest = np.full(n, -1, np.int64)
-    if not np.any(active) or n == 0:
-        return finest
-    from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
-
-    means = np.asarray(posterior.space.mean, np.float64)[active]
-    colours = np.asarray(posterior.colour.mean, np.float64)[active]
-    _, nearest = cKDTree(means).query(x, k=1, workers=-1)
-    c = np.asarray(rgb, np.float64)
-    miss = np.sum((c - colours[nearest]) ** 2, -1)  # [n] |c_n - m_n|^2
-    own = np.sum(c**2, -1)  # [n] |c_n|^2
-    allowed = np.full(n, rule.levels - 1, np.int64)
-    if footprint is not None:
-        ratio = rule.cell / (floor * np.maximum(np.asarray(footprint, np.float64), 1e-30))
-        allowed = np.minimum(allowed, np.floor(np.log2(ratio)).astype(np.int64))
-    for level in range(1, rule.levels):
-        ids = cell_ids(cell_index(x, rule.cell / 2**level))
-        m = ids.max() + 1
-        count = np.bincount(ids, minlength=m)
-        total = np.stack([np.bincount(ids, c[:, j], m) for j in range(c.shape[1])], 1)
-        spread = np.bincount(ids, own, m) - np.sum(total**2, 1) / count  # sum |c - c_bar|^2
-        g = (np.bincount(ids, miss, m) - spread) / (2.0 * colour_noise**2)
-        earns = (g[ids] > gain) & (allowed >= level)
-        finest = np.where(earns, level, finest)
-    return finest
-
-
 def reach_of(rule: Growth, cells: float = REACH_CELLS) -> float:
     """``cells x cell`` (:data:`REACH_CELLS` by default): how far from every component a point may lie and still be
     learned. Once the budget K is spent, new ground gets no component; its points, forced
@@ -460,22 +406,23 @@ def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray
 
 
 def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-           key: jax.Array, ray: np.ndarray | None = None, levels=None, finest=None
+           key: jax.Array, ray: np.ndarray | None = None, levels=None, earns=None
            ) -> tuple[np.ndarray, int]:
     """Where a batch adds components: indices into ``x [n, d]`` (positions about the
     grid's origin) given the means ``taken [m, d]`` of the components in use and
     ``n_empty`` free slots. First one per cell holding no component (new ground,
     :func:`new_ground`), then refinement at finer levels within its share of the slots
-    left; at most ``rule.max_new`` in all; random choices under ``key``. ``finest [n]``
-    int: the finest refinement level each point may seed (:func:`refinement_levels`;
-    -1: none); None: every point, every level. Returns ``(indices, n_ground)``."""
+    left; at most ``rule.max_new`` in all; random choices under ``key``. ``earns [n,
+    rule.levels]`` bool: the refinement levels each point may seed
+    (:func:`vbgs.mapping.splits.earned_levels`); None: every point, every level. Returns
+    ``(indices, n_ground)``."""
     chosen, n_ground, _ = _select(x, taken, n_empty, rule, key=key, ray=ray, levels=levels,
-                                  finest=finest)
+                                  earns=earns)
     return chosen, n_ground
 
 
 def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-            key: jax.Array, ray=None, levels=None, finest=None
+            key: jax.Array, ray=None, levels=None, earns=None
             ) -> tuple[np.ndarray, int, np.ndarray]:
     """:func:`select`, and the refinement level of each chosen point ``[m]`` (0: new
     ground)."""
@@ -488,7 +435,7 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
     for level in range(1, rule.levels):
         if refine <= 0:
             break
-        seeds = order if finest is None else order[finest[order] >= level]
+        seeds = order if earns is None else order[earns[order, level]]
         more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level, seeds,
                      refine, ray)
         chosen = np.concatenate([chosen, more])
@@ -498,15 +445,15 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
-         config: PriorConfig = PriorConfig(), ray=None, levels=None, finest=None
+         config: PriorConfig = PriorConfig(), ray=None, levels=None, earns=None
          ) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`);
-    ``levels [n]``: the points' coarse levels (:func:`point_levels`); ``finest [n]``: the
-    finest refinement level each point may seed (:func:`refinement_levels`)."""
+    ``levels [n]``: the points' coarse levels (:func:`point_levels`); ``earns [n, levels]``:
+    the refinement levels each point may seed (:func:`vbgs.mapping.splits.earned_levels`)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
-                               config=config, ray=ray, levels=levels, finest=finest)
+                               config=config, ray=ray, levels=levels, earns=earns)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
@@ -522,15 +469,16 @@ def _about_origin(prior: Mixture, posterior: Mixture, xyz, ray=None):
     return x, taken, active, None if ray is None else np.asarray(ray, np.float64)
 
 
-def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, finest=None
+def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=None
               ) -> int:
     """How many more components the new ground of the batch ``xyz [n, d]`` wants (at most
     ``rule.max_new``, as :func:`select` counts it) than there are empty slots: above 0
     when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it). With
-    ``finest [n]`` (:func:`refinement_levels`) the refinement those points seed counts too
-    (as :func:`select` counts it with every slot free, in the points' own order)."""
+    ``earns [n, levels]`` (:func:`vbgs.mapping.splits.earned_levels`) the refinement those
+    points seed counts too (as :func:`select` counts it with every slot free, in the
+    points' own order)."""
     x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray)
-    if finest is None:
+    if earns is None:
         wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
     else:
         order = np.arange(len(x))
@@ -540,21 +488,21 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, finest=
             if quota <= 0:
                 break
             more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level,
-                         order[finest >= level], quota, ray)
+                         order[earns[:, level]], quota, ray)
             chosen = np.concatenate([chosen, more])
         wanted = len(chosen)
     return wanted - int((~active).sum())
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
-                 key: jax.Array, config: PriorConfig, ray=None, levels=None, finest=None
+                 key: jax.Array, config: PriorConfig, ray=None, levels=None, earns=None
                  ) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     x, taken, active, ray = _about_origin(prior, posterior, xyz, ray)
     empty = np.flatnonzero(~active)
     chosen, n_ground, split = _select(x, taken, len(empty), rule, key=key, ray=ray,
-                                      levels=levels, finest=finest)
+                                      levels=levels, earns=earns)
     n_new = len(chosen)
     if n_new == 0:
         return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])
@@ -563,7 +511,7 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     scales = None
     coarse = levels is not None and bool(levels[chosen].any())
     seeds = x[chosen]
-    fine = finest is not None and bool(split.any())  # auto's splits: their own cells
+    fine = earns is not None and bool(split.any())  # auto's splits: their own cells
     if prior.dim == 3 and (config.surface_thickness != 1.0 or coarse or fine) and len(x) >= 3:
         s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
         if coarse:  # a component on a coarse cell of side cell 2^j: variance 4^j times

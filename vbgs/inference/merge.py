@@ -57,7 +57,7 @@ On the walk (the same command with ``--scene walk``) they cost: 17.87 dB with 36
 components, 19.64 dB with 75978 without (depth L1 1.16 against 0.68). The bound scores
 points, not pictures: a merge the points allow can still open holes in views from
 elsewhere (far ground, seen coarsely and from one side). Since ``auto`` splits
-(:func:`vbgs.inference.grow.refinement_levels`) these merges cost pictures everywhere
+(the rule of the time, ``refinement_levels``) these merges cost pictures everywhere
 (0.6-1.9 dB on the three scenes' validation views) and are off by default
 (``growth.auto_merge_every = 0``; figures in :mod:`vbgs.components`).
 

@@ -62,10 +62,11 @@ class GrowthConfig:
     auto_points, auto_merge_every: ``components="auto"`` only (``mapper._auto_room``):
         first-frame points per level-0 cell (the resolution), frames between rounds of
         merges scored by the bound (0: none; at auto:MAX the budget merges still run);
-    refine_gain, refine_footprints: ``components="auto"`` only: a point seeds a finer
-        component when its component explains its colour worse by more than this many
-        nats, in cells no finer than this many pixel footprints
-        (:func:`vbgs.inference.grow.refinement_levels`; gain 0: no refinement);
+    split, refine_gain, refine_footprints: ``components="auto"`` only: a point seeds a
+        finer component where the log Bayes factor of a child, from every colour its cell
+        has shown, exceeds ``refine_gain`` nats (the prior log odds against a split), in
+        cells no finer than ``refine_footprints`` pixel footprints
+        (:mod:`vbgs.mapping.splits`; ``split`` false: no refinement);
     hole_radius, hole_colour_tol: measured depth only (``sensor`` not exact): a hole behind
         a depth edge or inside a surface takes the depth extrapolated from the nearest
         pixel within ``hole_radius`` px whose colour differs by at most ``hole_colour_tol``
@@ -83,6 +84,7 @@ class GrowthConfig:
     coarse_from: float = grow.COARSE_FROM
     auto_points: float = AUTO_POINTS
     auto_merge_every: int = AUTO_MERGE_EVERY
+    split: bool = True
     refine_gain: float = AUTO_REFINE_GAIN
     refine_footprints: float = grow.REFINE_FOOTPRINTS
     hole_radius: int = HOLE_RADIUS
@@ -103,9 +105,11 @@ class GrowthConfig:
             raise ValueError(f"growth.auto_merge_every must be an integer >= 0 (frames; 0: "
                              f"no merges scored by the bound), got {self.auto_merge_every!r}")
         if not (isinstance(self.refine_gain, (int, float)) and math.isfinite(self.refine_gain)
-                and self.refine_gain >= 0):
-            raise ValueError(f"growth.refine_gain must be a number >= 0 (nats; 0 turns auto's "
-                             f"refinement off), got {self.refine_gain!r}")
+                and not isinstance(self.refine_gain, bool)):
+            raise ValueError(f"growth.refine_gain must be a finite number (nats: the log "
+                             f"Bayes factor a split must exceed), got {self.refine_gain!r}")
+        if not isinstance(self.split, bool):
+            raise ValueError(f"growth.split must be true or false, got {self.split!r}")
         _positive("growth", "refine_footprints", self.refine_footprints)
         _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
         _positive("growth", "reach_cells", self.reach_cells)

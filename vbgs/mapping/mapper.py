@@ -54,8 +54,9 @@ RGB, z-depth):
 
 With ``components="auto"`` (``"auto:MAX"``) the count is the data's: step 2 grows new
 ground at the resolution of the first frame's points (``growth.auto_points`` of them per
-cell), splits where the bound's colour term asks for a finer cell
-(:func:`vbgs.inference.grow.refinement_levels`, no finer than the pixel footprint allows),
+cell), splits where a child in a finer cell earns its place (:mod:`vbgs.mapping.splits`:
+its Bayes factor from the colours the cell has shown, no finer than the pixel footprint
+allows),
 optionally merges every few frames the neighbours whose merge raises the bound
 (:func:`vbgs.inference.merge.bound_pairs`; off by default) and grows the slots in buckets
 (:mod:`vbgs.inference.capacity`) up to MAX (``MapState.capped`` once reached); see
@@ -89,6 +90,7 @@ from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
 from vbgs.components import AUTO_BUCKET
 import vbgs.mapping.saturation as saturation
+import vbgs.mapping.splits as splits
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.holes import fill_holes
@@ -115,6 +117,7 @@ class MapState(NamedTuple):
     n_frames: int = 0  # frames learned
     capped: bool = False  # components="auto" reached its most components (merged to go on)
     seen: saturation.Seen | None = None  # points learned per cell (budget.saturation)
+    colours: splits.CellColours | None = None  # colours shown per refinement cell (auto)
     n_skipped: int = 0  # valid points skipped as already explained (budget.saturation)
 
     @property
@@ -334,7 +337,7 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     if mixture is None:  # the first frame fixes the cell side
         first, refine = g.first_frame_share * k, g.refine_share
         if config.auto:  # the sensor's resolution, not a share of K; see _auto_room
-            first, refine = len(xyz) / g.auto_points, 1.0 if g.refine_gain > 0 else 0.0
+            first, refine = len(xyz) / g.auto_points, 1.0 if g.split else 0.0
         rule = grow.calibrate(xyz, k, first, refine=refine,
                               levels=g.levels, rate=g.max_new_share, footprint=footprint,
                               coarse=g.coarse_levels, coarse_from=g.coarse_from)
@@ -343,15 +346,15 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     key, sub = jax.random.split(state.key)
     levels = grow.point_levels(rule, footprint)
     state = state._replace(mixture=mixture, rule=rule)
-    finest = None
+    earns = None
     if config.auto:
         state, merged = _auto_room(state, xyz, ray, levels, config)
-        finest = _split_levels(state, xyz, rgb, footprint, config)
-        state = _auto_widen(state, xyz, ray, levels, finest, config)
+        state, earns = _split_levels(state, xyz, rgb, footprint, config)
+        state = _auto_widen(state, xyz, ray, levels, earns, config)
     else:
         state, merged = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
-                              ray=ray, levels=levels, finest=finest)
+                              ray=ray, levels=levels, earns=earns)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
@@ -450,8 +453,8 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
     are merged (:func:`vbgs.inference.merge.bound_pairs`, the derivation in
     :mod:`vbgs.inference.merge`). Splits come after this room is made
     (``_split_levels``, ``_auto_widen``): a point seeds a child in a finer cell where
-    the colour term of the bound a child would win back there exceeds
-    ``growth.refine_gain`` nats (:func:`vbgs.inference.grow.refinement_levels`). When the
+    the child's log Bayes factor, from every colour the cell has shown, exceeds
+    ``growth.refine_gain`` (:mod:`vbgs.mapping.splits`). When the
     frame's new ground wants more slots than are empty the capacity grows to the next bucket (:mod:`vbgs.inference.capacity`: a compilation
     per bucket, not per frame); at ``config.max_components`` it stops growing, the state
     says so (``capped``) and the cheapest pairs are merged as under a fixed K."""
@@ -487,28 +490,31 @@ def _widened(state: MapState, wanted: int, config: Config) -> MapState:
         colour=capacity.widen_rows(state.colour, k))
 
 
-def _split_levels(state: MapState, xyz, rgb, footprint, config: Config) -> np.ndarray | None:
-    """``components="auto"``: the finest refinement level each point of the batch may seed
-    (:func:`vbgs.inference.grow.refinement_levels`: points whose colour their component
-    explains worse than ``growth.refine_gain`` nats, cells no finer than
-    ``growth.refine_footprints`` pixel footprints); None when refinement is off."""
+def _split_levels(state: MapState, xyz, rgb, footprint, config: Config
+                  ) -> tuple[MapState, np.ndarray | None]:
+    """``components="auto"``: the refinement levels ``[n, levels]`` each point of the
+    batch may seed (:mod:`vbgs.mapping.splits`: where a child's log Bayes factor, from every colour its
+    cell has shown, exceeds ``growth.refine_gain``, in cells no finer than
+    ``growth.refine_footprints`` pixel footprints), and the state with the batch's colours
+    counted; None when splits are off (``growth.split``)."""
     g = config.growth
-    if g.refine_gain <= 0:
-        return None
+    if not g.split:
+        return state, None
     mixture = state.mixture
-    return grow.refinement_levels(state.rule, mixture.posterior, grow.is_active(mixture.prior),
-                                  xyz, rgb, colour_noise=config.prior.colour_noise,
-                                  gain=g.refine_gain, footprint=footprint,
-                                  floor=g.refine_footprints)
+    table = splits.no_colours() if state.colours is None else state.colours
+    earns, table = splits.earned_levels(
+        state.rule, mixture.posterior, grow.is_active(mixture.prior), xyz, rgb, table,
+        prior=config.prior, gain=g.refine_gain, footprint=footprint, floor=g.refine_footprints)
+    return state._replace(colours=table), earns
 
 
-def _auto_widen(state: MapState, xyz, ray, levels, finest, config: Config) -> MapState:
-    """Capacity for the refinement ``finest`` asks for as well as the new ground (births
+def _auto_widen(state: MapState, xyz, ray, levels, earns, config: Config) -> MapState:
+    """Capacity for the refinement ``earns`` asks for as well as the new ground (births
     beyond the ceiling are not made: refinement never merges to make room)."""
-    if finest is None or not (finest >= 1).any():
+    if earns is None or not earns.any():
         return state
     short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels,
-                           finest=finest)
+                           earns=earns)
     if short <= 0:
         return state
     return _widened(state, state.mixture.prior.n_components + short, config)

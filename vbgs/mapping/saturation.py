@@ -87,8 +87,10 @@ def cell_keys(rule: grow.Growth, xyz, origin, levels=None) -> np.ndarray:
     level = np.zeros(len(x), np.int64) if levels is None else np.asarray(levels, np.int64)
     side = rule.cell * np.exp2(level)[:, None]
     ijk = grow.cell_index(x / side, 1.0) & ((1 << _COORD_BITS) - 1)  # two's complement wrap
-    return (((level << _COORD_BITS | ijk[:, 0]) << _COORD_BITS | ijk[:, 1]) << _COORD_BITS
-            | ijk[:, 2])
+    key = level
+    for j in range(ijk.shape[1]):  # the level, then one field per axis
+        key = key << _COORD_BITS | ijk[:, j]
+    return key
 
 
 def _slots(keys: np.ndarray, bits: int) -> np.ndarray:
@@ -115,12 +117,22 @@ def keep(seen: Seen, keys: np.ndarray, cap: int, *, key: jax.Array) -> np.ndarra
 def add(seen: Seen, keys: np.ndarray) -> Seen:
     """``seen`` with the learned points of cells ``keys [n]`` counted; a slot that held
     another cell is handed to the new one (its count restarts)."""
-    bits = int(np.log2(len(seen.count)))
-    slot = _slots(keys, bits)
-    cell, count = seen.cell.copy(), seen.count.copy()
-    other = cell[slot] != keys
-    cell[slot[other]] = keys[other]  # of clashing new cells in one slot, the last wins
-    count[slot[other]] = 0
-    mine = cell[slot] == keys
+    cell, slot, fresh, mine = claim(seen.cell, keys)
+    count = seen.count.copy()
+    count[fresh] = 0
     count += np.bincount(slot[mine], minlength=len(count)).astype(np.int32)
     return Seen(cell, count)
+
+
+def claim(cells: np.ndarray, keys: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The slots of cells ``keys [n]`` in a table whose slots hold the cells ``cells [T]``
+    (-1: none; ``T`` a power of two): the table's cells with a slot that held another
+    cell handed to the new one (of clashing new cells in one slot, the last wins), each
+    key's slot ``[n]``, the slots handed over (their sums restart) and ``[n]`` bool: the
+    keys that hold their slot."""
+    slot = _slots(keys, int(np.log2(len(cells))))
+    cell = cells.copy()
+    other = cell[slot] != keys
+    cell[slot[other]] = keys[other]
+    return cell, slot, slot[other], cell[slot] == keys

@@ -71,7 +71,7 @@ def test_bound_merges_make_auto_smaller_than_births_alone(scene):
     counts = {}
     for merge in (True, False):
         config = mapping.Config(components="auto", growth=mapping.GrowthConfig(
-            merge=merge, auto_merge_every=4, refine_gain=0.0))  # merges on, no splits
+            merge=merge, auto_merge_every=4, split=False))  # merges on, no splits
         state = mapping.init(config, key=jax.random.key(0))
         for frame in scene.train:
             state, _ = mapping.update(state, frame, config)
