@@ -40,26 +40,30 @@ def test_fit_scene_refuses_bad_input(capsys):
 
 
 def test_depth_study_recovers_alignment(tmp_path):
-    assert main(["depth-study", "--methods", "vbgs", "--components", "400", "--frames", "5",
+    # TINY's scene, size, components and frames: its sensor-depth run is the run of
+    # test_fit_scene_json_ply_png above, whose executables the session's compile cache
+    # holds (tests/conftest.py), so only the estimated-depth run compiles
+    assert main(["depth-study", "--methods", "vbgs", "--components", "600", "--frames", "6",
                  "--size", "32", "--out", str(tmp_path)]) == 0
     text = (tmp_path / "depth_study.md").read_text()
     assert "estimated" in text and "sensor" in text
     # the table says how it was made: the command and every setting
-    assert (f"Command: `python -m experiments.run depth-study --scene object --components 400 "
-            f"--frames 5 --size 32 --methods vbgs --steps-per-frame 50 --out {tmp_path}`"
+    assert (f"Command: `python -m experiments.run depth-study --scene object --components 600 "
+            f"--frames 6 --size 32 --methods vbgs --steps-per-frame 50 --out {tmp_path}`"
             in text)
-    assert "components = 400" in text and "disparity_scale = 2.0" in text
+    assert "components = 600" in text and "disparity_scale = 2.0" in text
     import pandas as pd
 
     rows = pd.read_csv(tmp_path / "depth_study.csv").set_index("depth")
-    assert (rows["components"] == 400).all() and (rows["frames"] == 5).all()
+    assert (rows["components"] == 600).all() and (rows["frames"] == 6).all()
     assert "estimated = mono sensor model" in text
     est = rows.loc["estimated"]
     # p = 2 / d_mono + 0.3: the views' alignment is 1 / d = s p + t with s > 0; at 32 px
-    # and 5 frames it is loose (the 128 px runs recover about 0.44, -0.10 for 0.5, -0.15)
+    # and 6 frames it is loose (the 128 px runs recover about 0.44, -0.10 for 0.5, -0.15)
     assert est["align_scale"] > 0
-    # measured 15.18 dB estimated against 18.74 dB with sensor depth
-    assert est["psnr"] > rows.loc["sensor", "psnr"] - 4.5
+    # measured 15.18 dB estimated against 19.52 dB with sensor depth (align_scale 0.245)
+    assert rows.loc["sensor", "psnr"] > 19.0 and est["psnr"] > 14.5
+    assert est["psnr"] > rows.loc["sensor", "psnr"] - 5.0
 
 
 def test_fit_scene_skips_points_already_learned(capsys):

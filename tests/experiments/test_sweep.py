@@ -272,6 +272,10 @@ def test_scene_cells_through_a_stand_in_scene_task(tmp_path, monkeypatch, capsys
     assert (out / "forgetting.png").stat().st_size > 5_000
 
 
+# a real scene task's cells through the serial backend, scored and reported, run by
+# test_robustness_study.py::test_a_tiny_study_end_to_end in the default suite (three
+# cells of 32 px object scenes); this one cell took 9.5 s of CPU in the default run
+@pytest.mark.slow
 def test_real_scene_cell(tmp_path, capsys):
     config = tmp_path / "c.toml"
     # render-bound's, tune's and colour-gap's tiny shapes (16 px, 3 frames, 150
