@@ -213,7 +213,7 @@ def seeds_on_patches(x: np.ndarray, chosen: np.ndarray, ray: np.ndarray,
     (2.6 cm at 4 m for a Kinect), which the latent points then inherit as in-plane
     displacement at oblique views; the fitted surface averages ``neighbours`` points."""
     neighbours = NOISY_NORMAL_NEIGHBOURS if neighbours is None else neighbours
-    normal, height = quadric.quadric_patches(x, chosen, neighbours)
+    normal, height = quadric.quadric_patches(x, chosen, neighbours, ray)
     t = np.clip(quadric.ray_steps(normal, height, ray[chosen]), -SEED_SIGMAS, SEED_SIGMAS)
     unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     return unit, x[chosen] + t[:, None] * ray[chosen]
