@@ -150,7 +150,8 @@ def carry(params: Params, old: Params, new: Params) -> tuple[Params, np.ndarray]
         return params, changed
     out = {name: np.array(getattr(params, name)) for name in fields}
     for name in ("means", "opacity_logits", "colour_logits"):
-        out[name][rows] += np.asarray(getattr(new, name))[rows] - np.asarray(getattr(old, name))[rows]
+        moved = np.asarray(getattr(new, name))[rows] - np.asarray(getattr(old, name))[rows]
+        out[name][rows] += moved
     log_cov = _log_covs(params, rows) + _log_covs(new, rows) - _log_covs(old, rows)
     log_var, axes = np.linalg.eigh(0.5 * (log_cov + np.swapaxes(log_cov, -1, -2)))
     covs = (axes * np.exp(log_var)[:, None, :]) @ np.swapaxes(axes, -1, -2)

@@ -116,8 +116,9 @@ def make_optimizer(config: TrainConfig, extent: float) -> optax.GradientTransfor
     """Adam with the per-parameter 3DGS learning rates, over :func:`trainable` params.
 
     Its state is a dict by stage name: ``opt_state[ADAM]`` holds Adam's moments."""
+    rates = scale_by_learning_rates(learning_rates(config, extent))
     return optax.named_chain((ADAM, optax.scale_by_adam(eps=config.adam_eps)),
-                             (LEARNING_RATES, scale_by_learning_rates(learning_rates(config, extent))))
+                             (LEARNING_RATES, rates))
 
 
 def _rows_where(rows: jax.Array, a, b):

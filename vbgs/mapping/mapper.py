@@ -493,8 +493,8 @@ def _widened(state: MapState, wanted: int, config: Config) -> MapState:
 def _split_levels(state: MapState, xyz, rgb, footprint, config: Config
                   ) -> tuple[MapState, np.ndarray | None]:
     """``components="auto"``: the refinement levels ``[n, levels]`` each point of the
-    batch may seed (:mod:`vbgs.mapping.splits`: where a child's log Bayes factor, from every colour its
-    cell has shown, exceeds ``growth.refine_gain``, in cells no finer than
+    batch may seed (:mod:`vbgs.mapping.splits`: where a child's log Bayes factor, from
+    every colour its cell has shown, exceeds ``growth.refine_gain``, in cells no finer than
     ``growth.refine_footprints`` pixel footprints), and the state with the batch's colours
     counted; None when splits are off (``growth.split``)."""
     g = config.growth

@@ -93,7 +93,8 @@ def test_update_leaves_its_input_state_as_it_was(scene, assert_same):
     assert state.stepper is stepper and state.mixture.prior is prior  # ...not in place
     assert a.stepper.prior is a.mixture.prior and stepper.prior is prior
     assert_same(a.mixture.posterior.space.mean, b.mixture.posterior.space.mean)
-    assert info_a.n_points == info_b.n_points and len(info_a.xyz) == info_a.n_learned <= info_a.n_points
+    assert info_a.n_points == info_b.n_points
+    assert len(info_a.xyz) == info_a.n_learned <= info_a.n_points
 
 
 def test_mapper_binds_the_config(scene, assert_same):
