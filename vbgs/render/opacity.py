@@ -103,10 +103,7 @@ def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, p
                    height=height)
     a, b, c = proj.conic.T  # Σ'⁻¹ = [[a, b], [b, c]]
     det_conic = a * c - b * b
-    # a component whose float32 covariance came out indefinite (posterior assignment can
-    # leave one so) projects to no ellipse: it gets no evidence this frame (its area
-    # was inf or NaN, and so were its counts: room, --assign posterior, frame 53)
-    ellipse = (det_conic > 0.0) & (a > 0.0) & (c > 0.0) & jnp.isfinite(det_conic)
+    ellipse = proj.visible  # no ellipse (an indefinite covariance): no evidence (raster.project)
     det_conic = jnp.where(ellipse, det_conic, 1.0)
     area = jnp.where(ellipse, 2.0 * jnp.pi / jnp.sqrt(det_conic), 0.0)  # [k] ∫ exp(-½ dᵀ Σ'⁻¹ d) dd
     sigma_u = jnp.sqrt(jnp.where(ellipse, c, 1.0) / det_conic)  # sqrt of Σ' diagonal
@@ -117,8 +114,7 @@ def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, p
                          jnp.stack([zero, -sigma_v], -1)])  # [N_SAMPLES, k, 2]
     uv = proj.uv[None] + offsets
     col, row = jnp.floor(uv[..., 0]).astype(jnp.int32), jnp.floor(uv[..., 1]).astype(jnp.int32)
-    inside = ((col >= 0) & (col < width) & (row >= 0) & (row < height) & proj.visible[None]
-              & ellipse[None])
+    inside = (col >= 0) & (col < width) & (row >= 0) & (row < height) & ellipse[None]
     row, col = jnp.clip(row, 0, height - 1), jnp.clip(col, 0, width - 1)
     observed = depth[row, col]  # [s, k]
     has_depth = jnp.isfinite(observed) & (observed > 0)

@@ -159,7 +159,12 @@ def project(
     det = a * c - b * b
     conic = jnp.stack([c / det, -b / det, a / det], axis=-1)
     bounded = jnp.maximum(a, c) <= (MAX_FOOTPRINT * max(width, height)) ** 2
-    visible = in_front & in_band & bounded & (splats.opacities >= ALPHA_MIN)
+    # a covariance that came out indefinite in float32 (posterior assignment can leave one
+    # so: room, --assign posterior, frame 53) projects to no ellipse: it is drawn nowhere
+    # and gets no opacity evidence (vbgs.render.opacity)
+    det_conic = conic[:, 0] * conic[:, 2] - conic[:, 1] ** 2
+    ellipse = (det > 0.0) & (a > 0.0) & (c > 0.0) & jnp.isfinite(det_conic) & (det_conic > 0.0)
+    visible = in_front & in_band & bounded & ellipse & (splats.opacities >= ALPHA_MIN)
     # Mahalanobis radius beyond which o exp(-m²/2) < ALPHA_MIN (non-differentiable).
     opac = jax.lax.stop_gradient(splats.opacities)
     m2_max = 2.0 * jnp.log(jnp.maximum(opac, ALPHA_MIN) / ALPHA_MIN)

@@ -170,6 +170,24 @@ def test_splats_behind_the_camera_do_not_render():
     np.testing.assert_allclose(out.rgb, np.broadcast_to([0.1, 0.2, 0.3], out.rgb.shape))
 
 
+def test_an_indefinite_covariance_is_not_drawn():
+    """A float32 posterior covariance can come out indefinite; its projection is no
+    ellipse, so ``project`` marks it invisible and the picture is the one without it."""
+    splats, cam = random_scene(0, 120)  # same shapes as the first test: no recompile
+    bad = jnp.diag(jnp.array([-0.04, 0.05, 0.05], jnp.float32))  # indefinite across the view
+    broken = splats._replace(covs=splats.covs.at[:3].set(bad))
+    proj = raster.project(broken, cam.fx, cam.fy, cam.cx, cam.cy, jnp.asarray(cam.pose),
+                          width=cam.width,
+                          height=cam.height)
+    assert not np.any(np.asarray(proj.visible[:3]))
+    out = rasterize(broken, cam, tile=8, capacity=256)
+    without = rasterize(broken._replace(opacities=broken.opacities.at[:3].set(0.0)), cam,
+                        tile=8, capacity=256)
+    assert np.all(np.isfinite(np.asarray(out.rgb)))
+    diffs = max_diff(out, without)
+    assert all(d == 0.0 for d in diffs.values()), diffs
+
+
 def test_gradients_match_central_differences():
     eps, rtol = 1e-6, 1e-5
     with jax.enable_x64(True):
