@@ -9,9 +9,10 @@ responsibilities score each point under the component convolved with its noise, 
 M-step's covariance is that of each point's latent surface point along its ray, ``E[y |
 x]`` and ``Cov[y | x]`` under the assigning (reference) component
 (:func:`vbgs.inference.candidates.candidate_latent`), so the posterior describes the
-surface, not the surface blurred by the sensor; the means keep the measured points (the
-noise averages away). Both stay sums over points, so under prior assignment with a fixed
-reference a stream still equals one batch.
+surface, not the surface blurred by the sensor; its mean is the latent points' mean too
+(:func:`vbgs.inference.expfam.niw_posterior` says why and what it measured). Both stay
+sums over points, so under prior assignment with a fixed reference a stream still
+equals one batch.
 
 Why the latent points and not a moment deconvolution (``sum x x^T - sum R_n``, the first
 version): the deconvolution is unbiased, but a component of N points keeps a scatter
