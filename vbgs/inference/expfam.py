@@ -55,8 +55,7 @@ class Stats(NamedTuple):
     points differ by (:func:`vbgs.inference.model.e_step_with`): ``sum_noise = sum_n r_nk
     (x_n x_n^T - E[y_n y_n^T | x_n])`` and ``sum_shift = sum_n r_nk (x_n - E[y_n |
     x_n])``, the posteriors of ``y_n`` taken under the assigning (reference) component,
-    so both stay sums over points. :func:`niw_posterior` uses them for the mean and the
-    covariance.
+    so both stay sums over points. :func:`niw_posterior` uses them for the covariance.
     None for exact data (the default): no term, no extra work.
     """
 
@@ -98,32 +97,28 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
     ``d1 = S1 - N m`` to avoid cancelling large terms.
 
     With measurement noise (``stats.sum_noise``, ``stats.sum_shift``, see :class:`Stats`)
-    the update is that of the latent surface points ``y_n``: ``sum_x - sum_shift`` and
-    ``sum_xx - sum_noise`` (a scatter of latent points, positive semi-definite by
-    construction), for the mean as for the scale (the M-step of the latent-point model:
-    every moment is ``E[. | x]``). The mean was the measured ``sum_x`` until the grown
-    references were seeded on their patch's quadric (:func:`vbgs.inference.grow.
-    seeds_on_patches`): the latent points sit on the reference's surface, a fit of 48
-    points, where a component's own ~15 measured points leave its mean a sensor sigma
-    / sqrt(15) off along the rays, and a thin scatter about a mean off its own surface.
-    Object, 128 px / 20k / 60 frames, validation views, Kinect noise without holes
-    (exact depth 26.58 dB): measured means 25.08 dB, latent 25.25; with the Kinect's
-    holes too 24.61 and 24.73. Why not the moment deconvolution ``sum_xx - sum_n r
-    R_n`` (the first version): it is unbiased but a component of N points keeps a
-    scatter error of ``sigma^2 sqrt(2 / N)`` along the rays; at 128 px / 20k components,
-    15 points each and a Kinect's 2.6 cm at 4 m, that is ~1.6 cm of spurious thickness
-    and tilt on components 1.2 cm across (object, validation views: the exact-depth map
-    with these covariances fell from 26.62 to 22.80 dB; with the exact map's means
-    26.16, colours 26.62, opacities 26.63).
+    the scale is that of the latent surface points ``y_n``: the same update with
+    ``sum_x - sum_shift`` and ``sum_xx - sum_noise`` (a scatter of latent points, positive
+    semi-definite by construction), while the mean keeps the measured ``sum_x`` (the
+    noise has mean zero). Why not the latent mean too: under prior assignment the
+    latent points lie on the reference component's surface, and a grown reference sits
+    on one noisy point; the measured mean averages the noise away, the latent scatter
+    does not depend on where the reference's surface lies along the rays. Why not the
+    earlier moment deconvolution ``sum_xx - sum_n r R_n``: it is unbiased but a
+    component of N points keeps a scatter error of ``sigma^2 sqrt(2 / N)`` along the
+    rays; at 128 px / 20k components, 15 points each and a Kinect's 2.6 cm at 4 m, that
+    is ~1.6 cm of spurious thickness and tilt on components 1.2 cm across (object,
+    validation views: the exact-depth map with these covariances fell from 26.62 to
+    22.80 dB; with the exact map's means 26.16, colours 26.62, opacities 26.63).
     """
     n = stats.count
     kappa = prior.kappa + n
     m0 = prior.mean
+    mean = m0 + (stats.sum_x - n[:, None] * m0) / kappa[:, None]
     sum_x, sum_xx = stats.sum_x, stats.sum_xx
     if stats.sum_noise is not None:
         sum_x = sum_x - stats.sum_shift
         sum_xx = sum_xx - 0.5 * (stats.sum_noise + jnp.swapaxes(stats.sum_noise, -1, -2))
-    mean = m0 + (sum_x - n[:, None] * m0) / kappa[:, None]
     d1 = sum_x - n[:, None] * m0  # [k, d]  sum_n r (x - m0)
     s2 = (
         sum_xx
