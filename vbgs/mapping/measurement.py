@@ -24,6 +24,34 @@ change); learned on the exact map's components, the noisy data gave 22.53 dB
 deconvolved and 26.02 with the latent points. A stream's grown components are that
 reference: seeded on the quadric their patch fits (:func:`vbgs.inference.grow.seeds_on_patches`).
 
+The latent points' mean in place of the measured one (the reference's surface, a
+quadric fit of 48 points, against a component's ~15 noisy points), tried: Kinect noise
+without holes 25.08 -> 25.25 dB on these views, with the holes 24.61 -> 24.73, but the
+room's validation views 22.25 -> 22.18 and the test views object 23.76 -> 23.79, room
+21.83 -> 21.71; a blend counting the reference as 11 points (its measured error, 6.4 mm
+rms against 21 mm of noise): object 24.71 / 23.77 (validation / test), room 22.22 / 21.76.
+Not kept: no gain beyond a few hundredths on the object, and the room loses.
+
+Where the rest of the noise's cost lies (same views, Kinect noise without holes, with
+the latent means above: 25.25 dB against 26.58 exact). Oracle swaps learned two maps in
+lockstep under one reference, one from the exact points, one from the noisy points with
+their rays, each grown and merged as chosen: the learner costs little (the exact points under the
+noisy run's reference: 25.41; the noisy map with the exact map's means, colours or
+opacities: 25.19, 25.22, 25.16); the reference costs the rest. Growth on the exact
+points (no noise, seeds at the points themselves): 26.19; seeds at the exact points
+with the noisy normals: 25.88; the noisy selection (cells looked up two sigma along the
+rays) with exact seeds and normals: 25.96. The quadric's seeds are some 6 mm (rms, 3 mm
+median) off the surface along its normal at 2 cm of noise, and a robust (Cauchy) fit,
+96 neighbours or a thicker prior (0.2, 0.4: 24.67, 24.38 dB with the holes, against
+24.73) do not do better. Of the reference's cost about 0.5 dB is in the merges that
+free slots once the 20k are spent (some 15k merges over the stream): chosen on the
+exact map's posteriors, the noisy map reaches 25.77; chosen on its own, 25.25; on its
+own covariances with the exact means, 25.20, or the reverse, 25.32; adding a share of
+each component's noise to its covariance in the merge cost (0.1, 1: 24.69, 24.64 dB
+with the holes) does not help either. With the measured means (this code) the same
+picture: growth on the exact points 25.83 dB, merges chosen on the exact map 25.44,
+on its own 25.08 (the run as it is).
+
 The sensors and their ``sigma_z`` are :mod:`vbgs.sensors`; a map's sensor is
 ``Config.sensor`` (``exact``: nothing to take into account, no extra work).
 """
