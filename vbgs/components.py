@@ -64,6 +64,18 @@ AUTO_MERGE_EVERY = 0
 # (24.75, 17.5k) do worse; fixed K refines everywhere at random, and the rule counts
 # colour, not the geometry of curved surfaces and silhouettes.
 AUTO_REFINE_GAIN = 0.0
+# "auto": the split score's shape term (vbgs.mapping.splits.surface_gain, derived there:
+# how much better a child's own plane explains its cell's points along their normal than
+# the component that explains them now). Off: on VALIDATION views (128 px, 60 frames, the
+# first 4; experiments.scene_task.run_scene on experiments.val_probe's views with the
+# growth fields set; val_psnr, components, births + splits):
+#   on,  gain 0: object 25.16 (17.8k: 7.8k + 9.9k) against 25.65 (18.0k) off
+#   on,  auto_points 8, gain 8: object 24.61 (12.5k), room 23.12 (40.9k: 18.9k + 22.0k),
+#        walk 22.07 (23.6k: 11.6k + 12.0k) against walk 22.16 (25.0k: 11.8k + 13.1k) off
+# A form that credited the child its prior's spread along the normal (looser than a
+# parent fitted to many points: a gain on flat ground too) gave object 26.21 (29.9k) but
+# walk 22.18 (70.5k: 26.0k + 44.4k splits against 19.1k): no better than a lower gain.
+AUTO_REFINE_SHAPE = False
 AUTO = "auto"
 
 

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from vbgs.inference import grow
-from vbgs.components import AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, parse_components
+from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AUTO_REFINE_SHAPE,
+                             parse_components)
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
@@ -67,6 +68,10 @@ class GrowthConfig:
         has shown, exceeds ``refine_gain`` nats (the prior log odds against a split), in
         cells no finer than ``refine_footprints`` pixel footprints
         (:mod:`vbgs.mapping.splits`; ``split`` false: no refinement);
+    refine_shape: ``components="auto"`` only: the split score adds the shape term, how
+        much better a child's own plane explains its cell's points along their normal
+        than the component that explains them now (:func:`vbgs.mapping.splits.
+        surface_gain`: where a surface bends or ends);
     hole_radius, hole_colour_tol: measured depth only (``sensor`` not exact): a hole behind
         a depth edge or inside a surface takes the depth extrapolated from the nearest
         pixel within ``hole_radius`` px whose colour differs by at most ``hole_colour_tol``
@@ -87,6 +92,7 @@ class GrowthConfig:
     split: bool = True
     refine_gain: float = AUTO_REFINE_GAIN
     refine_footprints: float = grow.REFINE_FOOTPRINTS
+    refine_shape: bool = AUTO_REFINE_SHAPE
     hole_radius: int = HOLE_RADIUS
     hole_colour_tol: float = HOLE_COLOUR_TOL
 
@@ -110,6 +116,9 @@ class GrowthConfig:
                              f"Bayes factor a split must exceed), got {self.refine_gain!r}")
         if not isinstance(self.split, bool):
             raise ValueError(f"growth.split must be true or false, got {self.split!r}")
+        if not isinstance(self.refine_shape, bool):
+            raise ValueError(f"growth.refine_shape must be true or false, got "
+                             f"{self.refine_shape!r}")
         _positive("growth", "refine_footprints", self.refine_footprints)
         _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
         _positive("growth", "reach_cells", self.reach_cells)

@@ -501,7 +501,8 @@ def _split_levels(state: MapState, xyz, rgb, footprint, config: Config
     if not g.split:
         return state, None
     mixture = state.mixture
-    table = splits.no_colours() if state.colours is None else state.colours
+    table = state.colours if state.colours is not None else \
+        splits.no_colours(shape=g.refine_shape)
     earns, table = splits.earned_levels(
         state.rule, mixture.posterior, grow.is_active(mixture.prior), xyz, rgb, table,
         prior=config.prior, gain=g.refine_gain, footprint=footprint, floor=g.refine_footprints)

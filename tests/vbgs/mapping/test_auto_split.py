@@ -43,9 +43,10 @@ def active_after(config, xyz, rgb, footprint=None, batches=4):
     return counts, state
 
 
-def auto(gain=0.0, floor=1.0, components="auto", split=True):
+def auto(gain=0.0, floor=1.0, components="auto", split=True, shape=False):
     return mapping.Config(components=components, growth=mapping.GrowthConfig(
-        split=split, refine_gain=gain, refine_footprints=floor, merge=False))
+        split=split, refine_gain=gain, refine_footprints=floor, merge=False,
+        refine_shape=shape))
 
 
 def test_a_patch_whose_colours_its_components_mix_is_split_once_the_evidence_pays():
@@ -59,6 +60,15 @@ def test_a_patch_whose_colours_its_components_mix_is_split_once_the_evidence_pay
 def test_a_patch_its_components_explain_is_not_split():
     counts, _ = active_after(auto(), *patch(checker=False))
     assert counts == [400] * 4  # grey within 0.01: the evidence only falls
+
+
+def test_the_shape_term_adds_no_child_on_a_flat_patch():
+    """growth.refine_shape through the stream: on a flat grey patch the shape term is 0
+    (vbgs.mapping.splits.surface_gain), so nothing splits; the checkerboard still does."""
+    counts, state = active_after(auto(shape=True), *patch(checker=False))
+    assert counts == [400] * 4 and state.colours.place is not None
+    counts, _ = active_after(auto(shape=True), *patch(checker=True))
+    assert counts[-1] > 2 * counts[0]
 
 
 def test_without_the_rule_the_resolution_is_the_first_frame_s():
