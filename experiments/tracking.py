@@ -176,7 +176,8 @@ class TrackedLearner:
         self.sigmas: list[list[float]] = []  # per registered frame: |sigma_t|, |sigma_r| (deg)
         self.seconds: list[float] = []  # registration time per registered frame
         # the direct odometry from the frame before (None: the map registration alone)
-        self.direct = direct.DirectConfig() if DIRECT else None
+        # (with the photometric refinement on, its own search and refinement instead)
+        self.direct = direct.DirectConfig() if DIRECT and self.photo is None else None
         self.previous: Frame | None = None
         self.covariance = np.zeros((6, 6))  # the last pose's (right twist)
         # (frame number from 1, why, which directions) of each frame with free directions

@@ -103,7 +103,9 @@ def _planar(points: np.ndarray, length: float) -> bool:
 
 def describe(free: np.ndarray) -> str:
     """Words for free directions ``[6, m]`` (scaled twist): each as the camera axis it
-    moves along or turns about most; '' for none."""
+    moves along or turns about most ('every direction' for all six); '' for none."""
+    if np.shape(free)[1] == 6:
+        return "every direction"
     words = []
     for vec in np.asarray(free).T:
         i = int(np.argmax(np.abs(vec)))
