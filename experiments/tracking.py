@@ -23,9 +23,9 @@ track, from the best of :data:`SEARCH`'s motions), and the map registration star
 it. Where the registration leaves directions free (:mod:`vbgs.tracking.degeneracy`):
 on a planar frame the pose is the odometry's whole (on the walk under a Kinect the
 registration against a map of the near road moved the forward and vertical position
-by 2-3 mm a frame the wrong way, ATE 7.9 cm; the odometry alone 5.9 mm); otherwise the
-registration's pose is kept (on the object under a Kinect the chained odometry drifted
-to 3.7 cm ATE alone). Either way the free directions' ``pose_sigmas`` are the chained
+by 2-3 mm a frame the wrong way, ATE 7.9 cm; the odometry's pose on its planar frames
+11.6 mm); otherwise the registration's pose is kept (on the object under a Kinect the
+chained odometry alone drifted to 3.7 cm ATE; the registration from its starts 1.2 cm). Either way the free directions' ``pose_sigmas`` are the chained
 odometry's (its step's covariance added frame by frame), the frames are listed in
 ``tracking_degenerate_frames`` (numbered from 1, the given first) and said on stderr.
 
