@@ -17,6 +17,18 @@ the run's ``seconds_per_frame``. The guess for frame ``i`` is
   ``P_i-1 (O_i-1^-1 O_i)``, the odometry drifting by ``--drift`` per frame
   (:mod:`vbgs.tracking.drift`; the true poses feed only this simulated sensor).
 
+With :data:`DIRECT` (the default) that motion is first refined by the direct RGB-D
+odometry from the frame before (:mod:`vbgs.tracking.direct`; for the second frame of a
+track, from the best of :data:`SEARCH`'s motions), and the map registration starts from
+it. Where the registration leaves directions free (:mod:`vbgs.tracking.degeneracy`):
+on a planar frame the pose is the odometry's whole (on the walk under a Kinect the
+registration against a map of the near road moved the forward and vertical position
+by 2-3 mm a frame the wrong way, ATE 7.9 cm; the odometry's pose on its planar frames
+11.6 mm); otherwise the registration's pose is kept (on the object under a Kinect the
+chained odometry alone drifted to 3.7 cm ATE; the registration from its starts 1.2 cm). Either way the free directions' ``pose_sigmas`` are the chained
+odometry's (its step's covariance added frame by frame), the frames are listed in
+``tracking_degenerate_frames`` (numbered from 1, the given first) and said on stderr.
+
 With :data:`PHOTOMETRIC` on and measured depth (a sensor other than ``exact``) each
 registered pose of a frame with little depth is then refined photometrically against
 the map's splats (:func:`photo_config`, :mod:`vbgs.tracking.photometric`); it is off
@@ -29,6 +41,7 @@ given, so renders need no alignment; the trajectory metrics
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import replace
 
@@ -39,10 +52,11 @@ from experiments.settings import POSES
 from vbgs.data.scene import Frame, Scene
 from vbgs.io_atomic import write_atomic
 from vbgs.render.camera import valid_depth
-from vbgs.tracking import drift, trajectory
+from vbgs.tracking import direct, drift, trajectory
+from vbgs.tracking.degeneracy import describe, fuse
 from vbgs.tracking.photometric import PhotoConfig
 from vbgs.tracking.register import BOOTSTRAP, TrackConfig
-from vbgs.tracking.se3 import orthonormalise, relative, se3_exp
+from vbgs.tracking.se3 import hat, inverse, orthonormalise, relative, se3_exp
 
 
 def check_poses(task) -> None:
@@ -108,6 +122,44 @@ def photo_config(task) -> PhotoConfig | None:
     return PhotoConfig()
 
 
+# Whether a tracked stream starts each frame from the direct RGB-D odometry from the
+# frame before (vbgs.tracking.direct) and takes the directions the map registration
+# leaves free from it (vbgs.tracking.degeneracy.fuse).
+DIRECT = True
+
+
+def _ranges(numbers: list[int]) -> str:
+    """``[2, 3, 4, 7]`` -> ``'2-4, 7'``."""
+    out, start = [], None
+    for i, n in enumerate(numbers):
+        start = n if start is None else start
+        if i + 1 == len(numbers) or numbers[i + 1] != n + 1:
+            out.append(str(n) if n == start else f"{start}-{n}")
+            start = None
+    return ", ".join(out)
+
+
+# The map registration after the odometry: its start is near, so one level, the map as
+# it is, 2 passes (room, exact depth, 128 px / 20k / 60 frames, training poses: ATE
+# 0.108 mm with the default three levels, 0.099 with these; tracking 0.224 against
+# 0.196 s a frame on a loaded machine).
+AFTER_DIRECT = dict(levels=(2048,), inflate=(0.0,), passes=(2,))
+
+
+def _finite(x: float) -> float | None:
+    """``x``, or None (JSON null) when it is not finite."""
+    return float(x) if np.isfinite(x) else None
+
+
+def _adjoint(pose: np.ndarray) -> np.ndarray:
+    """The ``[6, 6]`` adjoint of a rigid transform on twists ``(v, w)``."""
+    rot, t = pose[:3, :3], pose[:3, 3]
+    out = np.zeros((6, 6))
+    out[:3, :3], out[3:, 3:] = rot, rot
+    out[:3, 3:] = hat(t) @ rot
+    return out
+
+
 class TrackedLearner:
     """A learner fed estimated poses (module docstring)."""
 
@@ -123,6 +175,13 @@ class TrackedLearner:
         self.estimates: list[np.ndarray] = []
         self.sigmas: list[list[float]] = []  # per registered frame: |sigma_t|, |sigma_r| (deg)
         self.seconds: list[float] = []  # registration time per registered frame
+        # the direct odometry from the frame before (None: the map registration alone)
+        # (with the photometric refinement on, its own search and refinement instead)
+        self.direct = direct.DirectConfig() if DIRECT and self.photo is None else None
+        self.previous: Frame | None = None
+        self.covariance = np.zeros((6, 6))  # the last pose's (right twist)
+        # (frame number from 1, why, which directions) of each frame with free directions
+        self.free: list[tuple[int, str, str]] = []
 
     replay_bytes = property(lambda self: self.inner.replay_bytes)
     blur = property(lambda self: self.inner.blur)
@@ -137,12 +196,8 @@ class TrackedLearner:
 
     def guess(self) -> np.ndarray:
         """The next frame's starting pose (module docstring)."""
-        i, last = len(self.estimates), self.estimates[-1]
-        if self.odometry is not None:
-            return orthonormalise(last @ relative(self.odometry[i - 1], self.odometry[i]))
-        if i >= 2:
-            return orthonormalise(last @ relative(self.estimates[-2], last))
-        return last
+        motion, last = self.motion_guess(), self.estimates[-1]
+        return last if motion is None else orthonormalise(last @ motion)
 
     def search(self, frame: Frame, guess, config: TrackConfig, background) -> np.ndarray:
         """The second frame's start with photometric refinement on: the geometric
@@ -153,30 +208,102 @@ class TrackedLearner:
         costs = self.inner.photo_costs(frame, starts, self.photo, background)
         return starts[int(np.argmin(costs))]
 
+    def motion_guess(self) -> np.ndarray | None:
+        """The motion from the last frame to the next one (module docstring); None for
+        the second frame of a track (no velocity yet)."""
+        i = len(self.estimates)
+        if self.odometry is not None:
+            return relative(self.odometry[i - 1], self.odometry[i])
+        if i >= 2:
+            return relative(self.estimates[-2], self.estimates[-1])
+        return None
+
+    def _direct(self, frame: Frame) -> direct.Motion:
+        """The direct RGB-D odometry from the frame before (:mod:`vbgs.tracking.direct`),
+        from the motion guess, or from :data:`SEARCH`'s motions for the second frame."""
+        prev, guess = self.previous, self.motion_guess()
+        args = (frame.camera, prev.rgb, prev.depth, frame.rgb, frame.depth)
+        if guess is None:
+            return direct.search(*args, se3_exp(np.concatenate([np.zeros((1, 6)), SEARCH])),
+                                 self.direct)
+        return direct.align(*args, guess, self.direct)
+
     def learn(self, frame: Frame, background) -> None:
         sparse = valid_depth(np.asarray(frame.depth)).mean() < PHOTO_BELOW
         photo = self.photo if sparse else None
         extra = {} if photo is None else {"photo": photo, "background": background}
         pose = np.asarray(frame.camera.pose, np.float64)  # the first: given
+        cov = np.zeros((6, 6))
         if self.estimates:
             start = time.perf_counter()
-            config = self.config
-            if self.odometry is None and len(self.estimates) == 1:  # no velocity yet
-                config = replace(config, **BOOTSTRAP)
-            guess = self.guess()
-            if photo is not None and self.odometry is None and len(self.estimates) == 1:
-                guess = self.search(frame, guess, config, background)
-                config = self.config  # the search's best start is near: the usual levels
+            config, odo = self.config, None
+            if self.direct is not None:
+                odo = self._direct(frame)
+                guess = orthonormalise(self.estimates[-1] @ odo.motion)
+                config = replace(config, **AFTER_DIRECT)
+            else:
+                if self.odometry is None and len(self.estimates) == 1:  # no velocity yet
+                    config = replace(config, **BOOTSTRAP)
+                guess = self.guess()
+                if photo is not None and self.odometry is None and len(self.estimates) == 1:
+                    guess = self.search(frame, guess, config, background)
+                    config = self.config  # the search's best start is near: the usual levels
             found = self.inner.locate(frame, guess, config,
                                       seed=self.seed + len(self.estimates), **extra)
+            pose, cov = found.pose, None
+            if odo is not None and photo is None:  # the free directions from the odometry
+                info = self._chained(odo)
+                if found.free.planar and found.free.free.shape[1]:  # a plane: all odometry
+                    pose, cov = guess, np.linalg.pinv(info)
+                else:
+                    pose, cov = fuse(found.pose, found.hessian, found.free, None, info)
             self.seconds.append(time.perf_counter() - start)
-            pose = found.pose
-            self.sigmas.append([float(np.linalg.norm(found.sigma_t)),
-                                float(np.linalg.norm(found.sigma_r_deg))])
+            if cov is None:
+                cov = np.diag(np.concatenate([found.sigma_t, np.radians(found.sigma_r_deg)])**2)
+            if found.free.free.shape[1]:
+                self.free.append((len(self.estimates) + 1, found.free.reason,
+                                  describe(found.free.free)))
+            sig = np.sqrt(np.abs(np.diag(cov)))
+            self.sigmas.append([_finite(np.linalg.norm(sig[:3])),
+                                _finite(np.degrees(np.linalg.norm(sig[3:])))])
+        self.covariance = cov
+        self.previous = frame
         self.truth.append(np.asarray(frame.camera.pose, np.float64))
         self.estimates.append(pose)
         moved = frame._replace(camera=frame.camera._replace(pose=pose))
         self.inner.learn(moved, background)
+
+    def _chained(self, odo: direct.Motion) -> np.ndarray:
+        """Information ``[6, 6]`` of the new pose by the odometry: its step's covariance
+        plus the last pose's, carried along the step (``P exp(xi) M = P M exp(Ad(M^-1)
+        xi)``), so a direction only the odometry fixes grows less sure frame by frame."""
+        step = np.linalg.pinv(odo.hessian)
+        prev = self.covariance
+        if not np.all(np.isfinite(prev)):
+            return np.zeros((6, 6))  # the last pose is unknown along some direction
+        ad = _adjoint(inverse(odo.motion))
+        return np.linalg.pinv(ad @ prev @ ad.T + step)
+
+    def say_free(self) -> None:
+        """Say on stderr, once a run, which frames had pose directions their depth left
+        free, which directions (those free in at least half of them; else the most
+        frequent) and what fixed them."""
+        for reason in dict.fromkeys(r for _, r, _ in self.free):
+            frames = [f for f, r, _ in self.free if r == reason]
+            words = [w for f, r, d in self.free if r == reason for w in d.split(", ")]
+            names = sorted(set(words), key=lambda w: (-words.count(w), words.index(w)))
+            names = [w for w in names if 2 * words.count(w) >= len(frames)] or names[:1]
+            if self.direct is None:
+                then = ("poses there are the registration's from the motion model's guess "
+                        "(pose_sigmas: null)")
+            elif "planar" in reason:
+                then = ("poses there are the direct RGB-D alignment's with the frame before "
+                        "(pose_sigmas: its steps' added up frame by frame)")
+            else:
+                then = ("poses there keep the registration's estimate; pose_sigmas along "
+                        "them are the direct RGB-D alignment's, added up frame by frame")
+            print(f"warning: tracking, frames {_ranges(frames)} of {len(self.estimates)}: "
+                  f"{' and '.join(names)}: {reason}; {then}", file=sys.stderr)
 
     def details(self, result) -> dict:
         """The inner learner's details and the trajectory's: ``ate_rmse``, ``rpe_trans``,
@@ -194,6 +321,9 @@ class TrackedLearner:
             odo = self.odometry[: len(est)]
             out["odometry_ate_rmse"] = trajectory.errors(odo, truth).ate_rmse
             paths["odometry"] = odo[:, :3, 3].tolist()
+        out["tracking_degenerate_frames"] = [f for f, _, _ in self.free]
+        out["tracking_degenerate_directions"] = [d for _, _, d in self.free]
+        self.say_free()
         out.update(tracking_seconds_per_frame=float(np.mean(steady)),
                    pose_errors=np.stack([err.trans, err.rot_deg], -1).tolist(),
                    pose_sigmas=self.sigmas, trajectory=paths)

@@ -31,6 +31,27 @@ def test_fit_scene_tracks(tmp_path, capsys):
     assert png.stat().st_size > 5_000
 
 
+def test_fit_scene_says_which_directions_the_depth_leaves_free(capsys):
+    # a tiny walk under a Kinect: depth on the near road only, a plane that leaves the
+    # motion along it free (said on stderr, listed in the JSON). Its 6 frames are 5.5
+    # units apart (the full walk's 0.55 at 60): the track is lost after the second
+    # (measured ATE 8.2 units; the full walk at 128 px: 5.9 mm), and the pose_sigmas say
+    # so (0.2-0.8 units, 3.3 degrees) where the map registration alone said 0.4 mm
+    walk = ["--scene", "walk", "--components", "600", "--frames", "6", "--test-views", "2",
+            "--size", "32", "--simulate-sensor", "kinect", "--sensor", "kinect"]
+    assert main(["fit-scene", *walk, "--poses", "track", "--json"]) == 0
+    out = capsys.readouterr()
+    r = json.loads(out.out.strip().splitlines()[-1])
+    assert r["tracking_degenerate_frames"] == [2, 3, 4, 5, 6]
+    assert len(r["tracking_degenerate_directions"]) == 5
+    assert "warning: tracking, frames 2 of 6: translation along" in out.err
+    assert "not constrained by the depth (planar geometry)" in out.err
+    assert "direct RGB-D alignment" in out.err
+    sigmas = np.asarray(r["pose_sigmas"], float)
+    assert sigmas.shape == (5, 2) and np.all(np.isfinite(sigmas))
+    assert np.all(sigmas[:, 0] > 0.1)  # honest: the track is lost
+
+
 def test_fit_scene_refuses_what_tracking_cannot_run(capsys):
     cases = [(["--poses", "track", "--method", "gradient"], "use --method vbgs"),
              (["--poses", "track", "--order", "shuffled"], "temporal order"),

@@ -58,6 +58,7 @@ import numpy as np
 from vbgs.inference import candidates as cands
 from vbgs.inference import model
 from vbgs.render.camera import Camera, depth_points, rigid, valid_depth
+from vbgs.tracking.degeneracy import Directions, directions, fuse
 from vbgs.tracking.se3 import compose, from_rt, orthonormalise, se3_exp
 
 # Points per level, coarse to fine (fixed: one compiled solver per count, whatever the
@@ -81,6 +82,9 @@ REACH = 3.0
 # for the thinnest (and for the few whose float32 scale matrix is not quite positive
 # definite); a component still singular after it is left out.
 COV_FLOOR = 1e-3
+# Fewer points of the final level than this within reach of the map leave every
+# direction free (6 fix a pose at best; 24 keep a few outliers from deciding it).
+MIN_MATCHED = 24
 # Initial Levenberg-Marquardt damping (relative to the Hessian's diagonal) and its
 # factors when a step is refused / kept.
 DAMPING, DAMP_UP, DAMP_DOWN = 1e-4, 10.0, 0.3
@@ -150,6 +154,8 @@ class Registration(NamedTuple):
     sigma_r_deg: np.ndarray  # [3] of the rotation (degrees), in the camera frame
     inliers: float  # share of the final level's points within reach of the map
     cost: float  # the final robust cost (per point within reach)
+    hessian: np.ndarray  # [6, 6] Gauss-Newton information of the right twist, all points
+    free: Directions  # the directions the depth leaves free (vbgs.tracking.degeneracy)
 
 
 # The symmetric 3x3 entries a table stores, in order; a matrix is a list of 6 planes.
@@ -356,16 +362,9 @@ def register(map_target: MapTarget, camera: Camera, depth: np.ndarray, guess,
             pose = orthonormalise(np.asarray(out, np.float64))
     n_in = float(np.sum(np.asarray(w_used)))
     scale = len(p_all) / max(float(np.sum(w)), 1.0)  # Hessian of all the frame's points
-    sigma = _sigmas(np.asarray(h, np.float64) * scale)
+    hess = np.asarray(h, np.float64) * scale
+    free = directions(hess, p_all, matched=int(n_in), min_matched=MIN_MATCHED)
+    _, cov = fuse(pose, hess, free)  # free directions: infinite (nothing else fixes them)
+    sigma = np.sqrt(np.abs(np.diag(cov)))
     return Registration(pose, sigma[:3], np.degrees(sigma[3:]), n_in / max(np.sum(w), 1.0),
-                        float(cost) / max(n_in, 1.0))
-
-
-def _sigmas(h: np.ndarray) -> np.ndarray:
-    """``sqrt(diag(H^-1))`` ``[6]``; inf where the Hessian leaves a direction free."""
-    try:
-        cov = np.linalg.inv(h)
-    except np.linalg.LinAlgError:
-        return np.full(6, np.inf)
-    diag = np.diag(cov)
-    return np.where(diag > 0, np.sqrt(np.abs(diag)), np.inf)
+                        float(cost) / max(n_in, 1.0), hess, free)
