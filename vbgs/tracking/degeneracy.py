@@ -84,7 +84,9 @@ def directions(h: np.ndarray, points: np.ndarray, ratio: float = RATIO, *,
     if few:
         reason = f"only {matched} of the frame's points lie on the map"
     elif free.any():
-        reason = "not constrained by the depth" + (" (planar geometry)" if planar else "")
+        reason = ("not constrained by the depth (planar geometry)" if planar else
+                  f"weakly constrained by the depth (under {ratio:g} of the best-fixed "
+                  "direction's information)")
     return Directions(vectors[:, free], vectors[:, ~free], rel, length, reason, planar)
 
 
