@@ -56,7 +56,8 @@ def expected_loglik(q: model.Mixture, xyz, rgb, *, config: model.PriorConfig = m
                     n_candidates: int = candidates.DEFAULT_CANDIDATES) -> float:
     """``sum_n log sum_k exp(l_nk)`` of the batch ``xyz [n, d]``, ``rgb [n, 3]`` under
     ``q`` (sparse: over each point's candidates, a lower bound on the dense value)."""
-    return _terms(q, None, xyz, rgb, config, estep, n_candidates)[0]
+    # KL(q || q) is computed and dropped: batch_bound's compiled function serves both
+    return _terms(q, q, xyz, rgb, config, estep, n_candidates)[0]
 
 
 def batch_bound(before: model.Mixture, after: model.Mixture, xyz, rgb, *,
@@ -74,11 +75,10 @@ def padded_size(n: int) -> int:
     return max(MIN_PADDED, 1 << (max(n, 1) - 1).bit_length())
 
 
-def _terms(q: model.Mixture, before: model.Mixture | None, xyz, rgb,
+def _terms(q: model.Mixture, before: model.Mixture, xyz, rgb,
            config: model.PriorConfig, estep: model.EStep, n_candidates: int
            ) -> tuple[float, float]:
-    """``(sum_n lse_n under q, KL(q || before))`` as Python floats (KL 0 without
-    ``before``): the points padded on the host (:func:`padded_size`; weight 0), the
+    """``(sum_n lse_n under q, KL(q || before))`` as Python floats: the points padded on the host (:func:`padded_size`; weight 0), the
     sparse E-step's candidates of the real points from a KD-tree over ``q``'s means."""
     if estep not in ("dense", "sparse"):
         raise ValueError(f"unknown E-step {estep!r}: use 'dense' or 'sparse'")
@@ -100,12 +100,11 @@ def _terms(q: model.Mixture, before: model.Mixture | None, xyz, rgb,
 
 
 @partial(jax.jit, static_argnames=("colour_noise", "chunk"))
-def _compiled_terms(q: model.Mixture, before: model.Mixture | None, x, c, w, cand,
+def _compiled_terms(q: model.Mixture, before: model.Mixture, x, c, w, cand,
                     colour_noise: float, chunk: int):
     _, lse = model.e_step(q, x, c, w, colour_noise, chunk, cand)
     ell = jnp.sum(jnp.where(w > 0, lse * w, 0.0))  # padding's candidates are arbitrary
-    kl = jnp.zeros((), ell.dtype) if before is None else model.kl(q, before, colour_noise)
-    return ell, kl
+    return ell, model.kl(q, before, colour_noise)
 
 
 class StreamBound(NamedTuple):
