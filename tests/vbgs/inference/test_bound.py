@@ -56,3 +56,22 @@ def test_sparse_expected_loglik_is_below_the_dense_one():
     dense = bound.expected_loglik(q, xyz, rgb, estep="dense")
     sparse = bound.expected_loglik(q, xyz, rgb, estep="sparse", n_candidates=4)
     assert sparse <= dense + 1e-3 * abs(dense)
+
+
+
+@pytest.mark.parametrize("estep", ["dense", "sparse"])
+def test_bound_terms_equal_the_updates_elbo_and_the_kl(estep):
+    """The compiled terms (points padded to a power of two) equal what the bound was
+    first built from, to float32 rounding: the ELBO model.update reports for a state
+    whose reference and posterior are both q_t, and model.kl run op by op. (The shapes
+    of the test above: 200 points, padded to 1024 here and to 200 by model.update.)"""
+    xyz, rgb = blob(200, 2)
+    prior = model.init(xyz, rgb, 64, key=jax.random.key(2), scheme="data")
+    after, _ = model.update(model.start(prior), xyz, rgb, estep=estep, n_candidates=4)
+    b = bound.batch_bound(prior, after.posterior, xyz, rgb, estep=estep, n_candidates=4)
+    _, info = model.update(model.start(after.posterior), xyz, rgb, estep=estep,
+                           n_candidates=4)
+    assert b.expected_loglik == pytest.approx(float(info.elbo), rel=1e-6, abs=1e-3)
+    noise = model.PriorConfig().colour_noise
+    assert b.kl == pytest.approx(float(model.kl(after.posterior, prior, noise)), rel=1e-5)
+    assert b.kl > 0 and b.n_points == 200
