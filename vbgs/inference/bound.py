@@ -20,7 +20,7 @@ Built on :mod:`vbgs.inference.model`'s public functions only: the expected log-l
 the ``log sum_k exp`` of :func:`vbgs.inference.model.e_step` under ``q_t`` (the ELBO
 :func:`vbgs.inference.model.update` reports for a state whose reference model and posterior
 are both ``q_t``, whose KL term ``KL(q_t || q_t)`` is 0 up to rounding; tests hold the two
-equal). Both terms of ``B_t`` come from one compiled function, its points padded to the
+equal). The expected log-likelihood is one compiled function, its points padded to the
 power of two that holds them: a stream's batches of many sizes compile it once per octave
 (the update's own buckets, eight per octave, compiled the bound anew for most frames of
 a stream: 41 of 100 s of compilation in a tiny ``fit-scene`` run).
@@ -56,8 +56,7 @@ def expected_loglik(q: model.Mixture, xyz, rgb, *, config: model.PriorConfig = m
                     n_candidates: int = candidates.DEFAULT_CANDIDATES) -> float:
     """``sum_n log sum_k exp(l_nk)`` of the batch ``xyz [n, d]``, ``rgb [n, 3]`` under
     ``q`` (sparse: over each point's candidates, a lower bound on the dense value)."""
-    # KL(q || q) is computed and dropped: batch_bound's compiled function serves both
-    return _terms(q, q, xyz, rgb, config, estep, n_candidates)[0]
+    return _expected_loglik(q, xyz, rgb, config, estep, n_candidates)
 
 
 def batch_bound(before: model.Mixture, after: model.Mixture, xyz, rgb, *,
@@ -65,7 +64,11 @@ def batch_bound(before: model.Mixture, after: model.Mixture, xyz, rgb, *,
                 n_candidates: int = candidates.DEFAULT_CANDIDATES) -> BatchBound:
     """``B_t`` for the batch ``xyz [n, d]``, ``rgb [n, 3]`` learned from ``before``
     (``q_{t-1}``) to ``after`` (``q_t``); see the module docstring."""
-    ell, kl = _terms(after, before, xyz, rgb, config, estep, n_candidates)
+    ell = _expected_loglik(after, xyz, rgb, config, estep, n_candidates)
+    # op by op, outside the E-step's compiled function: compiled next to it, the LU of
+    # q_{t-1}'s scales ran beside q_t's and both LAPACK calls waited on the 2-core thread
+    # pool for good (a 128 px, 20k component fit-scene hung; see vbgs/__init__.py)
+    kl = float(model.kl(after, before, config.colour_noise))
     return BatchBound(ell, kl, ell - kl, int(len(xyz)))
 
 
@@ -75,11 +78,11 @@ def padded_size(n: int) -> int:
     return max(MIN_PADDED, 1 << (max(n, 1) - 1).bit_length())
 
 
-def _terms(q: model.Mixture, before: model.Mixture, xyz, rgb,
-           config: model.PriorConfig, estep: model.EStep, n_candidates: int
-           ) -> tuple[float, float]:
-    """``(sum_n lse_n under q, KL(q || before))`` as Python floats: the points padded on the host (:func:`padded_size`; weight 0), the
-    sparse E-step's candidates of the real points from a KD-tree over ``q``'s means."""
+def _expected_loglik(q: model.Mixture, xyz, rgb, config: model.PriorConfig,
+                     estep: model.EStep, n_candidates: int) -> float:
+    """``sum_n lse_n`` under ``q`` as a Python float: the points padded on the host
+    (:func:`padded_size`; weight 0), the sparse E-step's candidates of the real points
+    from a KD-tree over ``q``'s means."""
     if estep not in ("dense", "sparse"):
         raise ValueError(f"unknown E-step {estep!r}: use 'dense' or 'sparse'")
     xyz, rgb = model.check_points_host(xyz, rgb)
@@ -95,16 +98,13 @@ def _terms(q: model.Mixture, before: model.Mixture, xyz, rgb,
         chunk = model.chunk_size(size, cand.shape[1] * (d * d + d + 4))
     else:
         chunk = model.chunk_size(size, q.n_components)
-    ell, kl = _compiled_terms(q, before, x, c, w, cand, float(config.colour_noise), chunk)
-    return float(ell), float(kl)
+    return float(_compiled_loglik(q, x, c, w, cand, float(config.colour_noise), chunk))
 
 
 @partial(jax.jit, static_argnames=("colour_noise", "chunk"))
-def _compiled_terms(q: model.Mixture, before: model.Mixture, x, c, w, cand,
-                    colour_noise: float, chunk: int):
+def _compiled_loglik(q: model.Mixture, x, c, w, cand, colour_noise: float, chunk: int):
     _, lse = model.e_step(q, x, c, w, colour_noise, chunk, cand)
-    ell = jnp.sum(jnp.where(w > 0, lse * w, 0.0))  # padding's candidates are arbitrary
-    return ell, model.kl(q, before, colour_noise)
+    return jnp.sum(jnp.where(w > 0, lse * w, 0.0))  # padding's candidates are arbitrary
 
 
 class StreamBound(NamedTuple):
