@@ -140,10 +140,12 @@ def _ranges(numbers: list[int]) -> str:
 
 
 # The map registration after the odometry: its start is near, so one level, the map as
-# it is, 2 passes (room, exact depth, 128 px / 20k / 60 frames, training poses: ATE
-# 0.108 mm with the default three levels, 0.099 with these; tracking 0.224 against
-# 0.196 s a frame on a loaded machine).
-AFTER_DIRECT = dict(levels=(2048,), inflate=(0.0,), passes=(2,))
+# it is, one pass (room, exact depth, 128 px / 20k / 60 frames, training poses: ATE
+# 0.108 mm with the default three levels, 0.099 with two passes of this level). One pass
+# against two, training poses' ATE (mm) of object / room / walk, exact and Kinect:
+# 0.20 / 0.10 / 1.24 and 12.5 / 3.2 / 8.6 against 0.15 / 0.11 / 1.33 and 11.4 / 3.3 /
+# 12.8 (sum 25.9 against 29.1), for one candidate search and solve less a frame.
+AFTER_DIRECT = dict(levels=(2048,), inflate=(0.0,), passes=(1,))
 
 
 def _finite(x: float) -> float | None:

@@ -184,6 +184,15 @@ def quadratic_loglik_coefficients(prec, mean, logdet_prec, extra=0.0):
     return prec, pm, const
 
 
+def niw_centred_loglik_constant(q: NIW) -> jnp.ndarray:
+    """``E_q[log N(x | mu, Sigma)]`` at ``x = m``, ``[k]``: the quadratic's constant about
+    each component's own mean, ``-d/2 log 2pi + 1/2 E[log|Sigma^-1|] - d / (2 kappa)``
+    (:func:`quadratic_loglik_coefficients` with ``m = 0``; it needs no precision
+    matrix, so a caller that wants the constant alone pays no inverse)."""
+    d = q.mean.shape[-1]
+    return -0.5 * d * LOG_2PI + 0.5 * niw_expected_logdet_precision(q) + (-0.5 * d / q.kappa)
+
+
 def niw_loglik_coefficients(q: NIW):
     """``E_q[log N(x | mu, Sigma)]`` as a quadratic in x (see :func:`niw_expected_loglik`):
     precision ``P = nu Psi^-1``, log-determinant ``E[log|Sigma^-1|]`` and the extra

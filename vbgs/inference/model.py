@@ -372,8 +372,8 @@ def component_terms(q: Mixture, colour_noise: float | None,
     """The centred-form terms of :class:`Terms` for the assigning model ``q``;
     ``alpha_total``: ``sum_k alpha_k`` of the whole mixture when ``q`` holds only some of
     its rows (``E[log pi_k]`` needs it; default ``q.alpha.sum()``)."""
-    prec, _, const = expfam.niw_loglik_coefficients(q.space._replace(mean=jnp.zeros_like(
-        q.space.mean)))  # about the component's own mean: no -1/2 m^T P m term
+    prec = expfam.niw_expected_precision(q.space)
+    const = expfam.niw_centred_loglik_constant(q.space)  # about the component's own mean
     const = const + expfam.dirichlet_expected_log(q.alpha, alpha_total)
     colour_mean = None
     if colour_noise is not None:

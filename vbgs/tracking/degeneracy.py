@@ -95,15 +95,16 @@ def _planar(points: np.ndarray, length: float) -> bool:
     plane: the best of :data:`TRIES` planes through three of them (seeded draws)."""
     if len(points) < 3:
         return False
-    rng = np.random.default_rng(26)
-    best = 0.0
-    for i, j, k in rng.integers(0, len(points), (TRIES, 3)):
-        normal = np.cross(points[j] - points[i], points[k] - points[i])
-        size = np.linalg.norm(normal)
-        if size > 0:
-            near = np.abs((points - points[i]) @ (normal / size)) < FLAT * length
-            best = max(best, float(np.mean(near)))
-    return best >= PLANAR
+    i, j, k = np.random.default_rng(26).integers(0, len(points), (TRIES, 3)).T
+    normal = np.cross(points[j] - points[i], points[k] - points[i])  # [TRIES, 3]
+    size = np.linalg.norm(normal, axis=1)
+    ok = size > 0
+    if not ok.any():
+        return False
+    unit = normal[ok] / size[ok, None]
+    offset = np.sum(points[i[ok]] * unit, axis=1)  # each plane's distance from the camera
+    near = np.abs(points @ unit.T - offset) < FLAT * length  # [n, planes]
+    return float(near.mean(0).max()) >= PLANAR
 
 
 def describe(free: np.ndarray) -> str:
