@@ -81,7 +81,7 @@ splat's thin axis alone: 24.69 dB; the polish without that part: 27.56 dB. Its m
 the splats were pushed off their surface, and views other than the one stepped on saw them
 there. Along the stream the polish led VBGS on each view when first seen and lost the lead
 as later frames' steps moved the splats it shares (after 15 frames +0.60 dB, after 45
--0.29 dB). With item 5: 27.49 dB at the end (every one of the 8 views above VBGS's), +0.73
+-0.29 dB). With item 5: 27.49 dB at the end (every one of the 8 views above VBGS's), +1.06
 after 30 frames, +1.04 after 45; the means' residual alone on VBGS's splats 26.69 dB.
 
 Where it stands (validation views, ANCHOR_WEIGHT's note): at the chosen weight every

@@ -28,6 +28,9 @@ pixel.
 
 :func:`carry` moves polished splats with their base when the posterior changes (a new
 frame): the polish is a residual on top of the posterior.
+
+:func:`shape_mean_steps` shapes an optimiser's mean steps by each splat's own axes (the
+anchor's metric up to scale): the continual polish's steps.
 """
 
 from __future__ import annotations
