@@ -11,7 +11,8 @@ polish with one group's residual taken away (``without``), the groups being the 
 the covariances (scales and rotations), the colours and the opacities, and the means'
 residual cut into its part along each splat's thin axis (its normal) and the rest. Prints
 one JSON record. This is how the polish's no-replay loss against VBGS was traced to the
-means' steps along the normals (:mod:`experiments.learners.polish_learner`, "Why the polish without replay went below VBGS").
+means' steps along the normals (:mod:`experiments.learners.polish_learner`, "Why the
+polish without replay went below VBGS").
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ import json
 import sys
 
 import jax.numpy as jnp
-import numpy as np
 
 from experiments.learners import PolishLearner
 from experiments.protocol import evaluate, stream_frames

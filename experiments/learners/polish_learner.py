@@ -72,8 +72,9 @@ residual on top of it, carried as it learns.
    step, whose figures this rule was not measured on.)
 
 Why the polish without replay went below VBGS (object, 128 px, 20k components, 60 frames,
-10 steps a frame, seed 0, scored on 8 validation views; :mod:`experiments.polish_residual`, splats of the
-end: VBGS's base plus part of the polish's residual). Before item 5: VBGS 26.43 dB, the
+10 steps a frame, seed 0, scored on 8 validation views by
+:mod:`experiments.polish_residual`: the splats of the end, VBGS's plus part of the polish's
+residual). Before item 5: VBGS 26.43 dB, the
 polish 25.63 dB. The residual of the means alone on VBGS's splats: 24.98 dB; the polish
 with every residual but the means': 27.59 dB. Of the means' residual, the part along each
 splat's thin axis alone: 24.69 dB; the polish without that part: 27.56 dB. Its median was
