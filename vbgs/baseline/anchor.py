@@ -68,6 +68,8 @@ from vbgs.render.splats import rotations_from_quaternions, scale_rotation_from_c
 #     0.1    20.40 / -0.52   21.30 / 0.13    21.39 / 0.01    23.26 / 0.29
 #   centred on the polish: 0.1   22.10 / -0.45   23.35 / 0.29    21.41 / 1.55    24.22 / 0.12
 #   the gradient baseline, fifo:8: room 18.86 / 1.07, walk 21.59 / 0.37.
+# Chosen before the continual steps were shaped by the splats (shape_mean_steps); not chosen
+# again since.
 ANCHOR_WEIGHT = 0.2
 
 
