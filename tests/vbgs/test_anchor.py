@@ -1,11 +1,14 @@
 """The polish's anchor: zero at the posterior's splats, growing away from them as the
 posterior's precision says, and the residual carried onto a changed posterior."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 
-from vbgs.baseline.anchor import anchor_terms, carry, make_anchor
-from vbgs.baseline.params import covariances, init_params
+from vbgs.baseline.anchor import anchor_terms, carry, make_anchor, shape_mean_steps
+from vbgs.baseline.params import covariances, init_params, trainable
+from vbgs.render.splats import rotations_from_quaternions
 
 
 def base_params(seed=0, n=5):
@@ -92,3 +95,22 @@ def test_carry_of_a_tilted_flat_splat_stays_its_size():
     # the tilt is kept, not undone (0.079 rad: the log-space sum mixes it a little)
     normal = np.linalg.eigh(np.asarray(covariances(carried))[0])[1][:, 0]
     assert 0.04 < np.arccos(abs(normal[2])) < 0.1
+
+
+def test_a_mean_steps_along_its_splat_s_axes_in_proportion_to_their_scales():
+    """A flat splat's mean moves across its surface at the optimiser's rate and along its
+    normal (the thin axis) at the ratio of the thin to the wide scale; the other rows and
+    fields are the optimiser's own update."""
+    base = base_params()
+    base = base._replace(log_scales=jnp.log(jnp.asarray([[0.2, 0.1, 0.002]] * 5, jnp.float32)))
+    theta = trainable(base)
+    axes = np.asarray(rotations_from_quaternions(base.rotations))  # columns: the axes
+    grads = jax.tree.map(jnp.ones_like, theta)._replace(
+        means=jnp.asarray(axes[:, :, 0] + axes[:, :, 1] + axes[:, :, 2], jnp.float32))
+    sgd = optax.sgd(1.0)
+    plain, _ = sgd.update(grads, sgd.init(theta), theta)
+    shaped, _ = shape_mean_steps(sgd).update(grads, sgd.init(theta), theta)
+    along = np.einsum("kai,ka->ki", axes, np.asarray(shaped.means))
+    np.testing.assert_allclose(along, np.tile([[-1.0, -0.5, -0.01]], (5, 1)), atol=1e-5)
+    for field in ("log_scales", "rotations", "opacity_logits", "colour_logits"):
+        np.testing.assert_array_equal(getattr(shaped, field), getattr(plain, field))
