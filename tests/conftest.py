@@ -16,6 +16,13 @@ subprocesses inherit, and removes it at the end. Under pytest-xdist (``-n 2``, t
 default options in pyproject.toml) the controlling process makes the folder before it
 starts the workers, which inherit it: the workers share one persistent compilation
 cache, and each checks its own mappings.
+
+Each process that runs tests (each xdist worker, or the one process under ``-n 0``) turns
+that persistent cache on before its first test, as every command line does: an executable
+one worker compiled is loaded, not compiled again, by the other worker, by the commands
+tests start in subprocesses, and by the same worker after its caches were cleared. (Before,
+a worker turned it on only when a test first called ``experiments.run.main`` in-process, so
+which compiles were shared depended on the order the files ran in.)
 """
 
 from __future__ import annotations
@@ -39,6 +46,10 @@ def pytest_configure(config):
         folder = tempfile.mkdtemp(prefix="vbgs-test-cache-")
         os.environ["VBGS_CACHE_DIR"] = folder
         _SESSION_CACHE.append(folder)
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        from vbgs.compilation import enable_persistent_cache
+
+        enable_persistent_cache()  # the xdist controller runs no test: it needs no JAX
 
 
 def pytest_unconfigure(config):

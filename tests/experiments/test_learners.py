@@ -1,6 +1,8 @@
 """Scene learners under the stream start: nothing read ahead, both methods start alike,
 and the run's record carries the streaming bound."""
 
+import contextlib
+import io
 import math
 
 import numpy as np
@@ -73,19 +75,33 @@ def test_vbgs_record_has_the_streaming_bound():
     assert run_scene(tiny(init="data", frames=3)).oracle_start is True
 
 
-def test_the_streaming_bound_counts_only_the_points_learned():
-    """Points beyond the stream start's reach are left out of the update, so the bound
-    (what the model claims to explain) leaves them out too. The room's walkthrough
-    reaches new ground after the budget of 300 components is spent (frame 25 at 32 px)
-    and, without merging (which frees slots for it), leaves it out."""
+@pytest.fixture(scope="module")
+def room_past_its_budget():
+    """The room's walkthrough spends the 300 components before frame 25 (at 32 px) and,
+    without merging (which frees slots for it), leaves later ground unlearned: one run
+    (:func:`run_scene`) gives the record, what it said on stderr and its VBGS learner."""
     from vbgs.mapping import GrowthConfig
 
+    learners = []
+
+    class Kept(VbgsLearner):
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            learners.append(self)
+
     task = tiny(scene="room", frames=25, components=300, growth=GrowthConfig(merge=False))
-    room = prepare_scene(task)[0]
-    learner = VbgsLearner(task, room)
-    for frame in room.train:
-        learner.learn(frame, np.zeros(3, np.float32))
-        learner.diagnose(frame)
+    err = io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err):
+        mp.setitem(LEARNERS, "vbgs", Kept)
+        result = run_scene(task)
+    (learner,) = learners
+    return result, err.getvalue(), learner
+
+
+def test_the_streaming_bound_counts_only_the_points_learned(room_past_its_budget):
+    """Points beyond the stream start's reach are left out of the update, so the bound
+    (what the model claims to explain) leaves them out too."""
+    _, _, learner = room_past_its_budget
     state = learner.state
     assert state.n_unlearned > 0
     assert learner.bound.n_points == state.n_points - state.n_unlearned
@@ -118,16 +134,11 @@ def test_a_bad_pixel_filter_is_refused(bad):
         tiny(splat_blur=bad)
 
 
-def test_points_left_unlearned_are_said_on_stderr(capsys):
-    """The room's walkthrough spends the 300 components before frame 25 (at 32 px) and,
-    without merging, leaves later ground unlearned: the share is a field of the record
-    and a warning."""
-    from vbgs.mapping import GrowthConfig
-
-    result = run_scene(tiny(scene="room", frames=25, components=300,
-                            growth=GrowthConfig(merge=False)))
+def test_points_left_unlearned_are_said_on_stderr(room_past_its_budget):
+    """The share of the training points left unlearned is a field of the record and a
+    warning."""
+    result, err, _ = room_past_its_budget
     share = result.details["points_unlearned"]
     assert share > 0.01
-    err = capsys.readouterr().err
     assert f"warning: {share:.1%} of the training points were not learned" in err
     assert "--components" in err

@@ -26,8 +26,14 @@ def small():
     return load_image("coffee", 32)
 
 
-def test_float32_matches_float64(small):
-    _, _, out32 = _fit(small, 300)
+@pytest.fixture(scope="module")
+def near(small):
+    """The float32 fit of ``small`` at its own coordinates (two tests' reference)."""
+    return _fit(small, 300)
+
+
+def test_float32_matches_float64(small, near):
+    _, _, out32 = near
     with jax.enable_x64(True):
         post64, _, out64 = _fit(small, 300, dtype=np.float64)
         assert post64.alpha.dtype == jnp.float64
@@ -35,8 +41,8 @@ def test_float32_matches_float64(small):
     assert abs(psnr(out32, small) - psnr(out64, small)) < 0.1
 
 
-def test_coordinates_far_from_origin(small):
-    _, _, near = _fit(small, 300)
+def test_coordinates_far_from_origin(small, near):
+    _, _, near = near
     post, info, far = _fit(small, 300, offset=1e4)
     assert np.isfinite(far).all() and np.isfinite(info.elbo).all()
     assert abs(psnr(far, small) - psnr(near, small)) < 0.2
