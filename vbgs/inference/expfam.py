@@ -23,7 +23,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jax.scipy.special import digamma, gammaln, multigammaln
 
-from vbgs.inference.precision import mat_vec, quad_form
+from vbgs.inference.precision import quad_form
 
 LOG_2PI = 1.8378770664093453
 
@@ -170,37 +170,15 @@ def niw_expected_covariance(q: NIW) -> jnp.ndarray:
     return q.scale / (q.dof - d - 1.0)[:, None, None]
 
 
-def quadratic_loglik_coefficients(prec, mean, logdet_prec, extra=0.0):
-    """Coefficients of a Gaussian-type log-density as a quadratic in x.
-
-    ``-d/2 log 2pi + 1/2 logdet_prec - 1/2 (x - m)^T P (x - m) + extra
-      = -1/2 x^T P x + x^T P m + c``, ``c = -d/2 log 2pi + 1/2 logdet_prec - 1/2 m^T P m + extra``.
-    prec ``[k, d, d]``, mean ``[k, d]``, logdet_prec and extra ``[k]``;
-    returns ``(P, P m [k, d], c [k])``.
-    """
-    d = mean.shape[-1]
-    pm = mat_vec(prec, mean)  # elementwise: robust to reduced-precision matmuls
-    const = -0.5 * d * LOG_2PI + 0.5 * logdet_prec - 0.5 * jnp.sum(mean * pm, -1) + extra
-    return prec, pm, const
-
-
 def niw_centred_loglik_constant(q: NIW) -> jnp.ndarray:
-    """``E_q[log N(x | mu, Sigma)]`` at ``x = m``, ``[k]``: the quadratic's constant about
-    each component's own mean, ``-d/2 log 2pi + 1/2 E[log|Sigma^-1|] - d / (2 kappa)``
-    (:func:`quadratic_loglik_coefficients` with ``m = 0``; it needs no precision
-    matrix, so a caller that wants the constant alone pays no inverse)."""
+    """``E_q[log N(x | mu, Sigma)]`` at ``x = m``, ``[k]``: the constant of its quadratic
+    about each component's own mean, ``-d/2 log 2pi + 1/2 E[log|Sigma^-1|] - d / (2
+    kappa)``, so that ``E_q[log N(x | mu, Sigma)] = const - 1/2 (x - m)^T E[Sigma^-1] (x -
+    m)`` (:func:`niw_expected_loglik`; :func:`vbgs.inference.model.component_terms` pairs
+    it with :func:`niw_expected_precision`). It needs no precision matrix, so a caller
+    that wants the constant alone pays no inverse."""
     d = q.mean.shape[-1]
     return -0.5 * d * LOG_2PI + 0.5 * niw_expected_logdet_precision(q) + (-0.5 * d / q.kappa)
-
-
-def niw_loglik_coefficients(q: NIW):
-    """``E_q[log N(x | mu, Sigma)]`` as a quadratic in x (see :func:`niw_expected_loglik`):
-    precision ``P = nu Psi^-1``, log-determinant ``E[log|Sigma^-1|]`` and the extra
-    ``-d / (2 kappa)`` from the uncertainty of the mean."""
-    d = q.mean.shape[-1]
-    return quadratic_loglik_coefficients(
-        niw_expected_precision(q), q.mean, niw_expected_logdet_precision(q), -0.5 * d / q.kappa
-    )
 
 
 def niw_expected_loglik(q: NIW, x: jnp.ndarray) -> jnp.ndarray:

@@ -20,11 +20,13 @@ def _niw(k=3, d=2, seed=0):
     )
 
 
-def test_quadratic_coefficients_equal_direct_expected_loglik():
+def test_centred_quadratic_equals_direct_expected_loglik():
     q = _niw()
     x = jnp.asarray(np.random.default_rng(1).normal(size=(7, 2)), jnp.float32)
-    prec, pm, const = expfam.niw_loglik_coefficients(q)
-    quad = -0.5 * jnp.einsum("ni,kij,nj->nk", x, prec, x) + x @ pm.T + const[None]
+    prec = expfam.niw_expected_precision(q)
+    const = expfam.niw_centred_loglik_constant(q)
+    diff = x[:, None, :] - q.mean[None]  # [n, k, d]
+    quad = -0.5 * jnp.einsum("nki,kij,nkj->nk", diff, prec, diff) + const[None]
     np.testing.assert_allclose(quad, expfam.niw_expected_loglik(q, x), rtol=1e-5, atol=1e-4)
 
 
