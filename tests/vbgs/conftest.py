@@ -1,5 +1,8 @@
 """Fixtures shared by the library's tests."""
 
+import importlib.util
+from pathlib import Path
+
 import jax
 import numpy as np
 import pytest
@@ -34,3 +37,14 @@ def assert_same():
             np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-4 * scale, err_msg=err_msg)
 
     return check
+
+
+@pytest.fixture(scope="session")
+def tf32():
+    """The helper module ``inference/tf32.py``: ``tf32.emulated_tf32()`` rounds the
+    operands of default-precision float32 products as an NVIDIA GPU does by default."""
+    spec = importlib.util.spec_from_file_location(
+        "tf32", Path(__file__).parent / "inference" / "tf32.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

@@ -62,6 +62,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.inference.precision import matmul
 from vbgs.render.camera import Camera, camera_rays, valid_depth
 from vbgs.tracking.photometric import _cauchy, level_camera, pool, pool_depth
 from vbgs.tracking.register import DAMP_DOWN, DAMP_UP, DAMPING
@@ -163,7 +164,7 @@ def _terms(t, p, src, w, planes, k, use_depth):
     """Residuals ``[n, 2]`` (intensity, depth), their Jacobians ``[n, 2, 6]`` in the left
     twist of ``t`` and their masks ``[n, 2]``."""
     fx, fy, cx, cy = k
-    q = p @ t[:3, :3].T + t[:3, 3]
+    q = matmul(p, t[:3, :3].T) + t[:3, 3]  # full float32: TF32 would move a still camera
     z = q[:, 2]
     zs = jnp.where(z > 1e-6, z, 1.0)
     u, v = fx * q[:, 0] / zs + cx, fy * q[:, 1] / zs + cy

@@ -1,9 +1,6 @@
 """vbgs.tracking.photometric: a pose offset along a textured ground plane (where the
 plane's depth leaves the motion free) recovered from the colours; bad input refused."""
 
-import importlib.util
-from pathlib import Path
-
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -15,11 +12,6 @@ from vbgs.tracking import photometric as ph
 from vbgs.tracking import se3
 
 BACKGROUND = (0.6, 0.7, 0.9)
-
-_spec = importlib.util.spec_from_file_location(
-    "tf32", Path(__file__).parents[1] / "inference" / "tf32.py")
-tf32 = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(tf32)
 
 
 def ground(n=48, seed=0):
@@ -79,7 +71,7 @@ def test_recovers_an_offset_along_the_plane(frame, with_depth):
     assert np.all(np.isfinite(found.sigma_t)) and np.all(found.sigma_t < 0.05)
 
 
-def test_recovers_the_offset_under_tf32(frame):
+def test_recovers_the_offset_under_tf32(frame, tf32):
     """A GPU's default TF32 products (emulated here) must not move the pose found: the
     pose compositions ask for full float32 (:func:`vbgs.tracking.se3.compose`). On an H200
     at default precision, before they did, this offset was found to 5.8e-4 units."""
