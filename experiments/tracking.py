@@ -20,7 +20,9 @@ the run's ``seconds_per_frame``. The guess for frame ``i`` is
 With :data:`DIRECT` (the default) that motion is first refined by the direct RGB-D
 odometry from the frame before (:mod:`vbgs.tracking.direct`; for the second frame of a
 track, from the best of :data:`SEARCH`'s motions), and the map registration starts from
-it. Where the registration leaves directions free (:mod:`vbgs.tracking.degeneracy`):
+it. The odometry reads only the two frames and the registration's map table and
+KD-tree only the map: the table is built on a second thread while the frames align
+(:meth:`TrackedLearner.learn`), so a CPU's second core hides it. Where the registration leaves directions free (:mod:`vbgs.tracking.degeneracy`):
 on a planar frame the pose is the odometry's whole (on the walk under a Kinect the
 registration against a map of the near road moved the forward and vertical position
 by 2-3 mm a frame the wrong way, ATE 7.9 cm; the odometry's pose on its planar frames
@@ -43,6 +45,7 @@ from __future__ import annotations
 
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -180,7 +183,8 @@ class TrackedLearner:
         # the direct odometry from the frame before (None: the map registration alone)
         # (with the photometric refinement on, its own search and refinement instead)
         self.direct = direct.DirectConfig() if DIRECT and self.photo is None else None
-        self.previous: Frame | None = None
+        self.pyramid: direct.Pyramid | None = None  # the last frame's, for the odometry
+        self.beside: ThreadPoolExecutor | None = None  # builds the map's table (learn)
         self.covariance = np.zeros((6, 6))  # the last pose's (right twist)
         # (frame number from 1, why, which directions) of each frame with free directions
         self.free: list[tuple[int, str, str]] = []
@@ -222,13 +226,15 @@ class TrackedLearner:
 
     def _direct(self, frame: Frame) -> direct.Motion:
         """The direct RGB-D odometry from the frame before (:mod:`vbgs.tracking.direct`),
-        from the motion guess, or from :data:`SEARCH`'s motions for the second frame."""
-        prev, guess = self.previous, self.motion_guess()
-        args = (frame.camera, prev.rgb, prev.depth, frame.rgb, frame.depth)
+        from the motion guess, or from :data:`SEARCH`'s motions for the second frame.
+        Each frame's pyramid is built once: it is the previous frame of the next."""
+        prev, guess = self.pyramid, self.motion_guess()
+        new = self.pyramid = direct.pyramid(frame.camera, frame.rgb, frame.depth,
+                                            self.direct.factors)
         if guess is None:
-            return direct.search(*args, se3_exp(np.concatenate([np.zeros((1, 6)), SEARCH])),
-                                 self.direct)
-        return direct.align(*args, guess, self.direct)
+            starts = se3_exp(np.concatenate([np.zeros((1, 6)), SEARCH]))
+            return direct.search_pyramids(prev, new, starts, self.direct)
+        return direct.align_pyramids(prev, new, guess, self.direct)
 
     def learn(self, frame: Frame, background) -> None:
         sparse = valid_depth(np.asarray(frame.depth)).mean() < PHOTO_BELOW
@@ -238,9 +244,12 @@ class TrackedLearner:
         cov = np.zeros((6, 6))
         if self.estimates:
             start = time.perf_counter()
-            config, odo = self.config, None
-            if self.direct is not None:
+            config, odo, target = self.config, None, None
+            if self.direct is not None:  # the map's table on a second thread meanwhile
+                self.beside = self.beside or ThreadPoolExecutor(1, "map-table")
+                pending = self.beside.submit(self.inner.map_target)
                 odo = self._direct(frame)
+                target = pending.result()
                 guess = orthonormalise(self.estimates[-1] @ odo.motion)
                 config = replace(config, **AFTER_DIRECT)
             else:
@@ -250,7 +259,7 @@ class TrackedLearner:
                 if photo is not None and self.odometry is None and len(self.estimates) == 1:
                     guess = self.search(frame, guess, config, background)
                     config = self.config  # the search's best start is near: the usual levels
-            found = self.inner.locate(frame, guess, config,
+            found = self.inner.locate(frame, guess, config, target=target,
                                       seed=self.seed + len(self.estimates), **extra)
             pose, cov = found.pose, None
             if odo is not None and photo is None:  # the free directions from the odometry
@@ -269,7 +278,9 @@ class TrackedLearner:
             self.sigmas.append([_finite(np.linalg.norm(sig[:3])),
                                 _finite(np.degrees(np.linalg.norm(sig[3:])))])
         self.covariance = cov
-        self.previous = frame
+        if self.direct is not None and self.pyramid is None:  # the first frame
+            self.pyramid = direct.pyramid(frame.camera, frame.rgb, frame.depth,
+                                          self.direct.factors)
         self.truth.append(np.asarray(frame.camera.pose, np.float64))
         self.estimates.append(pose)
         moved = frame._replace(camera=frame.camera._replace(pose=pose))

@@ -198,59 +198,92 @@ def _solve(t, p, src, w, planes, k, robust, damping, use_depth, *, iterations: i
     def scales(r, m):
         return jnp.stack([_mad(r[:, 0], m[:, 0], FLOOR_I), _mad(r[:, 1], m[:, 1], FLOOR_D)])
 
-    def cost(t, sig):
-        r, _, m = _terms(t, p, src, w, planes, k, use_depth)
-        rho, _ = _cauchy((r / sig) ** 2, robust)
-        return jnp.sum(m * rho)
-
-    def normal(t):
-        r, jac, m = _terms(t, p, src, w, planes, k, use_depth)
+    def normal(r, jac, m):
         sig = scales(r, m)
         rho, wt = _cauchy((r / sig) ** 2, robust)
         ww = (m * wt) / sig**2  # [n, 2]
         jw = jac * ww[..., None]
         h = jnp.einsum("nca,ncb->ab", jw, jac, precision=hp)
         g = jnp.einsum("nca,nc->a", jw, r, precision=hp)
-        return jnp.sum(m * rho), g, h, sig, m
+        return jnp.sum(m * rho), g, h, sig
 
-    def step(_, carry):
-        t, lam = carry
-        c0, g, h, sig, _ = normal(t)
+    def step(_, carry):  # the terms at a step's end serve the next step's normal equations
+        t, lam, terms = carry
+        c0, g, h, sig = normal(*terms)
         a = h + lam * jnp.diag(jnp.diag(h) + 1e-12)
         delta = -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(a), g)
         new = jnp.matmul(se3_exp(delta), t, precision=hp)
-        keep = jnp.isfinite(delta).all() & (cost(new, sig) < c0)
-        return (jnp.where(keep, new, t), jnp.where(keep, lam * DAMP_DOWN, lam * DAMP_UP))
+        moved = _terms(new, p, src, w, planes, k, use_depth)
+        r, _, m = moved
+        keep = jnp.isfinite(delta).all() & (jnp.sum(m * _cauchy((r / sig) ** 2, robust)[0]) < c0)
+        pick = lambda a, b: jnp.where(keep, a, b)  # noqa: E731
+        return (pick(new, t), pick(lam * DAMP_DOWN, lam * DAMP_UP),
+                jax.tree_util.tree_map(pick, moved, terms))
 
-    t, _ = jax.lax.fori_loop(0, iterations, step, (t, damping))
-    _, _, h, sig, m = normal(t)
+    first = _terms(t, p, src, w, planes, k, use_depth)
+    t, _, terms = jax.lax.fori_loop(0, iterations, step, (t, damping, first))
+    _, _, h, sig = normal(*terms)
+    m = terms[2]
     return t, h, jnp.sum(m[:, 0]) / jnp.maximum(jnp.sum(w), 1.0), sig[0]
 
 
-def _pyramid_level(camera: Camera, rgb_prev, depth_prev, rgb_new, depth_new, factor: int):
-    """One level's inputs: the previous frame's points ``[n, 3]``, intensities and
-    weights, the new frame's planes ``[h, w, 7]`` and its intrinsics."""
+class Level(NamedTuple):
+    """One frame at one level of the pyramid, in both roles a frame plays: as the
+    previous frame, its pixels with depth (``points [m, 3]`` in its camera's frame,
+    ``intensity [m]``, ``weight [m]``: 1, or 0 on padding rows, :func:`_padded`); as the
+    new frame, its ``planes [h, w, 7]`` (intensity, its gradient, inverse depth, its
+    gradient, where a depth gradient counts) and the level's intrinsics ``k [4]``."""
+
+    points: np.ndarray
+    intensity: np.ndarray
+    weight: np.ndarray
+    planes: np.ndarray
+    k: np.ndarray
+
+
+class Pyramid(NamedTuple):
+    """A frame's :class:`Level` at each of ``factors``, built once (:func:`pyramid`):
+    a stream's frame is the new frame of one alignment and the previous of the next."""
+
+    factors: tuple[int, ...]
+    levels: tuple[Level, ...]
+    has_depth: bool  # any pixel with a reading
+
+
+def pyramid(camera: Camera, rgb, depth, factors=FACTORS, *, names=("rgb", "depth")
+            ) -> Pyramid:
+    """The :class:`Pyramid` of frame ``rgb [h, w, 3]``, ``depth [h, w]`` (0 or NaN where
+    missing) seen by ``camera`` (intrinsics only); ``names``: the arrays' in errors."""
+    for name, a, tail in ((names[0], rgb, (3,)), (names[1], depth, ())):
+        if np.shape(a) != (camera.height, camera.width) + tail:
+            raise ValueError(f"{name} must be {(camera.height, camera.width) + tail} for the "
+                             f"camera, got {np.shape(a)}")
+    ok = valid_depth(depth)
+    depth, intensity = np.where(ok, depth, 0.0), grey(rgb)
+    levels = tuple(_level(camera, intensity, depth, int(f)) for f in factors)
+    return Pyramid(tuple(int(f) for f in factors), levels, bool(ok.any()))
+
+
+def _level(camera: Camera, intensity, depth, factor: int) -> Level:
     cam = level_camera(camera, factor)
-    d_prev, _ = pool_depth(depth_prev, np.ones_like(depth_prev), factor)
-    d_new, _ = pool_depth(depth_new, np.ones_like(depth_new), factor)
-    ok_prev, ok_new = valid_depth(d_prev), valid_depth(d_new)
-    p = (camera_rays(cam) * np.where(ok_prev, d_prev, 0.0)[..., None]).reshape(-1, 3)
-    src = pool(grey(rgb_prev), factor).ravel()
-    i_new = pool(grey(rgb_new), factor)
-    gi = _gradient(i_new)
-    dz = np.where(ok_new, 1.0 / np.where(ok_new, d_new, 1.0), 0.0)  # inverse depth
+    d, _ = pool_depth(depth, np.ones_like(depth), factor)
+    ok = valid_depth(d)
+    i = pool(intensity, factor)
+    gi = _gradient(i)
+    dz = np.where(ok, 1.0 / np.where(ok, d, 1.0), 0.0)  # inverse depth
     gd = _gradient(dz)
     # a depth gradient counts only where the pixel and its 4 neighbours have readings
-    pad = np.pad(ok_new, 1)
-    full = ok_new & pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:]
-    planes = np.stack([i_new, *gi, dz, *gd, full.astype(np.float64)], -1)
-    k = np.array([cam.fx, cam.fy, cam.cx, cam.cy], np.float32)
-    keep = np.flatnonzero(ok_prev.ravel())  # only pixels with depth: the rest weigh 0
-    rows = np.zeros(_padded(len(keep), len(src)), np.int64)
-    rows[: len(keep)] = keep
-    w = (np.arange(len(rows)) < len(keep)).astype(np.float32)
+    pad = np.pad(ok, 1)
+    full = ok & pad[:-2, 1:-1] & pad[2:, 1:-1] & pad[1:-1, :-2] & pad[1:-1, 2:]
     f32 = np.float32
-    return (p[rows].astype(f32), src[rows].astype(f32), w, planes.astype(f32), k)
+    planes = np.stack([i, *gi, dz, *gd, full.astype(np.float64)], -1).astype(f32)
+    keep = np.flatnonzero(ok.ravel())  # only pixels with depth: the rest would weigh 0
+    rows = np.zeros(_padded(len(keep), ok.size), np.int64)
+    rows[: len(keep)] = keep
+    p = camera_rays(cam).reshape(-1, 3)[rows] * d.ravel()[rows, None]
+    w = (np.arange(len(rows)) < len(keep)).astype(f32)
+    k = np.array([cam.fx, cam.fy, cam.cx, cam.cy], f32)
+    return Level(p.astype(f32), i.ravel()[rows].astype(f32), w, planes, k)
 
 
 def _padded(n: int, most: int) -> int:
@@ -267,26 +300,36 @@ def align(camera: Camera, rgb_prev, depth_prev, rgb_new, depth_new, guess=None,
     frame ``(rgb_prev, depth_prev)`` to ``(rgb_new, depth_new)`` (``[h, w, 3]``, ``[h,
     w]``; depth 0 or NaN where missing) seen by ``camera`` (intrinsics only), starting
     from the motion ``guess`` (None: no motion)."""
-    for name, a, tail in (("rgb_prev", rgb_prev, (3,)), ("rgb_new", rgb_new, (3,)),
-                          ("depth_prev", depth_prev, ()), ("depth_new", depth_new, ())):
-        if np.shape(a) != (camera.height, camera.width) + tail:
-            raise ValueError(f"{name} must be {(camera.height, camera.width) + tail} for the "
-                             f"camera, got {np.shape(a)}")
-    depth_prev, depth_new = (np.where(valid_depth(d), d, 0.0)
-                             for d in (depth_prev, depth_new))
-    if not valid_depth(depth_prev).any():
+    prev, new = (_named(camera, rgb, depth, config.factors, when)
+                 for rgb, depth, when in ((rgb_prev, depth_prev, "prev"),
+                                          (rgb_new, depth_new, "new")))
+    return align_pyramids(prev, new, guess, config)
+
+
+def _named(camera, rgb, depth, factors, when: str) -> Pyramid:
+    return pyramid(camera, rgb, depth, factors, names=(f"rgb_{when}", f"depth_{when}"))
+
+
+def align_pyramids(prev: Pyramid, new: Pyramid, guess=None,
+                   config: DirectConfig = DirectConfig()) -> Motion:
+    """:func:`align` between two frames' :class:`Pyramid`, built with the ``factors``
+    of ``config``."""
+    factors = tuple(int(f) for f in config.factors)
+    if prev.factors != factors or new.factors != factors:
+        raise ValueError(f"the pyramids' levels {prev.factors} and {new.factors} are not "
+                         f"the config's {factors}")
+    if not prev.has_depth:
         raise ValueError("the previous frame has no pixel with depth: no motion to align")
     motion = np.eye(4) if guess is None else orthonormalise(np.asarray(guess, np.float64))
     t = inverse(motion)
     h, matched, residual = np.zeros((6, 6)), 0.0, np.inf
-    for factor, iterations in zip(config.factors, config.iterations, strict=True):
-        p, src, w, planes, k = _pyramid_level(camera, rgb_prev, depth_prev, rgb_new,
-                                              depth_new, int(factor))
-        if w.sum() < 6:  # too coarse for this frame's depth: the next level
+    for a, b, iterations in zip(prev.levels, new.levels, config.iterations, strict=True):
+        if a.weight.sum() < 6:  # too coarse for this frame's depth: the next level
             continue
-        out, h, matched, residual = _solve(jnp.asarray(t, jnp.float32), p, src, w, planes, k,
-                                 float(config.robust), float(config.damping),
-                                 bool(config.depth), iterations=int(iterations))
+        out, h, matched, residual = _solve(jnp.asarray(t, jnp.float32), a.points, a.intensity,
+                                           a.weight, b.planes, b.k, float(config.robust),
+                                           float(config.damping), bool(config.depth),
+                                           iterations=int(iterations))
         t = orthonormalise(np.asarray(out, np.float64))
     return Motion(inverse(t), np.asarray(h, np.float64), float(matched), float(residual))
 
@@ -303,7 +346,14 @@ def search(camera: Camera, rgb_prev, depth_prev, rgb_new, depth_new, starts,
     final intensity residual (``Motion.residual``) is lowest among those that keep
     :data:`MIN_MATCHED` of the points in view (the first start's when none does). For
     a frame with no motion guess (the second of a track)."""
-    found = [align(camera, rgb_prev, depth_prev, rgb_new, depth_new, s, config)
-             for s in np.asarray(starts, np.float64)]
+    prev = _named(camera, rgb_prev, depth_prev, config.factors, "prev")
+    new = _named(camera, rgb_new, depth_new, config.factors, "new")
+    return search_pyramids(prev, new, starts, config)
+
+
+def search_pyramids(prev: Pyramid, new: Pyramid, starts,
+                    config: DirectConfig = DirectConfig()) -> Motion:
+    """:func:`search` between two frames' :class:`Pyramid`."""
+    found = [align_pyramids(prev, new, s, config) for s in np.asarray(starts, np.float64)]
     score = [m.residual if m.matched >= MIN_MATCHED else np.inf for m in found]
     return found[int(np.argmin(score))] if np.isfinite(min(score)) else found[0]

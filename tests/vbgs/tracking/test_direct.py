@@ -74,3 +74,24 @@ def test_refuses_bad_input(street):
         direct.align(first.camera, first.rgb, 0 * first.depth, first.rgb, first.depth)
     with pytest.raises(ValueError, match="one iteration count per level"):
         direct.DirectConfig(factors=(4, 2), iterations=(3,))
+    with pytest.raises(ValueError, match="not the config's"):
+        pyr = direct.pyramid(first.camera, first.rgb, first.depth, (2, 1))
+        direct.align_pyramids(pyr, pyr)
+
+
+def test_pyramid_holds_each_level_s_pixels_with_depth(street):
+    """A level's rows: the camera points of the blocks whose every pixel has depth (at
+    the block's mean depth, along its centre's ray), then padding of weight 0."""
+    _, first = street
+    depth = np.asarray(first.depth, np.float64).copy()
+    depth[:20, :] = np.nan  # a band without readings
+    pyr = direct.pyramid(first.camera, first.rgb, depth, (4, 1))
+    for factor, level in zip(pyr.factors, pyr.levels):
+        h, w = depth.shape[0] // factor, depth.shape[1] // factor
+        blocks = depth[: h * factor, : w * factor].reshape(h, factor, w, factor)
+        full = np.isfinite(blocks).all((1, 3)) & (np.nan_to_num(blocks) > 0).all((1, 3))
+        n = int(full.sum())
+        assert level.weight.sum() == n and np.all(level.weight[n:] == 0)
+        z = blocks.mean((1, 3))[full]
+        np.testing.assert_allclose(level.points[:n, 2], z, rtol=1e-6)
+        assert level.planes.shape == (h, w, 7)
