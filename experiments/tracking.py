@@ -20,9 +20,7 @@ the run's ``seconds_per_frame``. The guess for frame ``i`` is
 With :data:`DIRECT` (the default) that motion is first refined by the direct RGB-D
 odometry from the frame before (:mod:`vbgs.tracking.direct`; for the second frame of a
 track, from the best of :data:`SEARCH`'s motions), and the map registration starts from
-it. The odometry reads only the two frames and the registration's map table and
-KD-tree only the map: the table is built on a second thread while the frames align
-(:meth:`TrackedLearner.learn`), so a CPU's second core hides it. Where the registration leaves directions free (:mod:`vbgs.tracking.degeneracy`):
+it. Where the registration leaves directions free (:mod:`vbgs.tracking.degeneracy`):
 on a planar frame the pose is the odometry's whole (on the walk under a Kinect the
 registration against a map of the near road moved the forward and vertical position
 by 2-3 mm a frame the wrong way, ATE 7.9 cm; the odometry's pose on its planar frames
@@ -45,7 +43,6 @@ from __future__ import annotations
 
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -184,7 +181,6 @@ class TrackedLearner:
         # (with the photometric refinement on, its own search and refinement instead)
         self.direct = direct.DirectConfig() if DIRECT and self.photo is None else None
         self.pyramid: direct.Pyramid | None = None  # the last frame's, for the odometry
-        self.beside: ThreadPoolExecutor | None = None  # builds the map's table (learn)
         self.covariance = np.zeros((6, 6))  # the last pose's (right twist)
         # (frame number from 1, why, which directions) of each frame with free directions
         self.free: list[tuple[int, str, str]] = []
@@ -244,12 +240,9 @@ class TrackedLearner:
         cov = np.zeros((6, 6))
         if self.estimates:
             start = time.perf_counter()
-            config, odo, target = self.config, None, None
-            if self.direct is not None:  # the map's table on a second thread meanwhile
-                self.beside = self.beside or ThreadPoolExecutor(1, "map-table")
-                pending = self.beside.submit(self.inner.map_target)
+            config, odo = self.config, None
+            if self.direct is not None:
                 odo = self._direct(frame)
-                target = pending.result()
                 guess = orthonormalise(self.estimates[-1] @ odo.motion)
                 config = replace(config, **AFTER_DIRECT)
             else:
@@ -259,7 +252,7 @@ class TrackedLearner:
                 if photo is not None and self.odometry is None and len(self.estimates) == 1:
                     guess = self.search(frame, guess, config, background)
                     config = self.config  # the search's best start is near: the usual levels
-            found = self.inner.locate(frame, guess, config, target=target,
+            found = self.inner.locate(frame, guess, config,
                                       seed=self.seed + len(self.estimates), **extra)
             pose, cov = found.pose, None
             if odo is not None and photo is None:  # the free directions from the odometry

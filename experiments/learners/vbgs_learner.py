@@ -110,30 +110,23 @@ class VbgsLearner:
         return photometric.search(self.splats(), frame.camera, frame.rgb, poses, photo,
                                   **self._photo_inputs(frame, background, photo))
 
-    def map_target(self) -> register.MapTarget:
-        """The map learned so far as the registration reads it
-        (:func:`vbgs.tracking.register.target`)."""
-        if self.state.mixture is None:
-            raise ValueError("the map has seen no frame yet: give the first pose")
-        return register.target(self.state.mixture.posterior, self.state.mixture.prior)
-
     def locate(self, frame: Frame, guess, config: TrackConfig, seed: int = 0, *,
-               photo: PhotoConfig | None = None, background=None,
-               target: register.MapTarget | None = None) -> Registration:
+               photo: PhotoConfig | None = None, background=None) -> Registration:
         """The frame's pose registered against the map learned so far, from ``guess``
         (:func:`vbgs.tracking.register.register`; the frame's own pose is not read), with
         its colours and the task's sensor noise along the rays when the depth is
         measured; with ``photo``, then refined against the map's splats rendered over
         ``background`` (:func:`vbgs.tracking.photometric.refine`, the measured depth
-        weighted by the sensor's ``1 / sigma_z^2``), whose uncertainty it then reports.
-        ``target``: :meth:`map_target` if already built."""
-        target = self.map_target() if target is None else target
-        sensor = self.config.sensor
+        weighted by the sensor's ``1 / sigma_z^2``), whose uncertainty it then reports."""
+        state, sensor = self.state, self.config.sensor
+        if state.mixture is None:
+            raise ValueError("the map has seen no frame yet: give the first pose")
         ray = None
         if sensor.noisy:  # the noise in the camera frame: the pose is what is sought
             camera = frame.camera._replace(pose=np.eye(4))
             ray = point_rays(camera, frame.depth, sensor.model, sensor.level)
-        found = register.register(target, frame.camera, frame.depth, guess, config,
+        found = register.target(state.mixture.posterior, state.mixture.prior)
+        found = register.register(found, frame.camera, frame.depth, guess, config,
                                   rgb=frame.rgb, ray=ray, seed=seed)
         if photo is None:
             return found
