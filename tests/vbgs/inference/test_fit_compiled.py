@@ -1,6 +1,8 @@
 """The compiled batch fit (one while_loop) equals the per-iteration host loop, its
 reference: posterior, ELBO trace, iteration count, convergence and re-seeded count."""
 
+import os
+
 import jax
 import numpy as np
 import pytest
@@ -39,7 +41,13 @@ def test_compiled_fit_stops_where_the_host_loop_does(points, assert_same):
     ref, ref_info = fit_steps(prior, uv, rgb, iters=40, tol=1e-3)
     assert info.converged and ref_info.converged
     assert info.iterations == ref_info.iterations < 40
-    assert_same(info.elbo, ref_info.elbo)
+    if "xla_backend_optimization_level=0" in os.environ.get("XLA_FLAGS", ""):
+        # the suite compiles without LLVM's passes (tests/conftest.py): there 2 of the 16
+        # ELBOs differ in their last bit (1.2e-4 of -1666.05, 7.8e-8 relative); at XLA's
+        # default optimisation (VBGS_TEST_XLA_OPTIMISE=1) they are equal to the bit
+        np.testing.assert_allclose(info.elbo, ref_info.elbo, rtol=2e-7)
+    else:
+        assert_same(info.elbo, ref_info.elbo)
     _same(post, ref, assert_same)
 
 
