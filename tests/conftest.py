@@ -33,7 +33,10 @@ fusions with XLA:CPU's older LLVM IR emitters instead of its MLIR fusion emitter
 without LLVM's optimisation passes. Measured on the shared 2-core machine (``-n 0``,
 test_stability.py with test_raster_pallas.py, user CPU seconds): XLA's default 63.0;
 level 0 alone 47.8; level 0 and no expensive passes 42.7 (44.3 in a second run); the old
-emitters alone 39.5; the old emitters and level 0 21.1; all three 20.1. Only on a
+emitters alone 39.5; the old emitters and level 0 21.1; all three 20.1. The whole default
+run (``/usr/bin/time -v python -m pytest -q``, one run straight after the other on the
+loaded machine): at XLA's default 1132 s user+sys CPU, 1128 s wall; fast 455 s, 444 s
+(1095 passed, 1 skipped, both). Only on a
 CPU-only install: a GPU's kernels keep XLA's default (where a CUDA plugin is installed, or
 ``JAX_PLATFORMS`` names a GPU). The slow tests (long streams: more running than compiling,
 their floors measured at XLA's default) keep XLA's default too.
