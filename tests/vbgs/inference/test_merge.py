@@ -4,6 +4,7 @@ import warnings
 
 import jax
 import numpy as np
+import pytest
 
 from vbgs.inference import expfam, grow, merge, model
 from vbgs.inference.model import PriorConfig
@@ -34,6 +35,7 @@ def _moments(r, x, c):
     return r.T @ phi
 
 
+@pytest.mark.xla_default  # equal to the bit at XLA's default (tests/conftest.py)
 def test_merged_statistics_are_the_union_of_both_components():
     state, xyz, rgb, label = two_clusters_state()
     empty = grow.empty_prior(4, state.prior.origin, 0.05, CONFIG)

@@ -15,7 +15,9 @@ from vbgs.inference.sharding import HOST_DEVICE_XLA_FLAGS, host_device_flags
 def sharded():
     root = Path(__file__).resolve().parents[3]
     path = os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")]))
-    env = {**os.environ, "XLA_FLAGS": host_device_flags(4), "JAX_PLATFORMS": "cpu", "JAX_ENABLE_X64": "1", "PYTHONPATH": path}
+    # the session's other XLA flags kept (tests/conftest.py: compiled without LLVM's passes)
+    env = {**os.environ, "XLA_FLAGS": host_device_flags(4, os.environ.get("XLA_FLAGS", "")),
+           "JAX_PLATFORMS": "cpu", "JAX_ENABLE_X64": "1", "PYTHONPATH": path}
     out = subprocess.run([sys.executable, str(Path(__file__).with_name("sharded_check.py"))],
                          capture_output=True, text=True, env=env, cwd=root, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
