@@ -156,12 +156,16 @@ def niw_expected_precision(q: NIW) -> jnp.ndarray:
     return q.dof[:, None, None] * jnp.linalg.inv(q.scale)
 
 
-def niw_expected_logdet_precision(q: NIW) -> jnp.ndarray:
-    """``E[log |Sigma^-1|] = sum_{i=1..d} psi((nu + 1 - i) / 2) + d log 2 - log |Psi|``, ``[k]``."""
+def niw_expected_logdet_precision(q: NIW, logdet_scale: jnp.ndarray | None = None
+                                  ) -> jnp.ndarray:
+    """``E[log |Sigma^-1|] = sum_{i=1..d} psi((nu + 1 - i) / 2) + d log 2 - log |Psi|``, ``[k]``;
+    ``logdet_scale``: ``log |Psi|`` ``[k]`` when the caller has it (default ``slogdet``'s)."""
     d = q.mean.shape[-1]
     i = jnp.arange(1, d + 1, dtype=q.dof.dtype)
     psi = digamma(0.5 * (q.dof[:, None] + 1.0 - i)).sum(-1)
-    return psi + d * jnp.log(2.0) - jnp.linalg.slogdet(q.scale)[1]
+    if logdet_scale is None:
+        logdet_scale = jnp.linalg.slogdet(q.scale)[1]
+    return psi + d * jnp.log(2.0) - logdet_scale
 
 
 def niw_expected_covariance(q: NIW) -> jnp.ndarray:
@@ -170,15 +174,18 @@ def niw_expected_covariance(q: NIW) -> jnp.ndarray:
     return q.scale / (q.dof - d - 1.0)[:, None, None]
 
 
-def niw_centred_loglik_constant(q: NIW) -> jnp.ndarray:
+def niw_centred_loglik_constant(q: NIW, logdet_scale: jnp.ndarray | None = None
+                                ) -> jnp.ndarray:
     """``E_q[log N(x | mu, Sigma)]`` at ``x = m``, ``[k]``: the constant of its quadratic
     about each component's own mean, ``-d/2 log 2pi + 1/2 E[log|Sigma^-1|] - d / (2
     kappa)``, so that ``E_q[log N(x | mu, Sigma)] = const - 1/2 (x - m)^T E[Sigma^-1] (x -
     m)`` (:func:`niw_expected_loglik`; :func:`vbgs.inference.model.component_terms` pairs
     it with :func:`niw_expected_precision`). It needs no precision matrix, so a caller
-    that wants the constant alone pays no inverse."""
+    that wants the constant alone pays no inverse. ``logdet_scale`` as in
+    :func:`niw_expected_logdet_precision`."""
     d = q.mean.shape[-1]
-    return -0.5 * d * LOG_2PI + 0.5 * niw_expected_logdet_precision(q) + (-0.5 * d / q.kappa)
+    return (-0.5 * d * LOG_2PI + 0.5 * niw_expected_logdet_precision(q, logdet_scale)
+            + (-0.5 * d / q.kappa))
 
 
 def niw_expected_loglik(q: NIW, x: jnp.ndarray) -> jnp.ndarray:

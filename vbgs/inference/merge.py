@@ -77,6 +77,7 @@ from scipy.special import digamma
 from vbgs.inference import expfam
 from vbgs.inference.grow import _m_step  # compiled: one executable, shared with growth
 from vbgs.inference.model import Mixture, State, m_step
+from vbgs.inference.precision import logdet3
 
 # Each component may merge with one of its this many nearest components (by mean).
 NEIGHBOURS = 4
@@ -100,15 +101,12 @@ def _union(wa, ma, ca, wb, mb, cb):
 
 
 def _logdet3(s: np.ndarray) -> np.ndarray:
-    """``log |det s|`` ``[m]`` of symmetric ``s [m, 3, 3]`` (float64), elementwise by the
-    rule of Sarrus (a batched LAPACK call costs ten times more). The absolute value, as
-    ``slogdet``'s: a thin component's float32 posterior scale can come out slightly
-    indefinite, and clamping its determinant instead (so it never merged) lost 0.6-0.9
-    dB on the room's validation views."""
-    det = (s[:, 0, 0] * (s[:, 1, 1] * s[:, 2, 2] - s[:, 1, 2] * s[:, 2, 1])
-           - s[:, 0, 1] * (s[:, 1, 0] * s[:, 2, 2] - s[:, 1, 2] * s[:, 2, 0])
-           + s[:, 0, 2] * (s[:, 1, 0] * s[:, 2, 1] - s[:, 1, 1] * s[:, 2, 0]))
-    return np.log(np.maximum(np.abs(det), 1e-300))
+    """``log |det s|`` ``[m]`` of symmetric ``s [m, 3, 3]`` (float64), elementwise
+    (:func:`vbgs.inference.precision.logdet3`; a batched LAPACK call costs ten times
+    more). The absolute value, as ``slogdet``'s: a thin component's float32 posterior
+    scale can come out slightly indefinite, and clamping its determinant instead (so it
+    never merged) lost 0.6-0.9 dB on the room's validation views."""
+    return logdet3(s, floor=1e-300)
 
 
 def merge_costs(posterior: Mixture, counts: np.ndarray, pairs: np.ndarray,

