@@ -1,14 +1,11 @@
 """Right answers whatever the matmul precision: TF32 products emulated on the CPU.
 
 NVIDIA GPUs run float32 products in TF32 by default (10-bit mantissa operands). The
-helper :mod:`tf32` rounds the operands of every default-precision product that way, so
+helper :mod:`tf32` (the ``tf32`` fixture) rounds the operands of every default-precision product that way, so
 these tests guard on CI what only a GPU would show. The last tests remove the
 protection (products at default precision) and show the fit collapsing, so they fail
 if the protection is ever lost.
 """
-
-import importlib.util
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -25,10 +22,6 @@ from vbgs.render.camera import unproject
 from vbgs.render.image import render_image
 from vbgs.render.metrics import psnr
 from vbgs.render.raster import rasterize
-
-_spec = importlib.util.spec_from_file_location("tf32", Path(__file__).with_name("tf32.py"))
-tf32 = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(tf32)
 
 SIZE, K, ITERS = 48, 1000, 2
 
@@ -47,7 +40,7 @@ def reference_fit():
     return _fit_image()
 
 
-def test_round_tf32_keeps_ten_mantissa_bits():
+def test_round_tf32_keeps_ten_mantissa_bits(tf32):
     x = jnp.asarray([1.0, 1.0 + 2**-11, 1.0 + 3 * 2**-11, 1.0 + 2**-10, np.pi, -2.5e-8],
                     jnp.float32)
     out = np.asarray(tf32.round_tf32(x))
@@ -57,7 +50,7 @@ def test_round_tf32_keeps_ten_mantissa_bits():
     assert abs(out[5] / -2.5e-8 - 1) < 2**-11
 
 
-def test_emulation_changes_default_products_only():
+def test_emulation_changes_default_products_only(tf32):
     a = jnp.asarray(np.random.default_rng(0).normal(size=(8, 8)), jnp.float32)
     with tf32.emulated_tf32():
         default = np.asarray(a @ a)
@@ -67,14 +60,14 @@ def test_emulation_changes_default_products_only():
     assert np.abs(highest - exact).max() < 1e-5
 
 
-def test_image_fit_unchanged_under_tf32(reference_fit):
+def test_image_fit_unchanged_under_tf32(reference_fit, tf32):
     with tf32.emulated_tf32():
         emulated = _fit_image()
     assert abs(emulated[0] - reference_fit[0]) < 0.1, (emulated, reference_fit)
     assert emulated[1] == reference_fit[1]
 
 
-def test_image_fit_degrades_without_explicit_precision(reference_fit, monkeypatch):
+def test_image_fit_degrades_without_explicit_precision(reference_fit, monkeypatch, tf32):
     """Products at default precision (the protection removed) collapse under TF32."""
     monkeypatch.setattr(precision, "PRODUCT_PRECISION", jax.lax.Precision.DEFAULT)
     with tf32.emulated_tf32():
@@ -83,7 +76,7 @@ def test_image_fit_degrades_without_explicit_precision(reference_fit, monkeypatc
 
 
 @pytest.mark.parametrize("estep", ["dense", "sparse"])
-def test_scene_update_unchanged_under_tf32(estep):
+def test_scene_update_unchanged_under_tf32(estep, tf32):
     scene = object_scene(size=24, n_train=2, n_test=1, seed=0)
     xyz, rgb = unproject(scene.train[0].camera, scene.train[0].rgb, scene.train[0].depth)
     prior = model.init(xyz, rgb, 300, key=jax.random.key(0), scheme="data", bounds=scene.bounds)
@@ -126,7 +119,7 @@ def _baseline_fit(scene, params, steps=6):
     return np.asarray(losses), state.params
 
 
-def test_render_unchanged_under_tf32(splat_scene, monkeypatch):
+def test_render_unchanged_under_tf32(splat_scene, monkeypatch, tf32):
     """Equal under emulated TF32; and the guard bites: with the products at default
     precision (the protection removed) TF32 moves the render."""
     reference = _render(*splat_scene)
@@ -144,7 +137,7 @@ def test_render_unchanged_under_tf32(splat_scene, monkeypatch):
     "a CPU emulation of a GPU's TF32: on a GPU the products already run so, and Adam "
     "turns its scatter-adds' run-to-run rounding on near-zero rotation gradients into "
     "1e-5 steps (seen on an H200), which this test's 1e-6 cannot tell from TF32"))
-def test_baseline_fit_unchanged_under_tf32(splat_scene):
+def test_baseline_fit_unchanged_under_tf32(splat_scene, tf32):
     ref_losses, ref_params = _baseline_fit(*splat_scene)
     with tf32.emulated_tf32():
         emu_losses, emu_params = _baseline_fit(*splat_scene)
