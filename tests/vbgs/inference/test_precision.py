@@ -2,9 +2,9 @@
 
 NVIDIA GPUs run float32 products in TF32 by default (10-bit mantissa operands). The
 helper :mod:`tf32` (the ``tf32`` fixture) rounds the operands of every default-precision
-product that way, so these tests guard on CI what only a GPU would show. The last tests remove the
-protection (products at default precision) and show the fit collapsing, so they fail
-if the protection is ever lost.
+product that way, so these tests guard on CI what only a GPU would show. The last tests
+remove the protection (products at default precision) and show the fit collapsing, so
+they fail if the protection is ever lost.
 """
 
 import jax
