@@ -347,16 +347,18 @@ def host_rng(key: jax.Array) -> np.random.Generator:
     return np.random.default_rng(np.asarray(jax.random.key_data(key)).ravel().tolist())
 
 
-def cell_ids(cells: np.ndarray) -> np.ndarray:
-    """``[n]`` labels 0, 1, ... of the distinct rows of integer cell coordinates
-    ``cells [n, d]`` (equal rows, equal labels). The rows are packed into one int64 each
-    when their box allows (a 1-D unique sorts far faster than a unique over rows)."""
+def cell_keys(cells: np.ndarray) -> np.ndarray:
+    """``[n]`` int64 keys of the rows of integer cell coordinates ``cells [n, d]``, equal
+    exactly where the rows are: the rows packed into one int64 each when their box allows
+    (a 1-D sort is far faster than one over rows), else labels of the distinct rows."""
     lo = cells.min(0)
     span = cells.max(0) - lo + 1
     if np.prod(span.astype(np.float64)) >= 2.0**62:  # too wide to pack: unique over rows
         return np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
-    key = np.ravel_multi_index(tuple((cells - lo).T), tuple(int(v) for v in span))
-    return np.unique(key, return_inverse=True)[1].reshape(-1)
+    key = cells[:, 0] - lo[0]
+    for j in range(1, cells.shape[1]):  # C order, as np.ravel_multi_index
+        key = key * span[j] + (cells[:, j] - lo[j])
+    return key
 
 
 def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
@@ -373,15 +375,15 @@ def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
         return np.zeros(0, np.int64)
     n = len(x)
     shifted = [x] if ray is None else [x, x - NOISE_SIGMAS * ray, x + NOISE_SIGMAS * ray]
-    ids = cell_ids(cell_index(np.concatenate([taken, *shifted]), cell))
-    occupied = np.zeros(ids.max() + 1, bool)
-    occupied[ids[: len(taken)]] = True
-    point_ids = ids[len(taken):len(taken) + n]
+    keys = cell_keys(cell_index(np.concatenate([taken, *shifted]), cell))
+    held = np.sort(keys[: len(taken)])  # the cells holding a component, sorted
+    point_keys = keys[len(taken):].reshape(len(shifted), n)
     empty = np.ones(n, bool)
-    for j in range(len(shifted)):
-        empty &= ~occupied[ids[len(taken) + j * n:len(taken) + (j + 1) * n]]
+    if len(held):
+        at = np.minimum(np.searchsorted(held, point_keys), len(held) - 1)
+        empty = ~(held[at] == point_keys).any(0)
     poor = order[empty[order]]  # points in empty cells, in random order
-    _, first = np.unique(point_ids[poor], return_index=True)  # one point per cell
+    _, first = np.unique(point_keys[0][poor], return_index=True)  # one point per cell
     return poor[np.sort(first)][:quota]
 
 
@@ -394,7 +396,7 @@ def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray
     if levels is None:
         return _pick(x, taken, rule.cell, order, quota, ray)
     chosen = np.zeros(0, np.int64)
-    for level in np.unique(levels):
+    for level in np.flatnonzero(np.bincount(levels)):  # np.unique(levels), 10x faster
         if quota - len(chosen) <= 0:
             break
         here = order[levels[order] == level]  # this level's points, in the random order

@@ -75,6 +75,7 @@ import numpy as np
 from scipy.special import digamma
 
 from vbgs.inference import expfam
+from vbgs.inference.candidates import means_tree
 from vbgs.inference.grow import _m_step  # compiled: one executable, shared with growth
 from vbgs.inference.model import Mixture, State, m_step
 from vbgs.inference.precision import logdet3
@@ -86,7 +87,7 @@ NEIGHBOURS = 4
 def _moments(space: expfam.NIW, rows: np.ndarray):
     """Means ``[m, d]`` and expected covariances ``[m, d, d]`` of NIW rows, in float64
     on the host (:func:`vbgs.inference.expfam.niw_expected_covariance` on the rows)."""
-    q = expfam.NIW(*(np.asarray(field, np.float64)[rows] for field in space))
+    q = expfam.NIW(*(np.asarray(field)[rows].astype(np.float64) for field in space))
     return q.mean, expfam.niw_expected_covariance(q)
 
 
@@ -147,18 +148,17 @@ def neighbour_pairs(posterior: Mixture, active: np.ndarray,
                     neighbours: int = NEIGHBOURS) -> np.ndarray:
     """``[p, 2]`` each unordered pair of active components (``active [k]`` bool) in
     which one is among the other's ``neighbours`` nearest (by mean), once."""
-    from scipy.spatial import cKDTree  # imported when used: 0.2-0.4 s at start-up
-
     idx = np.flatnonzero(active)
     if len(idx) < 2:
         return np.zeros((0, 2), np.int64)
-    means = np.asarray(posterior.space.mean, np.float64)[idx]
+    means = np.asarray(posterior.space.mean)[idx].astype(np.float64)
     k = min(neighbours + 1, len(idx))
-    _, near = cKDTree(means).query(means, k=k)
+    _, near = means_tree(means).query(means, k=k, workers=-1)
     a = np.repeat(np.arange(len(idx)), k - 1)
     b = np.asarray(near)[:, 1:].reshape(-1)
     keep = a < b  # each unordered pair once (packed in one int64: a 1-D unique)
-    key = np.unique(a[keep].astype(np.int64) * len(idx) + b[keep])
+    key = np.sort(a[keep].astype(np.int64) * len(idx) + b[keep])
+    key = key[np.concatenate([[True], key[1:] != key[:-1]])]  # np.unique: 10x faster
     return idx[np.stack([key // len(idx), key % len(idx)], 1)]
 
 

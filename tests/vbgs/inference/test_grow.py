@@ -123,18 +123,44 @@ def test_empty_slots_take_no_responsibility(estep):
     np.testing.assert_allclose(counts[active].sum(), 64.0, rtol=1e-5)
 
 
-def test_cell_ids_label_equal_cells_alike_packed_or_not():
+def test_cell_keys_equal_exactly_for_equal_cells_packed_or_not():
     rng = np.random.default_rng(0)
     cells = rng.integers(-3, 4, (500, 3))
-    got = grow.cell_ids(cells)
+    got = grow.cell_keys(cells)
     want = np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
-    # a bijection between the labels: same cell <=> same label
+    # a bijection between the keys and the rows: same cell <=> same key
     assert len(set(zip(got, want, strict=False))) == len(set(got)) == len(set(want))
+    lo = cells.min(0)  # packed: np.ravel_multi_index over the box
+    assert np.array_equal(got, np.ravel_multi_index(tuple((cells - lo).T),
+                                                    tuple(cells.max(0) - lo + 1)))
     wide = cells.copy()
     wide[:, 0] *= 2**40  # a box too wide to pack into one int64: unique over rows
     wide[:, 1] *= 2**30
-    again = grow.cell_ids(wide)
+    again = grow.cell_keys(wide)
     assert len(set(zip(again, want, strict=False))) == len(set(again)) == len(set(want))
+
+
+@pytest.mark.parametrize("noisy", [False, True])
+def test_pick_takes_the_first_point_of_each_cell_no_component_holds(noisy):
+    """_pick (sorted keys and a binary search) against the rule written out with a set."""
+    rng = np.random.default_rng(1)
+    x = rng.uniform(-2.0, 2.0, (3000, 3))
+    taken = rng.uniform(-3.0, 3.0, (400, 3))
+    ray = rng.normal(0.0, 0.05, (3000, 3)) if noisy else None
+    order = rng.permutation(len(x))
+    got = grow._pick(x, taken, 0.5, order, 10**6, ray)
+    held = {tuple(c) for c in grow.cell_index(taken, 0.5)}
+    shifted = [x] if ray is None else [x, x - grow.NOISE_SIGMAS * ray,
+                                       x + grow.NOISE_SIGMAS * ray]
+    cells = [grow.cell_index(s, 0.5) for s in shifted]
+    want, seen = [], set()
+    for i in order:
+        if any(tuple(c[i]) in held for c in cells) or tuple(cells[0][i]) in seen:
+            continue
+        seen.add(tuple(cells[0][i]))
+        want.append(i)
+    assert 50 < len(want) < len(x) and np.array_equal(got, want)
+    assert np.array_equal(grow._pick(x, taken, 0.5, order, 7, ray), want[:7])
 
 
 def test_batch_prior_is_growth_from_the_empty_state_to_the_bit():

@@ -91,6 +91,24 @@ def test_choose_pairs_takes_disjoint_pairs_cheapest_first():
     assert none.shape == (0, 2)  # one active component: nothing to merge
 
 
+def test_neighbour_pairs_are_the_active_components_with_their_nearest_once():
+    """Against the pairs written out from all distances: the tree search and the sorted
+    dedup of the packed pairs give each pair once, in order."""
+    rng = np.random.default_rng(2)
+    means = rng.uniform(-1.0, 1.0, (300, 3)).astype(np.float32)
+    active = rng.random(300) < 0.8
+    posterior = model.make_prior(means, np.zeros((300, 3), np.float32),
+                                 np.zeros(3, np.float32), 0.05, CONFIG)
+    got = merge.neighbour_pairs(posterior, active, 4)
+    idx = np.flatnonzero(active)
+    x = means[idx].astype(np.float64)
+    dist = ((x[:, None] - x[None]) ** 2).sum(-1)
+    near = np.argsort(dist, axis=1, kind="stable")[:, 1:5]
+    # as the code reads it: b among a's nearest with a < b (not b's alone; docstring)
+    want = sorted({(a, b) for a in range(len(idx)) for b in near[a] if a < b})
+    assert np.array_equal(got, idx[np.asarray(want)])
+
+
 def test_merge_rows_sums_any_per_component_table():
     stats = expfam.zero_stats(3, 3, noisy=True)._replace(
         count=jax.numpy.array([1.0, 2.0, 4.0]))

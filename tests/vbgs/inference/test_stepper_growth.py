@@ -79,7 +79,8 @@ def test_growth_does_not_recompile_the_step(frames):
                            max_points=max(len(f[0]) for f in frames))
     # count from zero: other tests may already have compiled the sizes this one meets
     stepper._step.clear_cache()
-    stepper._grown_terms.clear_cache()
+    stepper._grown_first.clear_cache()
+    stepper._grown_again.clear_cache()
     state, _ = step(state, *frames[0])  # compiles the step
     sizes = set()
     for i, (xyz, rgb) in enumerate(frames[1:], 1):
@@ -89,7 +90,32 @@ def test_growth_does_not_recompile_the_step(frames):
         state, _ = step(state, xyz, rgb)
     assert len(sizes) > 1  # the frames grow different numbers of components...
     assert stepper._step._cache_size() == 1  # ...and the step is traced once
-    assert stepper._grown_terms._cache_size() == 1  # so is the row update
+    assert stepper._grown_first._cache_size() == 1  # so is the row update
+    assert stepper._grown_again._cache_size() <= 1  # (and its in-place form)
+
+
+@pytest.mark.parametrize("estep", ["sparse", "dense"])
+def test_rows_updated_in_place_equal_copied_ones_and_leave_the_old_stepper(
+        frames, estep, monkeypatch):
+    """Blocks after the first update the terms in place (donated): the same terms, to
+    the bit, as each block copying them, and the stepper grown from keeps its own."""
+    monkeypatch.setattr(stepper, "ROW_BLOCK", 16)
+    rule, state = _start(frames)
+    step = stepper.Stepper(state.prior, estep=estep, grows=True)
+    before = jax.tree.map(np.array, step.fixed.reference)
+    grown, info = grow.grow(state, *frames[0], rule, key=jax.random.key(0))
+    assert info.n_new > 3 * 16  # several blocks
+    new = step.grow(grown.prior, info.slots)
+    want, alpha = step.fixed.reference, state.prior.alpha
+    for block in stepper.row_blocks(info.slots):  # every block copied: the old way
+        want = stepper._grown_first(want, alpha, grown.prior, block, estep,
+                                    step.colour_noise)
+        alpha = grown.prior.alpha
+    for a, b in zip(jax.tree.leaves(new.fixed.reference), jax.tree.leaves(want), strict=True):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
+    for a, b in zip(jax.tree.leaves(step.fixed.reference), jax.tree.leaves(before),
+                    strict=True):
+        assert np.array_equal(np.asarray(a), b)  # not donated: still readable, unchanged
 
 
 def test_a_growing_stepper_refuses_the_grid(frames):
