@@ -220,8 +220,12 @@ def _solve(t, p, src, w, planes, k, robust, damping, use_depth, *, iterations: i
         return (pick(new, t), pick(lam * DAMP_DOWN, lam * DAMP_UP),
                 jax.tree_util.tree_map(pick, moved, terms))
 
-    first = _terms(t, p, src, w, planes, k, use_depth)
-    t, _, terms = jax.lax.fori_loop(0, iterations, step, (t, damping, first))
+    # unrolled (the step count is static): XLA's CPU loop ran a 128 px frame's full-size
+    # level at 2.0 ms a step, the unrolled steps at 1.2 ms (the same results to the bit)
+    carry = (t, damping, _terms(t, p, src, w, planes, k, use_depth))
+    for i in range(iterations):
+        carry = step(i, carry)
+    t, _, terms = carry
     _, _, h, sig = normal(*terms)
     m = terms[2]
     return t, h, jnp.sum(m[:, 0]) / jnp.maximum(jnp.sum(w), 1.0), sig[0]
