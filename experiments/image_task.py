@@ -10,7 +10,7 @@ It has no CAVI iterations: ``task.iters`` is ignored and ``steps`` (default
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 

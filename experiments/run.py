@@ -110,8 +110,8 @@ def _add_fit_scene(sub):
     add_choice(p, "--method", METHOD)
     p.add_argument("--components", type=components_arg, default=20000, metavar="K|auto[:MAX]",
                    help="components / splat capacity K, or auto: the count chosen from the "
-                        "data (at most MAX, default %d; the JSON's components_chosen)"
-                        % AUTO_MAX_COMPONENTS)
+                        f"data (at most MAX, default {AUTO_MAX_COMPONENTS}; the JSON's "
+                        "components_chosen)")
     p.add_argument("--frames", type=int, default=60, help="training frames (at most)")
     p.add_argument("--test-views", type=int, default=8, help="held-out views (at most)")
     p.add_argument("--size", type=size_arg, default=128, help=SIZE_HELP)

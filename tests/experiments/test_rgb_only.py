@@ -77,7 +77,7 @@ def test_alignment_reads_arrived_frames_only(folder):
                            positions=order)
     seen = [(frame, len(pulled)) for frame in stage(frames())]
     assert [n for _, n in seen] == [3, 3, 3, 4, 5, 6, 7, 8]
-    assert all(np.array_equal(f.rgb, scene.train[i].rgb) for (f, _), i in zip(seen, order))
+    assert all(np.array_equal(f.rgb, scene.train[i].rgb) for (f, _), i in zip(seen, order, strict=True))
     report = stage.report()
     assert report["depth_aligned_on"] == [7, 6, 5]
     assert all(f.depth.max() > 0 for f, _ in seen)

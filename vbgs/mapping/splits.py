@@ -277,9 +277,9 @@ def earned_levels(rule: grow.Growth, posterior, active: np.ndarray, xyz, rgb,
         nearest = explaining(posterior, active, x, SHAPE_CANDIDATES if shape else 1)
         m = np.asarray(posterior.colour.mean, np.float64)[nearest]
     # every level's cells in one pass over the table (one copy of it per batch)
-    here = [np.flatnonzero(allowed >= l) for l in range(1, int(allowed.max()) + 1)]
+    here = [np.flatnonzero(allowed >= lv) for lv in range(1, int(allowed.max()) + 1)]
     rows = np.concatenate(here)  # the points, level after level
-    level = np.concatenate([np.full(len(h), l) for l, h in enumerate(here, 1)])
+    level = np.concatenate([np.full(len(h), lv) for lv, h in enumerate(here, 1)])
     keys = saturation.cell_keys(rule, x[rows], np.zeros(x.shape[1]), -level)
     offsets = None
     if table.place is not None:  # from each cell's centre (small: float32 sums hold)

@@ -9,7 +9,7 @@ from scipy import integrate
 from scipy.special import gammaln
 
 from vbgs.inference import grow
-from vbgs.inference.model import Mixture, PriorConfig
+from vbgs.inference.model import PriorConfig
 from vbgs.mapping import splits
 
 SIGMA, STRENGTH = 0.05, 1.0

@@ -86,7 +86,7 @@ def test_pyramid_holds_each_level_s_pixels_with_depth(street):
     depth = np.asarray(first.depth, np.float64).copy()
     depth[:20, :] = np.nan  # a band without readings
     pyr = direct.pyramid(first.camera, first.rgb, depth, (4, 1))
-    for factor, level in zip(pyr.factors, pyr.levels):
+    for factor, level in zip(pyr.factors, pyr.levels, strict=True):
         h, w = depth.shape[0] // factor, depth.shape[1] // factor
         blocks = depth[: h * factor, : w * factor].reshape(h, factor, w, factor)
         full = np.isfinite(blocks).all((1, 3)) & (np.nan_to_num(blocks) > 0).all((1, 3))
