@@ -146,8 +146,11 @@ def choose_pairs(posterior: Mixture, counts: np.ndarray, active: np.ndarray, n: 
 
 def neighbour_pairs(posterior: Mixture, active: np.ndarray,
                     neighbours: int = NEIGHBOURS) -> np.ndarray:
-    """``[p, 2]`` each unordered pair of active components (``active [k]`` bool) in
-    which one is among the other's ``neighbours`` nearest (by mean), once."""
+    """``[p, 2]`` the pairs ``(a, b)`` of active components (``active [k]`` bool; ``a``
+    before ``b`` among them) in which ``b`` is among ``a``'s ``neighbours`` nearest (by
+    mean), each once. A pair where only ``a`` is among ``b``'s nearest is not offered:
+    the rule every stream so far was measured with (making it symmetric would change
+    which components merge; not tried)."""
     idx = np.flatnonzero(active)
     if len(idx) < 2:
         return np.zeros((0, 2), np.int64)

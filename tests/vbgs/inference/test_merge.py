@@ -104,7 +104,7 @@ def test_neighbour_pairs_are_the_active_components_with_their_nearest_once():
     x = means[idx].astype(np.float64)
     dist = ((x[:, None] - x[None]) ** 2).sum(-1)
     near = np.argsort(dist, axis=1, kind="stable")[:, 1:5]
-    # as the code reads it: b among a's nearest with a < b (not b's alone; docstring)
+    # b among a's nearest with a < b (not a among b's alone: the docstring's rule)
     want = sorted({(a, b) for a in range(len(idx)) for b in near[a] if a < b})
     assert np.array_equal(got, idx[np.asarray(want)])
 
