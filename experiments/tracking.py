@@ -225,13 +225,15 @@ class TrackedLearner:
             return relative(self.estimates[-2], self.estimates[-1])
         return None
 
+    def _pyramid(self, frame: Frame) -> direct.Pyramid:
+        return direct.pyramid(frame.camera, frame.rgb, frame.depth, self.direct.factors)
+
     def _direct(self, frame: Frame) -> direct.Motion:
         """The direct RGB-D odometry from the frame before (:mod:`vbgs.tracking.direct`),
         from the motion guess, or from :data:`SEARCH`'s motions for the second frame.
         Each frame's pyramid is built once: it is the previous frame of the next."""
         prev, guess = self.pyramid, self.motion_guess()
-        new = self.pyramid = direct.pyramid(frame.camera, frame.rgb, frame.depth,
-                                            self.direct.factors)
+        new = self.pyramid = self._pyramid(frame)
         if guess is None:
             starts = se3_exp(np.concatenate([np.zeros((1, 6)), SEARCH]))
             return direct.search_pyramids(prev, new, starts, self.direct)
@@ -277,8 +279,7 @@ class TrackedLearner:
                                 _finite(np.degrees(np.linalg.norm(sig[3:])))])
         self.covariance = cov
         if self.direct is not None and self.pyramid is None:  # the first frame
-            self.pyramid = direct.pyramid(frame.camera, frame.rgb, frame.depth,
-                                          self.direct.factors)
+            self.pyramid = self._pyramid(frame)
         self.truth.append(np.asarray(frame.camera.pose, np.float64))
         self.estimates.append(pose)
         moved = frame._replace(camera=frame.camera._replace(pose=pose))

@@ -270,7 +270,7 @@ def pyramid(camera: Camera, rgb, depth, factors=FACTORS, *, names=("rgb", "depth
 
 def _level(camera: Camera, intensity, depth, factor: int) -> Level:
     cam = level_camera(camera, factor)
-    d, _ = pool_depth(depth, np.ones_like(depth), factor)
+    d, _ = pool_depth(depth, None, factor)
     ok = valid_depth(d)
     i = pool(intensity, factor)
     gi = _gradient(i)
@@ -304,14 +304,18 @@ def align(camera: Camera, rgb_prev, depth_prev, rgb_new, depth_new, guess=None,
     frame ``(rgb_prev, depth_prev)`` to ``(rgb_new, depth_new)`` (``[h, w, 3]``, ``[h,
     w]``; depth 0 or NaN where missing) seen by ``camera`` (intrinsics only), starting
     from the motion ``guess`` (None: no motion)."""
-    prev, new = (_named(camera, rgb, depth, config.factors, when)
-                 for rgb, depth, when in ((rgb_prev, depth_prev, "prev"),
-                                          (rgb_new, depth_new, "new")))
+    prev, new = _pyramids(camera, rgb_prev, depth_prev, rgb_new, depth_new, config)
     return align_pyramids(prev, new, guess, config)
 
 
-def _named(camera, rgb, depth, factors, when: str) -> Pyramid:
-    return pyramid(camera, rgb, depth, factors, names=(f"rgb_{when}", f"depth_{when}"))
+def _pyramids(camera, rgb_prev, depth_prev, rgb_new, depth_new, config: DirectConfig
+              ) -> tuple[Pyramid, Pyramid]:
+    """The previous and the new frame's :class:`Pyramid` (errors name the arrays as
+    :func:`align` and :func:`search` take them)."""
+    return tuple(pyramid(camera, rgb, depth, config.factors,
+                         names=(f"rgb_{when}", f"depth_{when}"))
+                 for rgb, depth, when in ((rgb_prev, depth_prev, "prev"),
+                                          (rgb_new, depth_new, "new")))
 
 
 def align_pyramids(prev: Pyramid, new: Pyramid, guess=None,
@@ -350,8 +354,7 @@ def search(camera: Camera, rgb_prev, depth_prev, rgb_new, depth_new, starts,
     final intensity residual (``Motion.residual``) is lowest among those that keep
     :data:`MIN_MATCHED` of the points in view (the first start's when none does). For
     a frame with no motion guess (the second of a track)."""
-    prev = _named(camera, rgb_prev, depth_prev, config.factors, "prev")
-    new = _named(camera, rgb_new, depth_new, config.factors, "new")
+    prev, new = _pyramids(camera, rgb_prev, depth_prev, rgb_new, depth_new, config)
     return search_pyramids(prev, new, starts, config)
 
 

@@ -217,16 +217,20 @@ def pool(image: np.ndarray, scale: int) -> np.ndarray:
     return total / float(scale * scale)
 
 
-def pool_depth(depth: np.ndarray, sigma: np.ndarray, scale: int):
+def pool_depth(depth: np.ndarray, sigma: np.ndarray | None, scale: int):
     """Block means of a depth map and its standard deviations, a block kept only where
     every pixel has a reading (0 elsewhere); the block's sigma is its pixels' mean (the
     readings' errors are correlated over a few pixels: averaging is not counted as
-    lowering the noise)."""
-    ok = valid_depth(depth) & np.isfinite(sigma) & (sigma > 0)
+    lowering the noise). ``sigma`` None: the depth alone (every reading counts), and
+    None for the sigmas."""
+    ok = valid_depth(depth)
+    if sigma is not None:
+        ok &= np.isfinite(sigma) & (sigma > 0)
     full = pool(ok.astype(np.float64), scale) >= 1.0
-    d = pool(np.where(ok, depth, 0.0), scale)
-    s = pool(np.where(ok, sigma, 0.0), scale)
-    return np.where(full, d, 0.0), np.where(full, s, 0.0)
+    d = np.where(full, pool(np.where(ok, depth, 0.0), scale), 0.0)
+    if sigma is None:
+        return d, None
+    return d, np.where(full, pool(np.where(ok, sigma, 0.0), scale), 0.0)
 
 
 def _cauchy(s, c):
