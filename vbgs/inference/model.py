@@ -368,12 +368,15 @@ class Terms(NamedTuple):
 
 
 def component_terms(q: Mixture, colour_noise: float | None,
-                    alpha_total: jnp.ndarray | None = None) -> Terms:
+                    alpha_total: jnp.ndarray | None = None,
+                    logdet_scale: jnp.ndarray | None = None) -> Terms:
     """The centred-form terms of :class:`Terms` for the assigning model ``q``;
     ``alpha_total``: ``sum_k alpha_k`` of the whole mixture when ``q`` holds only some of
-    its rows (``E[log pi_k]`` needs it; default ``q.alpha.sum()``)."""
+    its rows (``E[log pi_k]`` needs it; default ``q.alpha.sum()``); ``logdet_scale``:
+    ``log |Psi_k|`` when the caller has it
+    (:func:`vbgs.inference.expfam.niw_expected_logdet_precision`)."""
     prec = expfam.niw_expected_precision(q.space)
-    const = expfam.niw_centred_loglik_constant(q.space)  # about the component's own mean
+    const = expfam.niw_centred_loglik_constant(q.space, logdet_scale)  # about its own mean
     const = const + expfam.dirichlet_expected_log(q.alpha, alpha_total)
     colour_mean = None
     if colour_noise is not None:
