@@ -364,7 +364,7 @@ class _SceneRun:
         if warn:
             warn_unlearned(details.get("points_unlearned", 0.0), task)
             warn_capped(details, task)
-            warn_uncovered(result.uncovered)
+            warn_uncovered(result.uncovered, details.get("points_per_component"))
         return replace(result, depth=depth_report, details=details,
                        depth_l1=None if self.rgb_only_tests else result.depth_l1,
                        settings={**result.settings, **what_ran(task, self.scene)})
@@ -412,15 +412,29 @@ def warn_capped(details: dict, task) -> None:
 
 # A share of the test views' surface pixels drawn as background above this is said.
 UNCOVERED_WARNING = 0.02
+# ... and when the median component holds fewer points than this, the warning says the
+# splats may be too small. The walk at 128 px / 60 frames: 50k components hold a median
+# 5.8 points and leave 2.2 % of the test surface uncovered (21.30 dB), 20k hold 12.5 and
+# leave 0.6 % (22.50 dB); at 50k a splat scale of 1.5 draws the walk's validation views
+# at 22.41 dB against 21.05 at the default 1.2 (results/tuning/walk50k/splat_scale.md).
+FEW_POINTS = 10.0
 
 
-def warn_uncovered(share: float) -> None:
+def warn_uncovered(share: float, points_per_component: float | None = None) -> None:
     """Say on stderr when the test views show background where their ground truth has a
-    surface: ground the map missed, or that no training frame saw (JSON ``uncovered``)."""
-    if share > UNCOVERED_WARNING:
-        print(f"warning: {share:.1%} of the test views' pixels with a surface are drawn as "
-              f"background (no splat covers them): ground the map missed or no training "
-              f"frame saw (the JSON's uncovered says how much)", file=sys.stderr)
+    surface: ground the map missed, or that no training frame saw (JSON ``uncovered``);
+    with a median of fewer than :data:`FEW_POINTS` points a component
+    (``points_per_component``), also that the splats may be too small for the gaps."""
+    if share <= UNCOVERED_WARNING:
+        return
+    message = (f"warning: {share:.1%} of the test views' pixels with a surface are drawn as "
+               f"background (no splat covers them): ground the map missed or no training "
+               f"frame saw (the JSON's uncovered says how much)")
+    if points_per_component is not None and 0 < points_per_component < FEW_POINTS:
+        message += (f"; or splats too small to meet: the median component learned "
+                    f"{points_per_component:.1f} points, about a pixel's worth of surface, "
+                    f"so fewer --components or a larger --splat-scale may draw it better")
+    print(message, file=sys.stderr)
 
 
 def save_views(path: str | Path, targets, renders, title: str, n: int = 4) -> None:

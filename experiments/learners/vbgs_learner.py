@@ -78,9 +78,10 @@ class VbgsLearner:
             self.bound = self.bound.add(mapping.bound(self.info, self.state, self.config))
 
     def details(self, result: SceneResult) -> dict:
-        """The streaming bound (:meth:`vbgs.inference.bound.StreamBound.summary`) and,
-        for a map that grows, the share of points no component learned."""
-        extra = {}
+        """The streaming bound (:meth:`vbgs.inference.bound.StreamBound.summary`), the
+        median points a component holds and, for a map that grows, the share of points
+        no component learned."""
+        extra = {"points_per_component": self.state.points_per_component}
         if self.state.growing and self.config.estep == "sparse":
             extra["points_unlearned"] = self.state.points_unlearned
         if self.config.budget.saturation:  # valid points skipped as already explained

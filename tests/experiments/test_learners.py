@@ -142,3 +142,30 @@ def test_points_left_unlearned_are_said_on_stderr(room_past_its_budget):
     assert share > 0.01
     assert f"warning: {share:.1%} of the training points were not learned" in err
     assert "--components" in err
+
+
+def test_the_record_says_the_median_points_a_component_holds(room_past_its_budget):
+    """``points_per_component``: the median summed responsibilities of the components
+    that learned any point (the room at 32 px: 300 components over 25 frames)."""
+    result, _, learner = room_past_its_budget
+    counts = np.asarray(learner.state.mixture.stats.count, np.float64)
+    assert result.details["points_per_component"] == pytest.approx(
+        np.median(counts[counts > 0]), rel=1e-12)
+    assert result.details["points_per_component"] > 10  # 25 frames of 32 px on 300
+
+
+@pytest.mark.parametrize("points, hint", [(5.8, True), (12.5, False), (None, False)])
+def test_uncovered_surface_is_said_and_small_splats_named(capsys, points, hint):
+    """Background drawn over a test view's surface is said; with a median component of
+    fewer than FEW_POINTS points the warning also names small splats and what to try."""
+    from experiments.scene_task import FEW_POINTS, UNCOVERED_WARNING, warn_uncovered
+
+    warn_uncovered(UNCOVERED_WARNING / 2, points)
+    assert capsys.readouterr().err == ""
+    warn_uncovered(0.022, points)
+    err = capsys.readouterr().err
+    assert err.startswith("warning: 2.2% of the test views' pixels with a surface")
+    assert ("splats too small" in err) is hint
+    assert hint is (points is not None and points < FEW_POINTS)
+    if hint:
+        assert "5.8 points" in err and "--splat-scale" in err and "--components" in err

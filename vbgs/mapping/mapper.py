@@ -125,6 +125,17 @@ class MapState(NamedTuple):
         """The share of the points seen that no component learned."""
         return self.n_unlearned / max(self.n_points, 1)
 
+    @property
+    def points_per_component(self) -> float:
+        """The median number of points (summed responsibilities) the components that
+        learned any hold: a few points each and the splats are about a pixel across,
+        too small to close the gaps between them (0.0 before anything is learned)."""
+        if self.mixture is None:
+            return 0.0
+        counts = np.asarray(self.mixture.stats.count, np.float64)
+        used = counts[counts > 0]
+        return float(np.median(used)) if used.size else 0.0
+
 
 class MapInfo(NamedTuple):
     """One frame's (or point batch's) diagnostics."""

@@ -135,6 +135,16 @@ def test_points_beyond_reach_are_counted_not_learned(scene):
     np.testing.assert_allclose(float(state.mixture.stats.count.sum()), learned, rtol=1e-4)
 
 
+def test_points_per_component_is_the_median_over_components_that_learned(scene):
+    """Nothing learned: 0; after a stream: the median count over used components only."""
+    config = mapping.Config(components=4000)  # more than the small scene fills
+    assert mapping.init(config, key=jax.random.key(0)).points_per_component == 0.0
+    state = stream(config, scene.train)
+    counts = np.asarray(state.mixture.stats.count, np.float64)
+    assert (counts == 0).any()  # empty slots do not pull the median down
+    assert state.points_per_component == pytest.approx(np.median(counts[counts > 0]))
+
+
 def test_a_measured_depth_is_a_sensor_the_config_knows():
     with pytest.raises(ValueError, match="sensor.model must be one of exact, kinect"):
         mapping.SensorConfig("lidar")
