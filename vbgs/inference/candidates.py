@@ -20,6 +20,15 @@ if TYPE_CHECKING:
 
 # Candidates per point by default: enough that the truncated responsibilities match
 # the dense ones to within rendering precision for splat-sized components.
+# Fewer draw better with exact depth (stop 39; validation views, fit-scene's defaults,
+# `python -m experiments.val_probe fit-scene --scene S --candidates C`), object / room /
+# walk at C = 4, 8, 12, 16: 26.72 / 23.07 / 21.52, 26.74 / 22.86 / 21.68, 26.60 / 22.77 /
+# 21.67, 26.58 / 22.67 / 21.59 dB (means 23.77, 23.76, 23.68, 23.61), seconds a frame
+# 10-20% fewer at 8; the 640x480 room at N = 80000 (2 validation views) 23.10 / 23.06 /
+# 23.04 at 8 / 12 / 16. Under a measured sensor fewer lose: the object under the Kinect
+# (`--simulate-sensor kinect --sensor kinect`) 24.35 at 8 against 24.61 at 16, its noise
+# (2.6 cm) wider than a component. 16 stays the default until every result is re-made
+# under a default per sensor (README, "Sensor-sized frames").
 DEFAULT_CANDIDATES = 16
 
 
