@@ -56,6 +56,7 @@ from experiments.settings import (
     SENSOR_HOLES_HELP,
     STREAM,
     add_choice,
+    splat_scale_arg,
 )
 from vbgs.components import AUTO_MAX_COMPONENTS, components_arg
 
@@ -129,8 +130,9 @@ def _add_fit_scene(sub):
     add_choice(p, "--init", INIT)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--opacity", type=float, default=None, help="VBGS splat opacity")
-    p.add_argument("--splat-scale", type=float, default=None,
-                   help="VBGS splat covariance scale (sigma multiplier)")
+    p.add_argument("--splat-scale", type=splat_scale_arg, default=None,
+                   help="VBGS splat covariance scale (sigma multiplier), or auto: the "
+                        "scale that draws the arrived training frames best")
     p.add_argument("--splat-blur", type=float, default=None, metavar="PX2",
                    help="VBGS pixel filter: variance (px²) added to each projected splat")
     p.add_argument("--replay", default=REPLAY_DEFAULT,

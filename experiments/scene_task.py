@@ -7,6 +7,7 @@ The protocol (stream or static), evaluation and the run's record are in
 
 from __future__ import annotations
 
+import math
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -27,6 +28,7 @@ from experiments.protocol import (
 from experiments.sensor_swap import learned_surface, simulate_training_depth
 from experiments.tracking import TrackedLearner, check_poses
 from experiments.settings import (
+    AUTO_SCALE,
     ASSIGN,
     COLOUR_RULE,
     DEPTH_KIND,
@@ -81,7 +83,8 @@ class SceneTask:
     seed: int = 0
     opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.render.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
-    splat_scale: float = VBGS_COV_SCALE
+    # or "auto" (VBGS): chosen on the arrived training frames (vbgs.render.scale_fit)
+    splat_scale: float | str = VBGS_COV_SCALE
     splat_blur: float = VBGS_BLUR  # px², the pixel filter VBGS splats are rendered with
     # VBGS splat colours: the posterior colour means | fitted to the training pixels
     # (vbgs.render.colour_fit; why off by default: experiments.settings.COLOUR_RULE)
@@ -189,6 +192,14 @@ class SceneTask:
         check_calibration(self)
         check_poses(self)
         parse_background(self.background)  # fails on a malformed R,G,B
+        if self.splat_scale == AUTO_SCALE and self.method != "vbgs":
+            raise ValueError(f"splat_scale 'auto' is chosen by VBGS on the frames it learned; "
+                             f"--method {self.method} takes a number")
+        if self.splat_scale != AUTO_SCALE and not (
+                isinstance(self.splat_scale, (int, float)) and math.isfinite(self.splat_scale)
+                and self.splat_scale > 0):
+            raise ValueError(f"splat_scale must be a positive number or 'auto', got "
+                             f"{self.splat_scale!r}")
         if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):
             raise ValueError(f"splat_blur must be a pixel filter variance in [0, 10) px², "
                              f"got {self.splat_blur!r}")
@@ -364,7 +375,7 @@ class _SceneRun:
         if warn:
             warn_unlearned(details.get("points_unlearned", 0.0), task)
             warn_capped(details, task)
-            warn_uncovered(result.uncovered, details.get("points_per_component"))
+            warn_uncovered(result.uncovered, details)
         return replace(result, depth=depth_report, details=details,
                        depth_l1=None if self.rgb_only_tests else result.depth_l1,
                        settings={**result.settings, **what_ran(task, self.scene)})
@@ -420,20 +431,24 @@ UNCOVERED_WARNING = 0.02
 FEW_POINTS = 10.0
 
 
-def warn_uncovered(share: float, points_per_component: float | None = None) -> None:
+def warn_uncovered(share: float, details: dict | None = None) -> None:
     """Say on stderr when the test views show background where their ground truth has a
-    surface: ground the map missed, or that no training frame saw (JSON ``uncovered``);
-    with a median of fewer than :data:`FEW_POINTS` points a component
-    (``points_per_component``), also that the splats may be too small for the gaps."""
+    surface: ground the map missed, or that no training frame saw (JSON ``uncovered``).
+    With a median of fewer than :data:`FEW_POINTS` points a component (the learner's
+    ``details``: ``points_per_component``) and a fixed splat scale, also that the splats
+    may be too small for the gaps, and what to try."""
     if share <= UNCOVERED_WARNING:
         return
+    details = details or {}
+    points = details.get("points_per_component")
     message = (f"warning: {share:.1%} of the test views' pixels with a surface are drawn as "
                f"background (no splat covers them): ground the map missed or no training "
                f"frame saw (the JSON's uncovered says how much)")
-    if points_per_component is not None and 0 < points_per_component < FEW_POINTS:
+    if points is not None and 0 < points < FEW_POINTS and "splat_scale_chosen" not in details:
         message += (f"; or splats too small to meet: the median component learned "
-                    f"{points_per_component:.1f} points, about a pixel's worth of surface, "
-                    f"so fewer --components or a larger --splat-scale may draw it better")
+                    f"{points:.1f} points, about a pixel's worth of surface, so fewer "
+                    f"--components or --splat-scale auto (the scale that draws the arrived "
+                    f"frames best) may draw it better")
     print(message, file=sys.stderr)
 
 

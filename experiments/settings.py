@@ -97,6 +97,21 @@ SENSOR_HOLES_HELP = (f"holes of the simulated sensor ({', '.join(HOLED_SENSORS)}
                      "level) or physical+random:RATE; the noise drawn is the same whatever "
                      "the holes")
 DRIFT_DEFAULT = "0.01,0.5"  # --drift: metres and degrees per frame (vbgs.tracking.drift)
+# --splat-scale auto: VBGS chooses the scale on the arrived training frames
+# (vbgs.render.scale_fit), keeping a uniform sample of AUTO_SCALE_FRAMES of them
+AUTO_SCALE = "auto"
+AUTO_SCALE_FRAMES = 12
+
+
+def splat_scale_arg(text: str) -> float | str:
+    """A command line's splat scale: a number becomes a float, anything else stays text
+    for the task's check to accept (``auto``) or refuse, one message either way."""
+    try:
+        return float(text)
+    except ValueError:
+        return text.strip()
+
+
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 # --cl-segments with no number: the stream cut into this many segments for the
 # continual-learning matrix (experiments.continual); without the flag it is not measured

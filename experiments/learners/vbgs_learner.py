@@ -13,21 +13,27 @@ import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
 from experiments.protocol import SceneResult, task_sensor
+from experiments.settings import AUTO_SCALE, AUTO_SCALE_FRAMES
 from vbgs import mapping
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference.bound import StreamBound
 from vbgs.inference.grow import is_active
 from vbgs.mapping.measurement import depth_sigmas, point_rays
-from vbgs.render.splats import Splats
+from vbgs.baseline.replay import Replay
+from vbgs.render.scale_fit import SCALES, choose_scale, rescaled
+from vbgs.render.splats import VBGS_COV_SCALE, Splats
 from vbgs.tracking import photometric, register
 from vbgs.tracking.photometric import PhotoConfig
 from vbgs.tracking.register import Registration, TrackConfig
 
 
 def task_config(task) -> mapping.Config:
-    """The mapping config of a scene task (its VBGS settings, one place each)."""
+    """The mapping config of a scene task (its VBGS settings, one place each); with
+    ``splat_scale = "auto"`` the splats are made at the default scale and redrawn at the
+    chosen one (:class:`VbgsLearner`)."""
+    scale = VBGS_COV_SCALE if task.splat_scale == AUTO_SCALE else task.splat_scale
     render = mapping.RenderConfig(
-        splat_scale=task.splat_scale, splat_blur=task.splat_blur,
+        splat_scale=scale, splat_blur=task.splat_blur,
         opacity_rule=task.opacity_rule, opacity=task.opacity,
         colour_rule=task.colour_rule, colour_ridge=task.colour_ridge)
     return mapping.Config(components=task.components, assign=task.assign, estep=task.estep,
@@ -37,10 +43,12 @@ def task_config(task) -> mapping.Config:
 
 
 class VbgsLearner:
-    """A :class:`experiments.protocol.Learner`: conjugate updates, no replay."""
+    """A :class:`experiments.protocol.Learner`: conjugate updates, no replay. With
+    ``splat_scale = "auto"`` it keeps a uniform sample of the arrived frames
+    (``reservoir:AUTO_SCALE_FRAMES``, counted in ``replay_bytes``) to choose the splat
+    scale on (:mod:`vbgs.render.scale_fit`) each time its splats are drawn."""
 
     PROTOCOLS = ("continual",)  # VBGS always streams
-    replay_bytes = 0
 
     def __init__(self, task, scene: Scene):
         self.task = task
@@ -48,6 +56,15 @@ class VbgsLearner:
         self.state = mapping.init(self.config, key=init_key(task), prior=prior)
         self.info: mapping.MapInfo | None = None  # the last frame's, for diagnose
         self.bound = StreamBound()
+        self.auto_scale = task.splat_scale == AUTO_SCALE
+        self.arrived = Replay("reservoir", AUTO_SCALE_FRAMES, seed=task.seed)
+        self.background = None  # the last frame's, to draw the arrived frames over
+        self.scale: tuple[int, float, list[float]] | None = None  # (frames, scale, scores)
+
+    @property
+    def replay_bytes(self) -> int:
+        """Bytes of the frames kept to choose the splat scale on (0 without auto)."""
+        return self.arrived.nbytes
 
     @property
     def config(self) -> mapping.Config:
@@ -67,9 +84,21 @@ class VbgsLearner:
     def learn(self, frame: Frame, background=None) -> None:
         self.state, self.info = mapping.update(self.state, frame, self.config, background)
         jax.block_until_ready((self.state.mixture.stats.count, self.state.colour.rhs))
+        if self.auto_scale:
+            self.arrived = self.arrived.add(frame)
+            self.background = background
 
     def splats(self, drop_unused: bool = False) -> Splats:
-        return mapping.splats(self.state, self.config, drop_unused)
+        splats = mapping.splats(self.state, self.config, drop_unused)
+        if not self.auto_scale or not self.arrived.items:
+            return splats
+        base = self.config.render.splat_scale
+        if self.scale is None or self.scale[0] != self.state.n_frames:
+            chosen = choose_scale(mapping.splats(self.state, self.config), list(self.arrived.items),
+                                  0.0 if self.background is None else self.background,
+                                  self.blur, base)
+            self.scale = (self.state.n_frames, *chosen)
+        return rescaled(splats, base, self.scale[1])
 
     def diagnose(self, frame: Frame) -> None:
         """Add the last frame's streaming bound ``B_t`` (untimed) over the points it
@@ -82,6 +111,10 @@ class VbgsLearner:
         median points a component holds and, for a map that grows, the share of points
         no component learned."""
         extra = {"points_per_component": self.state.points_per_component}
+        if self.scale is not None:  # splat_scale "auto": what the arrived frames chose
+            extra.update(splat_scale_chosen=self.scale[1],
+                         splat_scale_scores=dict(zip(map(str, SCALES), self.scale[2],
+                                                     strict=True)))
         if self.state.growing and self.config.estep == "sparse":
             extra["points_unlearned"] = self.state.points_unlearned
         if self.config.budget.saturation:  # valid points skipped as already explained

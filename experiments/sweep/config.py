@@ -30,6 +30,7 @@ from typing import Any
 
 from experiments.settings import (
     ASSIGN,
+    AUTO_SCALE,
     COLOUR_RULE,
     DEPTH_KIND,
     ESTEP,
@@ -102,6 +103,14 @@ def _components(value) -> str | None:
     return None
 
 
+def _splat_scale(value) -> str | None:
+    if isinstance(value, str):
+        return None if value == AUTO_SCALE else "must be a positive number or \"auto\""
+    if not (math.isfinite(value) and value > 0):
+        return "must be a positive number or \"auto\""
+    return None
+
+
 def _sensor_level(value) -> str | None:
     if not (math.isfinite(value) and value >= 0):
         return "must be a finite number >= 0 (0: exact depth values, 1: the published model)"
@@ -168,6 +177,8 @@ SETTINGS: dict[str, Spec] = {
     "sensor_holes": Spec(_STR, SENSOR_HOLES_HELP, check=_sensor_holes),
     "sensor": Spec(_STR, MEASURED_BY.help, MEASURED_BY.values),
     "poses": Spec(_STR, POSES.help, POSES.values),
+    "splat_scale": Spec((float, str), "VBGS splat covariance scale (sigma multiplier), or "
+                        "\"auto\" (chosen on the arrived training frames)", check=_splat_scale),
 }
 TOP_LEVEL = ("name", "description", "fixed", "grid")
 

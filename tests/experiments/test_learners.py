@@ -154,18 +154,48 @@ def test_the_record_says_the_median_points_a_component_holds(room_past_its_budge
     assert result.details["points_per_component"] > 10  # 25 frames of 32 px on 300
 
 
-@pytest.mark.parametrize("points, hint", [(5.8, True), (12.5, False), (None, False)])
-def test_uncovered_surface_is_said_and_small_splats_named(capsys, points, hint):
+@pytest.mark.parametrize("details, hint", [({"points_per_component": 5.8}, True),
+                                           ({"points_per_component": 12.5}, False),
+                                           ({"points_per_component": 5.8,
+                                             "splat_scale_chosen": 1.5}, False),
+                                           ({}, False)])
+def test_uncovered_surface_is_said_and_small_splats_named(capsys, details, hint):
     """Background drawn over a test view's surface is said; with a median component of
-    fewer than FEW_POINTS points the warning also names small splats and what to try."""
+    fewer than FEW_POINTS points and a fixed splat scale the warning also names small
+    splats and what to try."""
     from experiments.scene_task import FEW_POINTS, UNCOVERED_WARNING, warn_uncovered
 
-    warn_uncovered(UNCOVERED_WARNING / 2, points)
+    warn_uncovered(UNCOVERED_WARNING / 2, details)
     assert capsys.readouterr().err == ""
-    warn_uncovered(0.022, points)
+    warn_uncovered(0.022, details)
     err = capsys.readouterr().err
     assert err.startswith("warning: 2.2% of the test views' pixels with a surface")
     assert ("splats too small" in err) is hint
-    assert hint is (points is not None and points < FEW_POINTS)
+    assert hint is (details.get("points_per_component", FEW_POINTS) < FEW_POINTS
+                    and "splat_scale_chosen" not in details)
     if hint:
-        assert "5.8 points" in err and "--splat-scale" in err and "--components" in err
+        assert "5.8 points" in err and "--splat-scale auto" in err and "--components" in err
+
+
+def test_an_auto_splat_scale_is_chosen_on_the_arrived_frames_and_drawn():
+    """``splat_scale="auto"``: the scale the kept arrived frames draw best, reported with
+    each scale's score; the record is the run at that scale; the kept frames are counted."""
+    from vbgs.render.scale_fit import SCALES
+
+    result = run_scene(tiny(splat_scale="auto"))
+    chosen, scores = result.details["splat_scale_chosen"], result.details["splat_scale_scores"]
+    assert chosen in SCALES and scores[str(chosen)] == max(scores.values())
+    fixed = run_scene(tiny(splat_scale=chosen))
+    assert result.psnr == pytest.approx(fixed.psnr, abs=1e-3)
+    frame = prepare_scene(tiny())[0].train[0]
+    assert result.replay_bytes == 6 * (frame.rgb.nbytes + frame.depth.nbytes)  # all 6 < 12
+    assert "splat_scale_chosen" not in fixed.details and fixed.replay_bytes == 0
+
+
+@pytest.mark.parametrize("task, match", [
+    (dict(splat_scale="big"), "splat_scale must be a positive number or 'auto'"),
+    (dict(splat_scale=-1.0), "splat_scale must be a positive number or 'auto'"),
+    (dict(splat_scale="auto", method="gradient"), "--method gradient takes a number")])
+def test_a_bad_splat_scale_is_refused(task, match):
+    with pytest.raises(ValueError, match=match):
+        tiny(**task)

@@ -70,6 +70,10 @@ def test_paper_config_parses():
         ({"seed": []}, "grid[0].seed: an empty list gives no cells"),
         ({"seed": [0, 0]}, "grid[0].seed: repeats a value"),
         ({"seed": [[0, 1]]}, "grid[0].seed: must be a value or a flat list"),
+        ({"splat_scale": ["big"]}, "grid[0].splat_scale: must be a positive number or "
+                                   "\"auto\", got 'big'"),
+        ({"splat_scale": [0.0]}, "grid[0].splat_scale: must be a positive number or "
+                                 "\"auto\", got 0.0"),
     ],
 )
 def test_bad_values_name_the_key(grid, message):
@@ -198,3 +202,11 @@ def test_a_scene_size_is_a_wxh_string():
     config = parse_config({"name": "t", "fixed": {"size": "48x32"},
                            "grid": [{"task": "scene", "dataset": "room"}]}, "ok.toml")
     assert config.grids[0].as_dict()["size"] == ("48x32",)
+
+
+def test_a_splat_scale_is_a_number_or_auto():
+    """``splat_scale = "auto"`` (VBGS chooses it on the arrived frames) or a number."""
+    doc = {"name": "t", "grid": [{"task": "scene", "dataset": "object", "size": 16,
+                                  "components": 100, "splat_scale": ["auto", 1.35, 1]}]}
+    cells = expand(parse_config(doc, "ok.toml")).cells
+    assert [c.as_dict()["splat_scale"] for c in cells] == ["auto", 1.35, 1]
