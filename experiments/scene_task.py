@@ -28,8 +28,8 @@ from experiments.protocol import (
 from experiments.sensor_swap import learned_surface, simulate_training_depth
 from experiments.tracking import TrackedLearner, check_poses
 from experiments.settings import (
-    AUTO_SCALE,
     ASSIGN,
+    AUTO_SCALE,
     COLOUR_RULE,
     DEPTH_KIND,
     DEPTH_REFERENCE,
@@ -425,9 +425,10 @@ def warn_capped(details: dict, task) -> None:
 UNCOVERED_WARNING = 0.02
 # ... and when the median component holds fewer points than this, the warning says the
 # splats may be too small. The walk at 128 px / 60 frames: 50k components hold a median
-# 5.8 points and leave 2.2 % of the test surface uncovered (21.30 dB), 20k hold 12.5 and
+# 5.8 points and leave 2.2 % of the test surface uncovered (21.29 dB), 20k hold 12.5 and
 # leave 0.6 % (22.50 dB); at 50k a splat scale of 1.5 draws the walk's validation views
-# at 22.41 dB against 21.05 at the default 1.2 (results/tuning/walk50k/splat_scale.md).
+# at 22.41 dB against 21.05 at the default 1.2 (results/tuning/walk50k/splat_scale.md), and
+# --splat-scale auto chooses it (vbgs.render.scale_fit).
 FEW_POINTS = 10.0
 
 

@@ -93,8 +93,9 @@ class VbgsLearner:
         if not self.auto_scale or not self.arrived.items:
             return splats
         base = self.config.render.splat_scale
-        if self.scale is None or self.scale[0] != self.state.n_frames:
-            chosen = choose_scale(mapping.splats(self.state, self.config), list(self.arrived.items),
+        if self.scale is None or self.scale[0] != self.state.n_frames:  # once a frame
+            every = mapping.splats(self.state, self.config) if drop_unused else splats
+            chosen = choose_scale(every, list(self.arrived.items),
                                   0.0 if self.background is None else self.background,
                                   self.blur, base)
             self.scale = (self.state.n_frames, *chosen)
