@@ -7,7 +7,6 @@ The protocol (stream or static), evaluation and the run's record are in
 
 from __future__ import annotations
 
-import math
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -45,6 +44,7 @@ from experiments.settings import (
     REPLAY_DEFAULT,
     SENSOR,
     SENSOR_HOLES_DEFAULT,
+    valid_splat_scale,
 )
 from vbgs.baseline import TrainConfig
 from vbgs.components import parse_components
@@ -195,9 +195,7 @@ class SceneTask:
         if self.splat_scale == AUTO_SCALE and self.method != "vbgs":
             raise ValueError(f"splat_scale 'auto' is chosen by VBGS on the frames it learned; "
                              f"--method {self.method} takes a number")
-        if self.splat_scale != AUTO_SCALE and not (
-                isinstance(self.splat_scale, (int, float)) and math.isfinite(self.splat_scale)
-                and self.splat_scale > 0):
+        if not valid_splat_scale(self.splat_scale):
             raise ValueError(f"splat_scale must be a positive number or 'auto', got "
                              f"{self.splat_scale!r}")
         if not (isinstance(self.splat_blur, (int, float)) and 0 <= self.splat_blur < 10):

@@ -14,6 +14,7 @@ the learners' and dataset formats' tables are heavier to import, and a test hold
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from depth.presets import KINDS as DEPTH_KINDS
@@ -101,6 +102,13 @@ DRIFT_DEFAULT = "0.01,0.5"  # --drift: metres and degrees per frame (vbgs.tracki
 # (vbgs.render.scale_fit), keeping a uniform sample of AUTO_SCALE_FRAMES of them
 AUTO_SCALE = "auto"
 AUTO_SCALE_FRAMES = 12
+
+
+def valid_splat_scale(value) -> bool:
+    """A splat scale a task takes: a positive finite number, or ``auto``."""
+    if isinstance(value, str):
+        return value == AUTO_SCALE
+    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
 
 
 def splat_scale_arg(text: str) -> float | str:

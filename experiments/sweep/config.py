@@ -30,7 +30,6 @@ from typing import Any
 
 from experiments.settings import (
     ASSIGN,
-    AUTO_SCALE,
     COLOUR_RULE,
     DEPTH_KIND,
     ESTEP,
@@ -45,6 +44,7 @@ from experiments.settings import (
     SENSOR,
     SENSOR_HOLES_HELP,
     STREAM,
+    valid_splat_scale,
 )
 from experiments.sweep.tasks import TASKS, TaskUnavailable
 
@@ -104,11 +104,7 @@ def _components(value) -> str | None:
 
 
 def _splat_scale(value) -> str | None:
-    if isinstance(value, str):
-        return None if value == AUTO_SCALE else "must be a positive number or \"auto\""
-    if not (math.isfinite(value) and value > 0):
-        return "must be a positive number or \"auto\""
-    return None
+    return None if valid_splat_scale(value) else "must be a positive number or \"auto\""
 
 
 def _sensor_level(value) -> str | None:
