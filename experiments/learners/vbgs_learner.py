@@ -56,10 +56,14 @@ class VbgsLearner:
         self.state = mapping.init(self.config, key=init_key(task), prior=prior)
         self.info: mapping.MapInfo | None = None  # the last frame's, for diagnose
         self.bound = StreamBound()
-        self.auto_scale = task.splat_scale == AUTO_SCALE
         self.arrived = Replay("reservoir", AUTO_SCALE_FRAMES, seed=task.seed)
         self.background = None  # the last frame's, to draw the arrived frames over
         self.scale: tuple[int, float, list[float]] | None = None  # (frames, scale, scores)
+
+    @property
+    def auto_scale(self) -> bool:
+        """The splat scale is chosen on the arrived frames (``splat_scale = "auto"``)."""
+        return self.task.splat_scale == AUTO_SCALE
 
     @property
     def replay_bytes(self) -> int:
