@@ -158,18 +158,7 @@ def _add_fit_scene(sub):
                    help="auto | none | median | scale-shift | scale-shift-inverse "
                         "(--depth-reference sensor)")
     add_choice(p, "--depth-reference", DEPTH_REFERENCE)
-    # checked by SceneTask, not argparse: a bad name is refused in one line
-    p.add_argument("--simulate-sensor", default=SENSOR.default,
-                   metavar="{" + ",".join(SENSOR.values) + "}", help=SENSOR.help)
-    p.add_argument("--sensor", default=MEASURED_BY.default,
-                   metavar="{" + ",".join(MEASURED_BY.values) + "}", help=MEASURED_BY.help)
-    p.add_argument("--sensor-level", type=float, default=None, metavar="X",
-                   help="noise multiplier of the sensor, simulated (--simulate-sensor) and "
-                        "as the learner takes it (--sensor): 0: exact depth values, "
-                        "1: the published model, 2: twice its noise (default: the "
-                        "folder's record of its sensor, else 1)")
-    p.add_argument("--sensor-holes", default=SENSOR_HOLES_DEFAULT, metavar="SPEC",
-                   help=SENSOR_HOLES_HELP)
+    _add_sensor(p)
     add_choice(p, "--opacity-rule", OPACITY_RULE)
     add_choice(p, "--colour-rule", COLOUR_RULE)
     p.add_argument("--background", default="auto",
@@ -185,6 +174,36 @@ def _add_fit_scene(sub):
     p.add_argument("--ply", metavar="OUT", help="save the splats as a 3DGS PLY")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
+
+
+def _add_sensor(p):
+    """The depth sensor a scene task simulates on its training frames and learns under
+    (fit-scene, tune)."""
+    # checked by SceneTask, not argparse: a bad name is refused in one line
+    p.add_argument("--simulate-sensor", default=SENSOR.default,
+                   metavar="{" + ",".join(SENSOR.values) + "}", help=SENSOR.help)
+    p.add_argument("--sensor", default=MEASURED_BY.default,
+                   metavar="{" + ",".join(MEASURED_BY.values) + "}", help=MEASURED_BY.help)
+    p.add_argument("--sensor-level", type=float, default=None, metavar="X",
+                   help="noise multiplier of the sensor, simulated (--simulate-sensor) and "
+                        "as the learner takes it (--sensor): 0: exact depth values, "
+                        "1: the published model, 2: twice its noise (default: the "
+                        "folder's record of its sensor, else 1)")
+    p.add_argument("--sensor-holes", default=SENSOR_HOLES_DEFAULT, metavar="SPEC",
+                   help=SENSOR_HOLES_HELP)
+
+
+def _sensor_argv(args) -> list[str]:
+    """The sensor options of ``args`` (:func:`_add_sensor`) that are not the defaults, as
+    command-line words."""
+    words = []
+    for flag, value, default in (("--simulate-sensor", args.simulate_sensor, SENSOR.default),
+                                 ("--sensor", args.sensor, MEASURED_BY.default),
+                                 ("--sensor-level", args.sensor_level, None),
+                                 ("--sensor-holes", args.sensor_holes, SENSOR_HOLES_DEFAULT)):
+        if value != default:
+            words += [flag, str(value)]
+    return words
 
 
 def _add_write_scene(sub):
@@ -343,6 +362,7 @@ def _add_tune(sub):
                    help="gradient: steps per arriving frame (continual)")
     p.add_argument("--replay", default=REPLAY_DEFAULT,
                    help="gradient (continual): none | fifo:K | reservoir:K | full")
+    _add_sensor(p)
     p.add_argument("--grid", nargs="+", default=DEFAULT_GRID, metavar="NAME=V1,V2",
                    help="render settings (task fields) and their values, e.g. "
                         "splat_scale=0.5,0.7,1.0 opacity=0.5,0.9; model hyperparameters as "
@@ -356,7 +376,7 @@ def _add_tune(sub):
 def _tune(args) -> dict:
     from pathlib import Path
 
-    from experiments.scene_task import SceneTask, load_task_scene
+    from experiments.scene_task import SceneTask, prepare_scene
     from experiments.tune import (
         command_line,
         inert_parameters,
@@ -379,7 +399,9 @@ def _tune(args) -> dict:
                        n_val=args.val_views, size=args.size, order=args.order,
                        assign=args.assign, init=args.init, seed=args.seed,
                        background=args.background, protocol=args.protocol, steps=args.steps,
-                       steps_per_frame=args.steps_per_frame, replay=args.replay)
+                       steps_per_frame=args.steps_per_frame, replay=args.replay,
+                       simulate_sensor=args.simulate_sensor, sensor=args.sensor,
+                       sensor_level=args.sensor_level, sensor_holes=args.sensor_holes)
              for scene in args.scene]
     grid = parse_grid(args.grid, tasks[0])  # bad grids fail before any work
     check_scene_components(args.components, args.frames, args.size)
@@ -390,7 +412,7 @@ def _tune(args) -> dict:
             "--init", args.init, "--seed", str(args.seed), "--background", args.background,
             *(["--protocol", args.protocol, "--steps", str(args.steps), "--steps-per-frame",
                str(args.steps_per_frame), "--replay", args.replay]
-              if args.method == "gradient" else []),
+              if args.method == "gradient" else []), *_sensor_argv(args),
             "--grid", *args.grid, "--out", args.out]
     per_scene, files, stream = {}, [], f"streamed once ({args.order}, {args.assign} assignment)"
     if args.method == "gradient":
@@ -399,7 +421,7 @@ def _tune(args) -> dict:
                   f"streamed once (gradient baseline, {args.steps_per_frame} steps per "
                   f"frame, replay {args.replay})")
     for task, name in zip(tasks, names, strict=True):
-        scene = load_task_scene(task)
+        scene = prepare_scene(task)[0]  # a simulated sensor's depth on the training frames
         rows = tune(task, scene, grid, progress=True)
         about = (f"{len(scene.train)} training frames {stream}; scores are "
                  f"means over {len(scene.val)} validation views (no test view is rendered). "
@@ -472,7 +494,7 @@ def _oracle(args) -> dict:
     from dataclasses import asdict
 
     from experiments.oracle import oracle_score
-    from experiments.scene_task import SceneTask, load_task_scene
+    from experiments.scene_task import SceneTask, prepare_scene
 
     task = SceneTask(scene=args.scene, format=args.format, frames=args.frames, n_test=1,
                      size=args.size, seed=args.seed)

@@ -224,3 +224,26 @@ def test_several_scenes_get_their_tables_and_a_mean_that_picks_one_setting(tmp_p
         assert row["val_psnr"] == pytest.approx((own[0]["val_psnr"] + own[1]["val_psnr"]) / 2)
         assert row["val_ssim"] == pytest.approx((own[0]["val_ssim"] + own[1]["val_ssim"]) / 2)
     assert "--scene object room" in (out / "mean.md").read_text()
+
+
+def test_tune_learns_under_a_simulated_sensor_and_names_it_in_the_command(tmp_path, capsys):
+    """The depth preprocessing of a measured sensor is tuned on its own noisy frames: the
+    two radii learn different maps, and the command in the table says which sensor."""
+    out = tmp_path / "tuning"
+    argv = [*TUNE, "--simulate-sensor", "kinect", "--sensor", "kinect",
+            "--grid", "growth.denoise_radius=0,2", "--out", str(out)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    header = (out / "object.csv").read_text().splitlines()[0]
+    assert "--simulate-sensor kinect --sensor kinect --grid growth.denoise_radius=0,2" in header
+    table = pd.read_csv(out / "object.csv", comment="#")
+    assert sorted(table["growth.denoise_radius"]) == [0, 2]
+    assert table["val_psnr"].nunique() == 2
+    # the stream reads the simulated sensor's depth, not the scene's exact depth
+    scores = {}
+    for simulated in ("exact", "kinect"):
+        assert main([*TUNE, "--simulate-sensor", simulated, "--grid", "splat_scale=1.0",
+                     "--out", str(tmp_path / simulated)]) == 0
+        scores[simulated] = pd.read_csv(tmp_path / simulated / "object.csv",
+                                        comment="#")["val_depth_l1"][0]
+    assert scores["kinect"] != scores["exact"]

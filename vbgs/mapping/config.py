@@ -19,11 +19,12 @@ from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AU
                              parse_components)
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
+from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
-from vbgs.sensors import SENSOR_NAMES
+from vbgs.sensors import SENSOR_NAMES, WHITE_NOISE_SENSORS
 
 ASSIGN = ("prior", "posterior")
 ESTEP = ("dense", "sparse")
@@ -75,7 +76,10 @@ class GrowthConfig:
     hole_radius, hole_colour_tol: measured depth only (``sensor`` not exact): a hole behind
         a depth edge or inside a surface takes the depth extrapolated from the nearest
         pixel within ``hole_radius`` px whose colour differs by at most ``hole_colour_tol``
-        per channel (:mod:`vbgs.mapping.holes`; radius 0: holes stay holes).
+        per channel (:mod:`vbgs.mapping.holes`; radius 0: holes stay holes);
+    denoise_radius: noise independent between pixels only (``sensor.white``): each
+        reading is replaced by the plane fitted to its surface's readings within this
+        many px (:mod:`vbgs.mapping.denoise`; 0: read as measured).
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -95,6 +99,7 @@ class GrowthConfig:
     refine_shape: bool = AUTO_REFINE_SHAPE
     hole_radius: int = HOLE_RADIUS
     hole_colour_tol: float = HOLE_COLOUR_TOL
+    denoise_radius: int = DENOISE_RADIUS
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
@@ -102,6 +107,9 @@ class GrowthConfig:
             raise ValueError(f"growth.hole_radius must be an integer >= 0 (pixels; 0: holes "
                              f"stay holes), got {self.hole_radius!r}")
         _positive("growth", "hole_colour_tol", self.hole_colour_tol)
+        if not isinstance(self.denoise_radius, int) or self.denoise_radius < 0:
+            raise ValueError(f"growth.denoise_radius must be an integer >= 0 (pixels; 0: the "
+                             f"depth read as measured), got {self.denoise_radius!r}")
         if not (isinstance(self.auto_points, (int, float)) and math.isfinite(self.auto_points)
                 and self.auto_points >= 1):
             raise ValueError(f"growth.auto_points must be a number >= 1 (a level-0 cell holds "
@@ -184,6 +192,13 @@ class SensorConfig:
         """The depth values carry the sensor's noise (level > 0): each point's noise
         along its ray enters the update (:mod:`vbgs.mapping.measurement`)."""
         return self.model != "exact" and self.level > 0
+
+    @property
+    def white(self) -> bool:
+        """The depth carries noise drawn independently at each pixel (an active sensor
+        at level > 0): averaging a surface's neighbouring readings removes it
+        (:mod:`vbgs.mapping.denoise`)."""
+        return self.noisy and self.model in WHITE_NOISE_SENSORS
 
 
 @dataclass(frozen=True)

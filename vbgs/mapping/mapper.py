@@ -21,6 +21,10 @@ A stream of bare points (an image's pixel patches, ``[n, 2]``; points from elsew
 What one :func:`update` does with a frame (a :class:`vbgs.data.scene.Frame`: camera,
 RGB, z-depth):
 
+0. a depth measured by an active sensor (``Config.sensor.white``: noise drawn afresh at
+   every pixel) is averaged over each reading's surface first, and the frame's noise is
+   scaled by the share the fit leaves (their median; :mod:`vbgs.mapping.denoise`); every
+   later step, the opacity evidence's hit band included, reads that depth and that noise;
 1. its valid depth pixels become coloured world points (:func:`vbgs.render.camera.unproject`;
    at most ``budget.points`` of them, :mod:`vbgs.mapping.budget`; under
    ``budget.saturation`` those of growth cells already learned that often are skipped,
@@ -93,8 +97,9 @@ import vbgs.mapping.saturation as saturation
 import vbgs.mapping.splits as splits
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
+from vbgs.mapping.denoise import noise_left, smoothed
 from vbgs.mapping.holes import fill_holes
-from vbgs.mapping.measurement import depth_variance, point_footprints, point_rays
+from vbgs.mapping.measurement import depth_sigmas, depth_variance, point_footprints, point_rays
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
 from vbgs.render.camera import unproject
@@ -193,18 +198,22 @@ def update(state: MapState, frame: Frame, config: Config,
     evidence (a depth-less pixel of its colour beside a silhouette shows it; pixels
     without depth are not points)."""
     sensor = config.sensor
-    measured, empty = frame, None
+    measured, empty, level = frame, None, sensor.level
     if not sensor.exact:  # holes in surfaces are neither background nor free space
         empty = empty_pixels(frame.depth, holes=True, rgb=frame.rgb, background=background)
         g, cam = config.growth, frame.camera
+        focal = 0.5 * (float(cam.fx) + float(cam.fy))
+        if sensor.white and g.denoise_radius:  # the noise averaged over each surface
+            depth, factor = smoothed(frame.depth, depth_sigmas(
+                frame.depth, cam, sensor.model, sensor.level), focal, g.denoise_radius)
+            frame, level = frame._replace(depth=depth), level * noise_left(depth, factor)
         measured = frame._replace(depth=fill_holes(
-            frame.depth, frame.rgb, empty, 0.5 * (float(cam.fx) + float(cam.fy)),
-            g.hole_radius, g.hole_colour_tol))
+            frame.depth, frame.rgb, empty, focal, g.hole_radius, g.hole_colour_tol))
     state, depth, weight = _within_budget(state, measured, config)
     xyz, rgb = unproject(frame.camera, frame.rgb, depth)
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
-    ray = point_rays(frame.camera, depth, sensor.model, sensor.level) if sensor.noisy else None
+    ray = point_rays(frame.camera, depth, sensor.model, level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
     state, kept, keys = _unexplained(state, xyz, footprint, config)
     if kept is not None:
@@ -216,7 +225,7 @@ def update(state: MapState, frame: Frame, config: Config,
     if config.render.opacity_rule == "evidence":  # against the model that assigned
         geometry = mixture_geometry(state.mixture.prior if config.assign == "prior"
                                     else info.before)
-        variance = depth_variance(geometry[0], frame.camera, sensor.model, sensor.level) \
+        variance = depth_variance(geometry[0], frame.camera, sensor.model, level) \
             if sensor.noisy else None
         evidence = opacity.observe(state.evidence, *geometry, frame.camera, frame.depth,
                                    pass_sigmas=config.evidence.pass_sigmas,

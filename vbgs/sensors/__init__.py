@@ -64,6 +64,9 @@ SENSORS: dict[str, DepthSensor] = {m.name: m for m in (Exact(), Kinect(), RealSe
 SENSOR_NAMES: tuple[str, ...] = tuple(SENSORS)
 # the sensors whose holes a HoleSpec sets (the others make none)
 HOLED_SENSORS: tuple[str, ...] = tuple(n for n, m in SENSORS.items() if isinstance(m, ActiveSensor))
+# the sensors whose noise is drawn independently at each pixel (the active ones; a depth
+# network's error is smooth): averaging neighbours removes it (vbgs.mapping.denoise)
+WHITE_NOISE_SENSORS: tuple[str, ...] = HOLED_SENSORS
 
 
 def sensor(name: str) -> DepthSensor:
@@ -89,7 +92,7 @@ def simulate(name: str, depth, camera, *, rng: np.random.Generator | None = None
     return model.simulate(depth, camera, rng, check_level(level), holes)
 
 
-__all__ = ["HOLED_SENSORS", "SENSORS", "SENSOR_HOLES", "SENSOR_NAMES", "DepthSensor", "Exact",
-           "HoleSpec", "Kinect", "Mono", "RealSense", "check_level", "kinect_sigma_z",
+__all__ = ["HOLED_SENSORS", "SENSORS", "SENSOR_HOLES", "SENSOR_NAMES", "WHITE_NOISE_SENSORS",
+           "DepthSensor", "Exact", "HoleSpec", "Kinect", "Mono", "RealSense", "check_level", "kinect_sigma_z",
            "kinect_step", "parse_holes", "realsense_sigma_z", "refuse_holes", "sensor",
            "simulate"]

@@ -1,0 +1,129 @@
+"""A frame's depth noise averaged over the surface it lies on, before the learner reads it.
+
+An active sensor's axial noise is drawn afresh at every pixel (:mod:`vbgs.sensors.active`),
+while the surface it measures is smooth over a few pixels. On a plane the inverse depth
+is affine in the pixel coordinates, ``1/z = a + b du + c dv`` about a pixel, so each
+pixel's depth is replaced by ``1/a`` of the least-squares plane fitted, in inverse depth,
+to the pixels within ``radius`` (a square window) that lie on its surface. Which do is
+decided twice: first those within ``K_SIGMA`` of the pixel's own reading (the difference
+of two readings: ``sqrt 2`` sigma) plus :data:`SLOPE_FOOTPRINTS` pixel footprints per
+pixel of distance (an inclined surface), then those within ``K_SIGMA`` sigma of that
+first plane. A pixel with fewer than :data:`MIN_POINTS` such neighbours (itself included)
+keeps its reading.
+
+What is left of the noise is derived, not tuned: with ``S = sum phi phi^T`` over the
+inliers (``phi = (1, du, dv)``) the fitted intercept's variance is the reading's times
+the leverage ``h = (S^-1)_00`` (``1/N`` on a full window: 0.2 of the standard deviation
+at radius 2), returned by :func:`smoothed` as ``factor = sqrt(h)``. The learner's
+measurement model (:mod:`vbgs.mapping.measurement`) takes one share for the whole frame,
+the median (:func:`noise_left`), not each reading's own: the fitted depths of
+neighbouring pixels share readings, so their errors are correlated and a component's
+points are worth less than independent ones, and where a reading's window is cut (an
+edge, a hole) its larger share widened growth's look-ups and the hit band there
+(validation, as below, radius 2: each reading's own share 25.13 dB, the frame's median
+25.45). On a curved surface the plane leaves a bias of about
+``(r p)^2 / (2 rho)`` (``p`` the footprint, ``rho`` the radius of curvature): 4 mm on the
+object's sphere at 128 px, against 14-26 mm of noise.
+
+Only for noise that is independent from pixel to pixel (the active sensors'); a depth
+network's error is smooth (:mod:`vbgs.sensors.mono`) and a plane fit removes none of it.
+A real structured-light sensor correlates neighbouring readings through its matching
+window at its native resolution; frames kept at a fraction of it (each pixel several
+native ones) are nearer the independent case.
+
+Measured (object, 128 px / 20k / 60 frames, the Kinect's noise, its holes and 2 % random
+holes, 8 validation views, ``python -m experiments.val_probe --val-views 8 fit-scene
+--scene object --simulate-sensor kinect --sensor kinect``; exact depth 26.43 dB): no
+smoothing 24.60 dB; a radius of 2 with the noise left at the reading's 24.98, at half
+of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noise)
+24.70; radius 1 at 0.33 of it 25.22 (one-off runs patching the learner; the radius
+itself is chosen in ``results/tuning/denoise/``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vbgs.render.camera import valid_depth
+
+DENOISE_RADIUS = 2  # window half-side in pixels (5 x 5); 0: no smoothing
+K_SIGMA = 3.0  # a neighbour farther than this many standard deviations is another surface
+SLOPE_FOOTPRINTS = 2.0  # first pass: a neighbour d px away may differ by d times this
+#                         many footprints more (a surface inclined up to 63 degrees)
+MIN_POINTS = 6  # fewer inliers than this (the pixel included): the reading is kept
+
+
+def _shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """``out[y, x] = a[y + dy, x + dx]``, 0 outside the image."""
+    h, w = a.shape
+    out = np.zeros_like(a)
+    out[max(-dy, 0):h + min(-dy, 0), max(-dx, 0):w + min(-dx, 0)] = \
+        a[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)]
+    return out
+
+
+def _plane_fit(inv: np.ndarray, inlier) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per pixel, the least-squares plane ``a + b du + c dv`` through the inverse depths
+    ``inv [h, w]`` of the window offsets ``(dy, dx, ok)`` of ``inlier`` (``ok [h, w]``
+    bool: that neighbour is on the pixel's surface): ``coef [h, w, 3]``, the leverage
+    ``h = (S^-1)_00 [h, w]`` (1 where the plane is undetermined) and the inlier count.
+    ``S`` is 3 x 3 and symmetric: solved by its cofactors, elementwise."""
+    s00 = s01 = s02 = s11 = s12 = s22 = b0 = b1 = b2 = 0.0
+    for dy, dx, ok in inlier:
+        m = ok.astype(np.float32)
+        mw = m * _shifted(inv, dy, dx)
+        s00, s01, s02 = s00 + m, s01 + dx * m, s02 + dy * m
+        s11, s12, s22 = s11 + dx * dx * m, s12 + dx * dy * m, s22 + dy * dy * m
+        b0, b1, b2 = b0 + mw, b1 + dx * mw, b2 + dy * mw
+    c00, c01, c02 = s11 * s22 - s12**2, s02 * s12 - s01 * s22, s01 * s12 - s02 * s11
+    c11, c12, c22 = s00 * s22 - s02**2, s01 * s02 - s00 * s12, s00 * s11 - s01**2
+    det = s00 * c00 + s01 * c01 + s02 * c02
+    solvable = det > 1e-6
+    d = np.where(solvable, det, 1.0)
+    coef = np.stack([c00 * b0 + c01 * b1 + c02 * b2, c01 * b0 + c11 * b1 + c12 * b2,
+                     c02 * b0 + c12 * b1 + c22 * b2], -1) / d[..., None]
+    return (np.where(solvable[..., None], coef, 0.0), np.where(solvable, c00 / d, 1.0),
+            np.where(solvable, s00, 0.0))
+
+
+def smoothed(depth: np.ndarray, sigma: np.ndarray, focal: float,
+             radius: int = DENOISE_RADIUS) -> tuple[np.ndarray, np.ndarray]:
+    """``(depth [h, w], factor [h, w])``: ``depth`` (0, NaN or inf: none) with each
+    reading replaced by its surface's plane fit (module docstring) and the share
+    ``sqrt(h)`` of its noise ``sigma [h, w]`` (standard deviations, scene units) left
+    (1 where the reading is kept); ``focal`` in pixels (a footprint is ``z / focal``).
+    Pixels without depth stay without; ``radius`` 0 returns the depth unchanged."""
+    depth = np.asarray(depth)
+    ok = valid_depth(depth)
+    factor = np.ones(depth.shape, np.float32)
+    if radius <= 0 or not ok.any():
+        return depth, factor
+    z = np.where(ok, depth, 0.0).astype(np.float32)
+    sig = np.where(ok, np.asarray(sigma, np.float32), 0.0).astype(np.float32)
+    inv = np.where(ok, 1.0 / np.where(ok, z, 1.0), 0.0).astype(np.float32)
+    offsets = [(dy, dx) for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)]
+    near = [(dy, dx, ok & (_shifted(z, dy, dx) > 0) & (np.abs(_shifted(z, dy, dx) - z) <= (
+        K_SIGMA * np.sqrt(2.0) * sig + SLOPE_FOOTPRINTS * np.hypot(dy, dx) * z / focal)))
+        for dy, dx in offsets]
+    coef, _, _ = _plane_fit(inv, near)
+    band = K_SIGMA * sig / np.maximum(z, 1e-12) ** 2  # sigma in inverse depth (dw = dz / z^2)
+
+    def on_plane(dy, dx):
+        other = _shifted(inv, dy, dx)
+        fit = coef[..., 0] + coef[..., 1] * dx + coef[..., 2] * dy
+        return ok & (other > 0) & (np.abs(other - fit) <= band)
+
+    coef, leverage, count = _plane_fit(inv, [(dy, dx, on_plane(dy, dx)) for dy, dx in offsets])
+    take = ok & (count >= MIN_POINTS) & (coef[..., 0] > 0) & (leverage < 1.0)
+    out = np.where(take, 1.0 / np.where(take, coef[..., 0], 1.0), z)
+    factor[take] = np.sqrt(leverage[take])
+    return np.where(ok, out, depth).astype(depth.dtype), factor
+
+
+def noise_left(depth: np.ndarray, factor: np.ndarray) -> float:
+    """The share of the sensor's noise the learner takes for a whole smoothed frame: the
+    median of ``factor [h, w]`` (:func:`smoothed`) over the pixels of ``depth`` with a
+    reading (1 where none has). One share per frame, not each reading's own (module
+    docstring)."""
+    ok = valid_depth(np.asarray(depth))
+    return float(np.median(factor[ok])) if ok.any() else 1.0
