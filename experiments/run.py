@@ -494,7 +494,7 @@ def _oracle(args) -> dict:
     from dataclasses import asdict
 
     from experiments.oracle import oracle_score
-    from experiments.scene_task import SceneTask, prepare_scene
+    from experiments.scene_task import SceneTask, load_task_scene
 
     task = SceneTask(scene=args.scene, format=args.format, frames=args.frames, n_test=1,
                      size=args.size, seed=args.seed)
