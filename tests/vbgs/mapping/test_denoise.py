@@ -24,7 +24,7 @@ def noisy(z, seed=0):
 
 def test_a_noisy_plane_keeps_the_noise_the_fit_predicts():
     z = plane_depth()
-    out, factor = smoothed(noisy(z), np.full(z.shape, SIGMA), FOCAL)
+    out, factor = smoothed(noisy(z), np.full(z.shape, SIGMA), FOCAL, radius=2)
     inner = np.s_[2:-2, 2:-2]  # full 5 x 5 windows: 25 readings, leverage 1/25 (a reading
     #                            beyond 3 sigma of the plane, left out, makes it 1/24)
     assert np.median(factor[inner]) == pytest.approx(0.2, abs=1e-4)
@@ -83,7 +83,7 @@ def test_float32_holds_at_any_scale_of_the_scene(scale):
     sigma = np.full(z.shape, SIGMA * scale)
     rng = np.random.default_rng(1)
     measured = (z + sigma * rng.standard_normal(z.shape)).astype(np.float32)
-    out, factor = smoothed(measured, sigma, FOCAL)
+    out, factor = smoothed(measured, sigma, FOCAL, radius=2)
     assert out.dtype == np.float32
     rms = np.sqrt(np.mean((out - z)[2:-2, 2:-2] ** 2)) / scale
     assert 0.18 * SIGMA < rms < 0.22 * SIGMA
@@ -92,6 +92,6 @@ def test_float32_holds_at_any_scale_of_the_scene(scale):
 def test_a_frame_takes_the_median_share_of_its_noise():
     z = noisy(plane_depth())
     z[:, :10] = 0.0
-    out, factor = smoothed(z, np.full(z.shape, SIGMA), FOCAL)
-    assert noise_left(out, factor) == pytest.approx(0.2, abs=1e-4)
+    out, factor = smoothed(z, np.full(z.shape, SIGMA), FOCAL)  # the default: 3 x 3
+    assert noise_left(out, factor) == pytest.approx(1 / 3, abs=1e-4)
     assert noise_left(np.zeros_like(z), factor) == 1.0
