@@ -177,7 +177,8 @@ def test_growth_spends_no_components_on_the_noise():
     """Noise scatters a surface into the cells before and behind it. Twelve object frames
     at 64 px with Kinect noise (no holes), K = 4000: learned as exact depth they grow
     15% more components than the exact frames (measured 3514 against 3066); with the
-    noise along the rays, no more (2967)."""
+    noise along the rays, after the depth is averaged over its surfaces, no more (3014;
+    2967 before the averaging)."""
     from vbgs import sensors
 
     scene = load_scene("object", size=64, n_train=12, n_test=1, seed=0)
