@@ -54,8 +54,8 @@ error on a silhouette costs more than the silhouette's points are worth.
 Nor do other frames' measurements place them (stop 40; the same 64 px runs, 8 validation
 views: exact depth 23.09 dB, no fill 22.56): each rim given the nearest depth the last 8
 arrived frames measured inside its pixel (their points z-buffered into the frame), kept
-only within 4, 1 or 0.5 footprints of a measured pixel within 2 px (and seen by 1, 3 or 2
-frames): 21.99, 22.11, 22.11 dB, 42 to 20 % of the rims filled. Inside a pixel at a
+only within 4, 1, 1 or 0.5 footprints of a measured pixel within 2 px (and seen by 1, 1,
+3 or 2 of the frames): 21.99, 22.22, 22.11, 22.11 dB, 42 to 20 % of the rims filled. Inside a pixel at a
 silhouette the surface spans several footprints of depth: the nearest point in it is
 not the depth the pixel's centre ray meets.
 """
