@@ -154,4 +154,4 @@ def test_a_measured_folder_scores_as_the_simulation(tmp_path, capsys):
         assert main(["fit-scene", *scene, "--sensor", "kinect", *size, "--json"]) == 0
         scores.append(json.loads(capsys.readouterr().out.strip().splitlines()[-1])["psnr"])
     assert scores[1] == pytest.approx(scores[0], abs=0.2)
-    assert scores[0] > 15.0
+    assert scores[0] > 19.0  # measured 19.56 dB (the depth averaged over its surfaces)
