@@ -38,8 +38,8 @@ smoothing 24.60 dB; a radius of 2 with the noise left at the reading's 24.98, at
 of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noise)
 24.70; radius 1 at 0.33 of it 25.22 (one-off runs patching the learner; the radius
 itself is chosen in ``results/tuning/denoise/``: radius 1, 25.30). Test views, fit-scene's
-defaults (``results/sensors/``): object 23.76 -> 24.32 dB (exact 25.97), room 21.83 ->
-21.84 (22.59), walk 14.01 -> 13.94 (its far ground lies beyond the Kinect's range). The
+defaults (``results/sensors/``): object 23.76 -> 24.30 dB (exact 25.97), room 21.83 ->
+21.83 (22.59), walk 14.01 -> 13.94 (its far ground lies beyond the Kinect's range). The
 RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``): validation object 15.28 -> 18.96
 dB, room 17.10 -> 19.54. Cost, jitted (the window's offsets unrolled into one fused pass):
 15 ms a frame at 640 x 480 at radius 1, 26 ms at radius 2, on a quiet 2-core CPU (the
