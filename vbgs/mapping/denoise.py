@@ -37,7 +37,7 @@ holes, 8 validation views, ``python -m experiments.val_probe --val-views 8 fit-s
 smoothing 24.60 dB; a radius of 2 with the noise left at the reading's 24.98, at half
 of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noise)
 24.70; radius 1 at 0.33 of it 25.22 (one-off runs patching the learner; the radius
-itself is chosen in ``results/tuning/denoise/``: radius 1, 25.30). Test views, fit-scene's
+itself is chosen in ``results/tuning/denoise/``: radius 1, 25.29). Test views, fit-scene's
 defaults (``results/sensors/``): object 23.76 -> 24.30 dB (exact 25.97), room 21.83 ->
 21.83 (22.59), walk 14.01 -> 13.94 (its far ground lies beyond the Kinect's range). The
 RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``): validation object 15.28 -> 18.96
@@ -59,13 +59,15 @@ import numpy as np
 
 from vbgs.render.camera import valid_depth
 
-DENOISE_RADIUS = 2  # window half-side in pixels (5 x 5); 0: no smoothing. Chosen on validation
-# views by `python -m experiments.run tune --scene object room --simulate-sensor kinect
-# --sensor kinect --val-views 8 --grid growth.denoise_radius=0,1,2,3` (results/tuning/denoise/,
-# at ed6687b, the jitted fit): mean of the two scenes 0: 23.30 dB, 1: 23.63, 2: 23.64, 3:
-# 23.43; the object 24.60, 25.29, 25.30, 25.06; the room 22.01, 21.97, 21.98, 21.81. 1 and 2
-# tie under the Kinect's holes; without them (`--sensor-holes none`, the object) 2 is the
-# better, 25.76 against 25.39 dB (exact depth 26.43; results/tuning/denoise/noise_only/).
+DENOISE_RADIUS = 1  # window half-side in pixels (3 x 3); 0: no smoothing. Chosen on validation
+# views at both of the project's sizes (8 views each, `python -m experiments.run tune --scene
+# object room --simulate-sensor kinect --sensor kinect --val-views 8 --grid
+# growth.denoise_radius=...`, results/tuning/denoise/ at ed6687b and size64/ at 1fb0137):
+# 128 px / 20k / 60 frames, mean of the two scenes 0: 23.30 dB, 1: 23.63, 2: 23.64, 3: 23.43
+# (the object 24.60, 25.29, 25.30, 25.06; the room 22.01, 21.97, 21.98, 21.81); 64 px / 5000
+# / 20 frames 0: 20.96, 1: 21.50, 2: 21.14 (the object 21.67, 22.74, 22.17). A window is
+# some 4 cm a pixel at 64 px: 5 x 5 spans the object's curves. Without the holes 2 is the
+# better at 128 px (the object 25.76 against 25.39 dB; results/tuning/denoise/noise_only/).
 K_SIGMA = 3.0  # a neighbour farther than this many standard deviations is another surface
 SLOPE_FOOTPRINTS = 2.0  # first pass: a neighbour d px away may differ by d times this
 #                         many footprints more (a surface inclined up to 63 degrees)
