@@ -68,7 +68,7 @@ DENOISE_RADIUS = 1  # window half-side in pixels (3 x 3); 0: no smoothing. Chose
 # (the object 24.60, 25.29, 25.30, 25.06; the room 22.01, 21.97, 21.98, 21.81); 64 px / 5000
 # / 20 frames 0: 20.96, 1: 21.50, 2: 21.14 (the object 21.67, 22.74, 22.17). A window is
 # some 4 cm a pixel at 64 px: 5 x 5 spans the object's curves. Without the holes 2 is the
-# better at 128 px (the object 25.76 against 25.39 dB; results/tuning/denoise/noise_only/).
+# better at 128 px (the object 25.77 against 25.39 dB; results/tuning/denoise/noise_only/).
 K_SIGMA = 3.0  # a neighbour farther than this many standard deviations is another surface
 SLOPE_FOOTPRINTS = 2.0  # first pass: a neighbour d px away may differ by d times this
 #                         many footprints more (a surface inclined up to 63 degrees)
