@@ -83,16 +83,17 @@ def _shifted(a: jax.Array, dy: int, dx: int) -> jax.Array:
     return padded[r + dy:r + dy + h, r + dx:r + dx + w]
 
 
-def _plane_fit(inv: jax.Array, inlier) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Per pixel, the least-squares plane ``a + b du + c dv`` through the inverse depths
-    ``inv [h, w]`` of the window offsets ``(dy, dx, ok)`` of ``inlier`` (``ok [h, w]``
-    bool: that neighbour is on the pixel's surface): ``coef`` (three ``[h, w]``), the
-    leverage ``h = (S^-1)_00 [h, w]`` (1 where the plane is undetermined) and the inlier
-    count. ``S`` is 3 x 3 and symmetric: solved by its cofactors, elementwise."""
+def _plane_fit(inlier) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Per pixel, the least-squares plane ``a + b du + c dv`` through the neighbours'
+    inverse depths: ``inlier`` holds per window offset ``(dy, dx, ok, w)``, ``w [h, w]``
+    the neighbour's inverse depth and ``ok [h, w]`` bool where it lies on the pixel's
+    surface. Returns ``coef`` (three ``[h, w]``), the leverage ``h = (S^-1)_00 [h, w]``
+    (1 where the plane is undetermined) and the inlier count. ``S`` is 3 x 3 and
+    symmetric: solved by its cofactors, elementwise."""
     s00 = s01 = s02 = s11 = s12 = s22 = b0 = b1 = b2 = 0.0
-    for dy, dx, ok in inlier:
+    for dy, dx, ok, w in inlier:
         m = ok.astype(jnp.float32)
-        mw = m * _shifted(inv, dy, dx)
+        mw = m * w
         s00, s01, s02 = s00 + m, s01 + dx * m, s02 + dy * m
         s11, s12, s22 = s11 + dx * dx * m, s12 + dx * dy * m, s22 + dy * dy * m
         b0, b1, b2 = b0 + mw, b1 + dx * mw, b2 + dy * mw
@@ -113,16 +114,16 @@ def _smoothed(z: jax.Array, sig: jax.Array, focal, radius: int):
     window's offsets unrolled (``radius`` static), one fused pass over the pixels."""
     ok = z > 0
     inv = jnp.where(ok, 1.0 / jnp.where(ok, z, 1.0), 0.0)
-    offsets = [(dy, dx) for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)]
-    near = [(dy, dx, ok & (_shifted(z, dy, dx) > 0) & (jnp.abs(_shifted(z, dy, dx) - z) <= (
-        K_SIGMA * math.sqrt(2.0) * sig + SLOPE_FOOTPRINTS * math.hypot(dy, dx) * z / focal)))
-        for dy, dx in offsets]
-    (a, b, c), _, _ = _plane_fit(inv, near)
+    window = [(dy, dx, _shifted(z, dy, dx), _shifted(inv, dy, dx))
+              for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)]
+    near = [(dy, dx, ok & (zn > 0) & (jnp.abs(zn - z) <= (
+        K_SIGMA * math.sqrt(2.0) * sig + SLOPE_FOOTPRINTS * math.hypot(dy, dx) * z / focal)),
+        wn) for dy, dx, zn, wn in window]
+    (a, b, c), _, _ = _plane_fit(near)
     band = K_SIGMA * sig / jnp.maximum(z, 1e-12) ** 2  # sigma in inverse depth (dw = dz / z^2)
-    on_plane = [(dy, dx, ok & (_shifted(inv, dy, dx) > 0)
-                 & (jnp.abs(_shifted(inv, dy, dx) - (a + b * dx + c * dy)) <= band))
-                for dy, dx in offsets]
-    (a, _, _), leverage, count = _plane_fit(inv, on_plane)
+    on_plane = [(dy, dx, ok & (wn > 0) & (jnp.abs(wn - (a + b * dx + c * dy)) <= band), wn)
+                for dy, dx, _, wn in window]
+    (a, _, _), leverage, count = _plane_fit(on_plane)
     take = ok & (count >= MIN_POINTS) & (a > 0) & (leverage < 1.0)
     return (jnp.where(take, 1.0 / jnp.where(take, a, 1.0), z),
             jnp.where(take, jnp.sqrt(leverage), 1.0))
