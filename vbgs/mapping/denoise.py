@@ -45,7 +45,10 @@ dB, room 17.10 -> 19.50; at radius 2 21.36 and 20.53 (``results/tuning/denoise/r
 a noise of several footprints wants the wider window). Cost, jitted (the window's offsets unrolled into one fused pass):
 15 ms a frame at 640 x 480 at radius 1, 26 ms at radius 2, on a quiet 2-core CPU (the
 NumPy version it replaced: 180 and 360 ms with the cores shared), against some 0.25 s for
-the rest of a budgeted frame. float32 is enough: the fit is the same at scene scales
+the rest of a budgeted frame. End to end it saves time: ``python -m experiments.run
+fit-scene --scene room --size 640x480 --frames 10 --components 100000 --simulate-sensor
+kinect --sensor kinect`` learns 1.51 s a frame (19.86 dB) against 1.80 s (19.78 dB) with the
+averaging patched out, twice each on a quiet machine. float32 is enough: the fit is the same at scene scales
 1e-3 to 1e3 (tested).
 """
 
