@@ -220,7 +220,7 @@ def update(state: MapState, frame: Frame, config: Config,
         xyz, rgb, ray, footprint, weight, keys = (
             None if a is None else a[kept] for a in (xyz, rgb, ray, footprint, weight, keys))
     state, info = update_points(state, xyz, rgb, config, ray=ray, footprint=footprint,
-                                weight=weight)
+                                weight=weight, camera=frame.camera)
     state = _count_seen(state, xyz, footprint, config, keys)
     if config.render.opacity_rule == "evidence":  # against the model that assigned
         geometry = mixture_geometry(state.mixture.prior if config.assign == "prior"
@@ -241,7 +241,7 @@ def update(state: MapState, frame: Frame, config: Config,
 
 
 def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footprint=None,
-                  weight=None) -> tuple[MapState, MapInfo]:
+                  weight=None, camera=None) -> tuple[MapState, MapInfo]:
     """Learn one arriving batch of points ``xyz [n, d]``, ``rgb [n, 3]`` (d = 3 for a
     scene, 2 for an image's pixels): the one stream loop's step, which :func:`update`
     takes every frame through after unprojection (steps 2 and 3 of the module
@@ -254,7 +254,8 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
 
     ``ray [n, 3]``: measured points' noise along their rays; ``footprint [n]``: their
     pixel footprints (far ground grows coarse cells); ``weight [n]``: each point's weight
-    in the statistics (a thinned frame's; None: 1); all from a frame
+    in the statistics (a thinned frame's; None: 1); ``camera``: the frame's camera, which
+    the projective candidate search reads (``config.search``); all from a frame
     (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.mapping.budget`), None for bare points."""
     if len(xyz) == 0:
         raise ValueError("the batch has no points: nothing to learn")
@@ -269,7 +270,7 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
         if levels is not None and state.stepper.reach is not None:
             reach = state.stepper.reach * 2.0**levels
         before = state.mixture.posterior
-        mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight)
+        mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight, camera)
         state, elbo, learned = state._replace(mixture=mixture), step.elbo, step.learned
     n = len(xyz)
     if learned is not None:  # points beyond reach were left out
@@ -563,12 +564,15 @@ def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapStat
     stepper sharing the compiled step) after the frame's growth filled ``slots``."""
     prior = state.mixture.prior
     if state.stepper is None or state.stepper.prior.n_components != prior.n_components:
-        reach = None
+        reach, search, spacing = None, "auto", None
         if state.growing and config.estep == "sparse":
             reach = grow.reach_of(state.rule, config.growth.reach_cells)
+        if config.search == "projective" and config.estep == "sparse" and prior.dim == 3:
+            search = "projective"
+            spacing = state.rule.cell if state.growing else grow.mean_spacing(prior)
         step = Stepper(prior, assign=config.assign, config=config.prior, estep=config.estep,
                        n_candidates=config.candidates, grows=state.growing, reach=reach,
-                       follow=config.budget.saturation > 0)
+                       follow=config.budget.saturation > 0, search=search, spacing=spacing)
     elif len(slots):
         step = state.stepper.grow(prior, slots)
     else:
