@@ -46,7 +46,7 @@ the chain drifts (a random walk of the fit errors: from 3 to 40 % depth error by
 frame of the object with no shrink and a linear warp); pulled half-way toward the
 network's own alignment, the errors stay bounded.
 
-Measured on validation views (``python -m experiments.val_probe fit-scene --scene object
+Measured on validation views (``python -m experiments.studies.val_probe fit-scene --scene object
 --size 64 --components 5000 --frames 20 --simulate-sensor mono --sensor mono --seed S``,
 4 views, seeds 0 / 1 / 2): without per-frame alignment 16.15 / 16.76 / 16.92 dB (mean
 16.61); the default (linear warp, ``ridge = shrink = shift_ridge = 1``, window 8) 16.16 /

@@ -45,7 +45,7 @@ AUTO_MERGE_EVERY = 0
 # nats: the prior log odds against a split, 0 (even odds) as derived. Confirmed, not
 # re-chosen, on VALIDATION views (128 px, 60 frames, 4 views; `python -m experiments.run
 # tune --scene object room walk --components auto --grid growth.refine_gain=-8,8`, and
-# `python -m experiments.val_probe fit-scene --scene S --components auto` at 0 and 1;
+# `python -m experiments.studies.val_probe fit-scene --scene S --components auto` at 0 and 1;
 # val_psnr, components):
 #   gain -8: object 26.78 (73.1k), room 24.10 (131k: the ceiling), walk 22.35 (131k)
 #   gain  0: object 25.65 (18.0k), room 24.21 (61.4k), walk 22.33 (46.7k)
@@ -67,7 +67,7 @@ AUTO_REFINE_GAIN = 0.0
 # "auto": the split score's shape term (vbgs.mapping.splits.surface_gain, derived there:
 # how much better a child's own plane explains its cell's points along their normal than
 # the component that explains them now). Off: on VALIDATION views (128 px, 60 frames, the
-# first 4; experiments.scene_task.run_scene on experiments.val_probe's views with the
+# first 4; experiments.tasks.scene_task.run_scene on experiments.studies.val_probe's views with the
 # growth fields set; val_psnr, components, births + splits):
 #   on,  gain 0: object 25.16 (17.8k: 7.8k + 9.9k) against 25.65 (18.0k) off
 #   on,  auto_points 8, gain 8: object 24.61 (12.5k), room 23.12 (40.9k: 18.9k + 22.0k),

@@ -10,11 +10,11 @@ the extent of every camera. Component means, colour means and the prior's expect
 covariance become the splats' means, colours and scales. It trains with Adam on
 rendered frames:
 
-* ``protocol="continual"`` (:func:`experiments.protocol.stream_protocol`): on each
+* ``protocol="continual"`` (:func:`experiments.tasks.protocol.stream_protocol`): on each
   arriving frame the learner takes ``task.steps_per_frame`` steps, each on a frame
   drawn uniformly from {that frame} ∪ its replay buffer (``task.replay``: ``none``,
   ``fifo:K``, ``reservoir:K``, ``full``), then adds the frame to the buffer;
-* ``protocol="static"`` (:func:`experiments.protocol.static_protocol`): ``task.steps``
+* ``protocol="static"`` (:func:`experiments.tasks.protocol.static_protocol`): ``task.steps``
   steps on frames drawn uniformly from all training frames.
 
 The learning rates are a schedule of the step alone (the position rate decays over
@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
-from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points, task_sensor
+from experiments.tasks.protocol import PROGRESS_BLOCK, SceneResult, frame_points, task_sensor
 from vbgs.baseline import (
     TrainConfig,
     Trainer,
@@ -102,7 +102,7 @@ def train_arrays(task, frame: Frame):
 
 
 class GradientLearner:
-    """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
+    """A :class:`experiments.tasks.protocol.Learner` that can also ``train`` on all frames."""
 
     PROTOCOLS = ("continual", "static")
     blur = BLUR_VARIANCE  # renders as it trains: 3DGS's low-pass dilation (vbgs.render.raster)

@@ -73,7 +73,7 @@ residual on top of it, carried as it learns.
 
 Why the polish without replay went below VBGS (object, 128 px, 20k components, 60 frames,
 10 steps a frame, seed 0, scored on 8 validation views by
-:mod:`experiments.polish_residual`: the splats of the end, VBGS's plus part of the polish's
+:mod:`experiments.studies.polish_residual`: the splats of the end, VBGS's plus part of the polish's
 residual). Before item 5: VBGS 26.43 dB, the
 polish 25.63 dB. The residual of the means alone on VBGS's splats: 24.98 dB; the polish
 with every residual but the means': 27.59 dB. Of the means' residual, the part along each
@@ -121,7 +121,7 @@ from experiments.learners.gradient_learner import (
 )
 from experiments.learners.start import init_key
 from experiments.learners.vbgs_learner import VbgsLearner
-from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points, stream_frames
+from experiments.tasks.protocol import PROGRESS_BLOCK, SceneResult, frame_points, stream_frames
 from vbgs.baseline import (
     Trainer,
     camera_extent,
@@ -178,7 +178,7 @@ def draw_points(points: float, n_learned: int, n_draw: int) -> float:
 
 
 class PolishLearner:
-    """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
+    """A :class:`experiments.tasks.protocol.Learner` that can also ``train`` on all frames."""
 
     PROTOCOLS = ("continual", "static")
 

@@ -21,7 +21,7 @@ from onnx import TensorProto, helper
 from PIL import Image
 from skimage import io as skio
 
-import experiments.scene_task as scene_task
+import experiments.tasks.scene_task as scene_task
 from depth.cli import main as depth_main
 from experiments.run import main
 from vbgs.data.blender import write_blender

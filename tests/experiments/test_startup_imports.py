@@ -18,7 +18,7 @@ CODE = f"""
 import json, sys
 from experiments.run import build_parser
 build_parser("fit-image").parse_args(["fit-image", "--json"])
-import experiments.cli_common, experiments.image_task, vbgs.compilation
+import experiments.cli.output, experiments.tasks.image_task, vbgs.compilation
 print(json.dumps([m for m in {NOT_FOR_A_FIT!r} if m in sys.modules]))
 """
 

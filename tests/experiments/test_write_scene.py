@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from experiments.run import main
-from experiments.scene_task import SceneTask, load_task_scene, prepare_scene
-from experiments.sensor_swap import simulate_training_depth
-from experiments.write_scene import write_scene
+from experiments.tasks.scene_task import SceneTask, load_task_scene, prepare_scene
+from experiments.tasks.sensor_swap import simulate_training_depth
+from experiments.tasks.write_scene import write_scene
 from vbgs.data.sensor_record import SENSOR_RECORD
 
 HALF_MM = 0.0005 + 2e-6  # the PNG stores round(depth * 1000); float32 rounding on top

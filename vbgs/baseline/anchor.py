@@ -52,7 +52,7 @@ from vbgs.render.splats import rotations_from_quaternions, scale_rotation_from_c
 # nat weighs b loss units, and b is about a hundredth to a tenth of a colour unit here.
 # Chosen on validation views (10 views cut into the 5 segments of the continual sweep,
 # experiments/configs/continual.toml: 64 px, 3000 components, 30 frames, 50 steps a frame,
-# seed 0; python -m experiments.val_probe --val-views 10 fit-scene ...): the weight with the
+# seed 0; python -m experiments.studies.val_probe --val-views 10 fit-scene ...): the weight with the
 # best mean CL final PSNR over room and walk, no replay and FIFO of 8, among those whose CL
 # forgetting is at most 0.3 dB in all four. CL final PSNR / CL forgetting (dB):
 #            room none       room fifo:8     walk none       walk fifo:8

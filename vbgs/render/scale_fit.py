@@ -10,7 +10,7 @@ frames that have arrived, never a held-out view): one number fitted to the data 
 map learned, as its colours and opacities are.
 
 Chosen so (stop 39, fit-scene's defaults, 128 px / 60 frames, `python -m
-experiments.val_probe fit-scene --scene S --components K --splat-scale auto`:
+experiments.studies.val_probe fit-scene --scene S --components K --splat-scale auto`:
 `results/tuning/splat_scale/auto_val_*.json`; the grid's validation scores at each
 fixed scale are beside them), the scale is 1.2 on the object, the room and the walk at
 20k components and on the object and the room at 50k (the validation best, or within

@@ -282,7 +282,7 @@ def load_ply(path) -> Splats:
 # K = 20000: 26.58 / 22.67 / 21.59, 26.11 / 22.21 / 21.62, 25.17 / 21.43 / 21.25;
 # K = 50000: 27.35 / 24.03 / 21.05, 26.89 / 23.67 / 22.08, 26.13 / 22.94 / 22.41.
 # The walk at 50k wants larger splats (its components hold a median 5.8 points and leave
-# gaps; experiments.scene_task.FEW_POINTS), the object and the room do not; over both K
+# gaps; experiments.tasks.scene_task.FEW_POINTS), the object and the room do not; over both K
 # and the three scenes 1.2 is still the best mean (23.88 against 23.77 and 23.22 dB).
 # Opacity comes from evidence (vbgs.render.opacity); VBGS_OPACITY is the constant of the old
 # rule (`opacity_rule="constant"`), kept for comparison.

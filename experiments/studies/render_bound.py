@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.learners.gradient_learner import DEFAULT_CONFIG
-from experiments.tune import learn_once
+from experiments.studies.tune import learn_once
 from vbgs.baseline import camera_extent, frame_arrays, params_from_splats, trainable
 from vbgs.baseline.params import Params, to_splats
 from vbgs.baseline.train import make_optimizer, make_step

@@ -3,7 +3,7 @@
 Read by the task dataclasses (field defaults and checks), by the CLI (argparse
 ``choices`` and ``default``, :func:`add_choice`) and by the sweep validation
 (:data:`experiments.sweep.config.SETTINGS`), so the three cannot drift apart. The
-start schemes live in :mod:`experiments.init_schemes` and are wrapped here.
+start schemes live in :mod:`experiments.tasks.init_schemes` and are wrapped here.
 
 Kept light to import (no JAX): the CLI builds its parsers from it before any task
 module is loaded. Choices that a library module also lists (stream orders, depth
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from depth.presets import KINDS as DEPTH_KINDS
 from depth.stream import REFERENCES as DEPTH_REFERENCES
-from experiments.init_schemes import INIT_HELP, INITS
+from experiments.tasks.init_schemes import INIT_HELP, INITS
 from vbgs.data.streams import ORDERS
 from vbgs.sensors import HOLED_SENSORS, SENSOR_HOLES, SENSOR_NAMES
 from vbgs.sensors.holes import HOLE_RATE
@@ -122,7 +122,7 @@ def splat_scale_arg(text: str) -> float | str:
 
 REPLAY_DEFAULT = "none"  # replay specs are parsed by vbgs.baseline.replay.parse_replay
 # --cl-segments with no number: the stream cut into this many segments for the
-# continual-learning matrix (experiments.continual); without the flag it is not measured
+# continual-learning matrix (experiments.tasks.continual); without the flag it is not measured
 CL_SEGMENTS_DEFAULT = 5
 
 

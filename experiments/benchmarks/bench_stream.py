@@ -34,13 +34,13 @@ LARGE_BUDGET = 20000
 def table_name() -> str:
     """The results file on this backend: ``bench_stream`` on the CPU (the committed
     table), ``bench_stream_<backend>`` elsewhere, so a GPU run never overwrites the CPU
-    figures (the table's machine line names the device, :func:`experiments.bench.machine`)."""
+    figures (the table's machine line names the device, :func:`experiments.benchmarks.bench.machine`)."""
     backend = jax.default_backend()
     return "bench_stream" if backend == "cpu" else f"bench_stream_{backend}"
 
 
 def _prior(scene, k: int, seed: int = 0):
-    from experiments.protocol import frame_points
+    from experiments.tasks.protocol import frame_points
 
     xyz, rgb = (np.concatenate(a) for a in zip(*map(frame_points, scene.train), strict=True))
     return model.init(xyz, rgb, k, key=jax.random.key(seed), scheme="data", bounds=scene.bounds)
@@ -51,7 +51,7 @@ def stream_row(scene, prior, estep: str, *, frames: int, search: str = "auto",
     """Stream ``frames`` frames through a fresh stepper; timings of one row.
     ``budget_points``: each frame thinned to at most this many points, weighted
     (:mod:`vbgs.mapping.budget`; 0: every point), the thinning timed with the frame."""
-    from experiments.protocol import peak_memory_mb
+    from experiments.tasks.protocol import peak_memory_mb
     from vbgs.mapping import budget
     from vbgs.render.camera import unproject
 
@@ -98,7 +98,7 @@ def _timed(fn, *args):
 def profile_frame(scene, prior, *, search: str = "auto") -> list[dict]:
     """Seconds of each stage of one streamed frame (sparse E-step, prior assignment),
     each stage compiled and timed on its own (warm, mean of a few runs)."""
-    from experiments.protocol import frame_points
+    from experiments.tasks.protocol import frame_points
 
     frame = scene.train[len(scene.train) // 2]
     rows = []
@@ -255,7 +255,7 @@ def device_rows(counts, k: int, scene_name: str, *, frames: int, size: int,
                "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
         if jax.default_backend() == "cpu":
             env["XLA_FLAGS"] = sharding.host_device_flags(n, env.get("XLA_FLAGS", ""))
-        code = ("import json; from experiments.bench_stream import sharded_row; "
+        code = ("import json; from experiments.benchmarks.bench_stream import sharded_row; "
                 "from vbgs.compilation import enable_persistent_cache; "
                 "enable_persistent_cache(); "  # as every CLI command (opt-out respected)
                 f"print(json.dumps(sharded_row({n}, {k}, {scene_name!r}, frames={frames}, "

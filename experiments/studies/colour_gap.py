@@ -23,7 +23,7 @@ from dataclasses import replace
 
 import jax.numpy as jnp
 
-from experiments.tune import learn_once
+from experiments.studies.tune import learn_once
 from vbgs import mapping
 from vbgs.render import colour_fit
 from vbgs.render.views import evaluate

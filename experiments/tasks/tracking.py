@@ -3,7 +3,7 @@ at the pose the tracker finds against its own map, not at the true one.
 
 :class:`TrackedLearner` wraps a learner that can ``locate(frame, guess, config, seed)``
 (VBGS: :meth:`experiments.learners.vbgs_learner.VbgsLearner.locate`) and is itself a
-:class:`experiments.protocol.Learner`, so the stream protocol, its timing and its
+:class:`experiments.tasks.protocol.Learner`, so the stream protocol, its timing and its
 scores are unchanged: ``learn`` registers the frame (the first pose is given: it
 fixes the map's frame), then learns it at the estimated pose; its seconds count in
 the run's ``seconds_per_frame``. The guess for frame ``i`` is
@@ -47,8 +47,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from experiments.protocol import COMPILE_FRAMES, task_sensor
-from experiments.settings import POSES
+from experiments.tasks.protocol import COMPILE_FRAMES, task_sensor
+from experiments.tasks.settings import POSES
 from vbgs.data.scene import Frame, Scene
 from vbgs.io_atomic import write_atomic
 from vbgs.render.camera import valid_depth

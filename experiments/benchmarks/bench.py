@@ -134,8 +134,8 @@ def bench_estep(components, *, size: int = 128, frames: int = 60, timing_frames:
     held-out PSNR of the full stream (data init, prior assignment) and the splat-tile
     overlaps its test renders dropped."""
     from experiments.learners.start import scene_prior
-    from experiments.protocol import frame_points
-    from experiments.scene_task import SceneTask, run_scene
+    from experiments.tasks.protocol import frame_points
+    from experiments.tasks.scene_task import SceneTask, run_scene
     from vbgs.data.synthetic import object_scene
 
     scene = object_scene(size=size, n_train=frames, n_test=8, seed=0)

@@ -1,6 +1,6 @@
 """``fit-scene`` scored on validation views in place of its test views.
 
-    python -m experiments.val_probe [--val-views N] fit-scene ARGS...
+    python -m experiments.studies.val_probe [--val-views N] fit-scene ARGS...
 
 runs ``python -m experiments.run fit-scene ARGS...`` with the scene's first ``N``
 (default 4) validation views as the views it scores, so a constant that ``tune`` cannot
@@ -15,7 +15,7 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 
-import experiments.scene_task as scene_task
+import experiments.tasks.scene_task as scene_task
 from experiments.run import main as run_main
 
 VAL_VIEWS = 4

@@ -18,14 +18,14 @@ step count, for each component count (where splats are far fewer than pixels).
 
 Each row: method, protocol, steps, replay, wall seconds, replay bytes, PSNR, SSIM,
 depth L1, the early views' PSNR when seen and at the end (continual rows: the
-forgetting, :mod:`experiments.protocol`) and ``on_front``: on the Pareto front of PSNR
+forgetting, :mod:`experiments.tasks.protocol`) and ``on_front``: on the Pareto front of PSNR
 against wall time (no other row is at least as fast and at least as good, and better in
-one). Written as CSV and markdown (:func:`experiments.bench.write_table`) and one PNG:
+one). Written as CSV and markdown (:func:`experiments.benchmarks.bench.write_table`) and one PNG:
 PSNR against wall time (log scale), the front drawn, and PSNR against replay memory.
 
 **One run per static method.** The static rows of a method are one run to the largest
-step count, scored at each count (:func:`experiments.scene_task.run_scene_checkpoints`;
-images: :func:`experiments.image_task.gradient_image_path`). The learners' learning
+step count, scored at each count (:func:`experiments.tasks.scene_task.run_scene_checkpoints`;
+images: :func:`experiments.tasks.image_task.gradient_image_path`). The learners' learning
 rates and frame draws are functions of the step count alone (the baseline's
 :class:`vbgs.baseline.Trainer`), so the row at N steps is what a run of N steps gives
 (tests/experiments/test_front.py holds them equal). Its wall time is the **cumulative
@@ -89,7 +89,7 @@ def parse_counts(text: str, flag: str) -> tuple[int, ...]:
 
 def scene_runs(base, plan: FrontPlan) -> list[tuple]:
     """The runs of a scene's front: ``(task, checkpoints)`` with the
-    :class:`experiments.scene_task.SceneTask` of each (``base`` giving the scene, size,
+    :class:`experiments.tasks.scene_task.SceneTask` of each (``base`` giving the scene, size,
     components, frames and seed) and, for a static run, the step counts it is scored at
     (one run to the largest; None: one row)."""
     from dataclasses import replace
@@ -144,7 +144,7 @@ def run_scene_front(base, plan: FrontPlan, *, progress: bool = False) -> list[di
     """Every row of a scene's front (:func:`scene_runs`; each row said on stderr, and with
     ``progress`` a bar over the runs and each run's own)."""
     from experiments.progress import progress as progress_bar
-    from experiments.scene_task import run_scene, run_scene_checkpoints
+    from experiments.tasks.scene_task import run_scene, run_scene_checkpoints
 
     runs = scene_runs(base, plan)
     rows = []
@@ -179,9 +179,9 @@ def run_image_front(image: str, size: int, components: tuple[int, ...], iters: i
     each gradient fit's own). Fits are timed warm: VBGS's runs twice, the second timed;
     the gradient's compiles on a one-step fit (its seconds, an upper bound of the
     compilation, are the first row's ``compile_seconds``), then one fit to the largest
-    step count is scored at each (:func:`experiments.image_task.gradient_image_path`:
+    step count is scored at each (:func:`experiments.tasks.image_task.gradient_image_path`:
     seconds to each count, the scoring of the earlier ones left out)."""
-    from experiments.image_task import ImageTask, gradient_image_path, run_image
+    from experiments.tasks.image_task import ImageTask, gradient_image_path, run_image
     from experiments.progress import progress as progress_bar
 
     counts = sorted(set(gradient_steps))
@@ -324,7 +324,7 @@ def read_front(csv: str | Path) -> list[dict]:
 def write_front(rows: list[dict], out: str | Path, name: str, *, command: str, title: str
                 ) -> list[Path]:
     """``name.csv``, ``name.md`` and ``name.png`` under ``out``."""
-    from experiments.bench import write_table
+    from experiments.benchmarks.bench import write_table
 
     ordered = [{k: r[k] for k in (*COLUMNS, "on_front")} for r in rows]
     note = ("on_front: on the Pareto front of held-out PSNR against wall seconds. Wall "

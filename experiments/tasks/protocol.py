@@ -15,7 +15,7 @@ how it is scored, and the typed record of a run.
   those frames were learned (``early_psnr_when_seen``), at the end
   (``early_psnr_at_end``) and along the stream (``forgetting_curve``): the forgetting
   they suffer. With ``task.cl_segments = S`` it also measures the continual-learning
-  matrix of the stream's S segments and its metrics (:mod:`experiments.continual`) at the
+  matrix of the stream's S segments and its metrics (:mod:`experiments.tasks.continual`) at the
   same checkpoints: one render per view serves both.
 * :func:`static_protocol`: a learner that can ``train(frames, n_steps)`` takes
   ``task.steps`` steps on all training frames, then is scored (no forgetting metrics).
@@ -25,7 +25,7 @@ how it is scored, and the typed record of a run.
 * Final metrics are over all test views: PSNR, SSIM, depth L1 (where the ground truth
   has depth; rendered depth is the alpha-normalised expected depth).
 * **Validation views** (``scene.val``) are never scored here: they are for
-  :func:`evaluate_validation`, which the tuning command (:mod:`experiments.tune`) uses
+  :func:`evaluate_validation`, which the tuning command (:mod:`experiments.studies.tune`) uses
   to choose render settings, so no setting is chosen on the test views.
 
 This module imports only :mod:`vbgs` (and the init names): tasks and learners import
@@ -42,14 +42,14 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from experiments.continual import FIELDS as CL_FIELDS
-from experiments.continual import (
+from experiments.tasks.continual import FIELDS as CL_FIELDS
+from experiments.tasks.continual import (
     ContinualScores,
     continual_scores,
     nearest_test_views,
     stream_segments,
 )
-from experiments.init_schemes import oracle_start
+from experiments.tasks.init_schemes import oracle_start
 from experiments.progress import progress as progress_bar
 from vbgs.compilation import compile_seconds
 from vbgs.data.scene import Frame, Scene

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.scene_task import SceneTask, load_task_scene, run_scene
-from experiments.sensor_swap import SENSOR_STREAM
+from experiments.tasks.scene_task import SceneTask, load_task_scene, run_scene
+from experiments.tasks.sensor_swap import SENSOR_STREAM
 from vbgs.sensors import simulate
 
 # The test depth model's affine map: relative disparity p = A / d_mono + B.
@@ -46,7 +46,7 @@ def mono_disparity(frames, seed: int, scale: float = DISPARITY_SCALE,
                    shift: float = DISPARITY_SHIFT) -> np.ndarray:
     """``[m, h, w]`` float32: ``scale / d_mono + shift`` of each training frame, ``d_mono``
     the ``mono`` sensor's depth of frame ``i`` drawn as ``--simulate-sensor mono`` draws
-    it (:func:`experiments.sensor_swap.simulate_training_depth`)."""
+    it (:func:`experiments.tasks.sensor_swap.simulate_training_depth`)."""
     out = [scale / simulate("mono", f.depth, f.camera, seed=[seed, SENSOR_STREAM, i]) + shift
            for i, f in enumerate(frames)]
     return np.stack(out).astype(np.float32)

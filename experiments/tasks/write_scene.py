@@ -3,8 +3,8 @@ depth on its training frames only (test and validation views exact: the truth a 
 is scored against).
 
 The frames are those ``fit-scene --scene NAME --simulate-sensor S`` learns from in
-memory: the same scene (:func:`experiments.scene_task.load_task_scene`) and the same
-simulation (:func:`experiments.sensor_swap.simulate_training_depth`, frame ``i``'s
+memory: the same scene (:func:`experiments.tasks.scene_task.load_task_scene`) and the same
+simulation (:func:`experiments.tasks.sensor_swap.simulate_training_depth`, frame ``i``'s
 noise from ``[seed, SENSOR_STREAM, i]``). The folder records the sensor
 (:mod:`vbgs.data.sensor_record`), so ``fit-scene --scene FOLDER`` takes its
 measurement model by default. What the files keep (:func:`vbgs.data.blender.write_blender`):
@@ -30,8 +30,8 @@ import time
 from pathlib import Path
 
 from experiments.progress import progress as progress_bar
-from experiments.scene_task import SceneTask, load_task_scene
-from experiments.sensor_swap import simulate_training_depth
+from experiments.tasks.scene_task import SceneTask, load_task_scene
+from experiments.tasks.sensor_swap import simulate_training_depth
 from vbgs.data.blender import depth_files, write_blender
 from vbgs.data.scene import size_text
 from vbgs.data.sensor_record import SENSOR_RECORD, write_sensor_record

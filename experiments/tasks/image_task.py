@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING
 import jax
 import numpy as np
 
-from experiments.init_schemes import oracle_start
+from experiments.tasks.init_schemes import oracle_start
 from experiments.progress import progress as progress_bar
-from experiments.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
+from experiments.tasks.settings import ASSIGN, INIT, METHOD, ORDER, STREAM
 from vbgs.data.images import image_to_points, load_image, patch_stream
 from vbgs.inference import grow, model
 from vbgs.inference.bound import StreamBound, batch_bound
@@ -40,7 +40,7 @@ class ImageTask:
     size: int | None = 64
     components: int = 2000
     iters: int = 10
-    init: str = INIT.default  # see experiments.init_schemes
+    init: str = INIT.default  # see experiments.tasks.init_schemes
     seed: int = 0
     stream: str = STREAM.default  # none | patches
     order: str = ORDER.default
@@ -185,7 +185,7 @@ def run_image(task: ImageTask, *, progress: bool = False,
 def run_gradient_image(task: ImageTask, *, steps: int | None = None, progress: bool = False,
                        config=None, image: np.ndarray | None = None) -> dict:
     """Fit 2-D Gaussians to the task's image with Adam for ``steps`` steps (``task.iters``
-    is ignored); same keys as :func:`experiments.image_task.run_image`, with the loss
+    is ignored); same keys as :func:`experiments.tasks.image_task.run_image`, with the loss
     trace under ``"loss"`` and ``"elbo": []``. ``config``: a
     :class:`vbgs.baseline.TrainConfig` (its defaults, the position rate decaying over
     :data:`vbgs.baseline.image.IMAGE_LR_DECAY_STEPS` steps, when None); ``image`` as for

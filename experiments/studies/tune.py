@@ -6,7 +6,7 @@ chosen here, on the scene's validation views (``Scene.val``), never on its test 
 
 The stream is learned once; each setting of the grid then only re-renders: a shallow
 copy of the learner gets the task with that setting (``dataclasses.replace``) and its
-``splats()`` are scored by :func:`experiments.protocol.evaluate_validation`. Data a
+``splats()`` are scored by :func:`experiments.tasks.protocol.evaluate_validation`. Data a
 learner gathers for a render setting (:data:`GATHERED`, the colour fit) depend on the
 other render settings: while it is gathered, the stream is learned once per
 combination of the other grid settings. So a grid
@@ -27,7 +27,7 @@ and every render setting of the grid is scored on each of those streams. The gra
 baseline's constants are the task's ``baseline`` (:class:`vbgs.baseline.TrainConfig`),
 reached the same way (``baseline.lr_means``, ``baseline.depth_weight``,
 ``baseline.densify.every``); under ``--protocol static`` its run is ``task.steps`` steps
-on all training frames, as :func:`experiments.protocol.static_protocol` trains it.
+on all training frames, as :func:`experiments.tasks.protocol.static_protocol` trains it.
 """
 
 from __future__ import annotations
@@ -41,9 +41,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.bench import machine
+from experiments.benchmarks.bench import machine
 from experiments.learners import LEARNERS
-from experiments.protocol import (
+from experiments.tasks.protocol import (
     PROGRESS_BLOCK,
     evaluate_validation,
     static_background,
@@ -165,7 +165,7 @@ def learn_once(task, scene, *, progress: bool = False):
     """The task's learner after one pass of the training stream, and the background
     estimated over it; under ``protocol="static"`` (a learner that trains on all frames,
     the gradient baseline) after ``task.steps`` steps on all training frames, as
-    :func:`experiments.protocol.static_protocol` trains it."""
+    :func:`experiments.tasks.protocol.static_protocol` trains it."""
     learner = LEARNERS[task.method](task, scene)
     if task.protocol == "static" and "static" in type(learner).PROTOCOLS:
         background = static_background(task, scene)

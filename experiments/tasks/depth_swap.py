@@ -18,7 +18,7 @@ import numpy as np
 
 from depth import OnnxDepth
 from depth.stream import StreamConfig, StreamState, arrive, check_config, finish, init
-from experiments.sensor_swap import per_frame_report
+from experiments.tasks.sensor_swap import per_frame_report
 from vbgs.data.scene import Frame
 
 

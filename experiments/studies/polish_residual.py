@@ -1,7 +1,7 @@
 """Where the continual polish gains or loses against VBGS: its residual taken apart, scored
 on validation views.
 
-    python -m experiments.polish_residual --scene object --replay none [--val-views 8]
+    python -m experiments.studies.polish_residual --scene object --replay none [--val-views 8]
 
 streams the task's frames through :class:`experiments.learners.PolishLearner` (continual,
 ``--steps-per-frame``, default 10) and, at the end, scores on the scene's first N
@@ -24,8 +24,8 @@ import sys
 import jax.numpy as jnp
 
 from experiments.learners import PolishLearner
-from experiments.protocol import evaluate, stream_frames
-from experiments.scene_task import SceneTask, prepare_scene
+from experiments.tasks.protocol import evaluate, stream_frames
+from experiments.tasks.scene_task import SceneTask, prepare_scene
 from vbgs.baseline import to_splats
 from vbgs.baseline.params import Params
 from vbgs.data.streams import stream_order
@@ -76,7 +76,7 @@ def run(task: SceneTask) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.polish_residual",
+    parser = argparse.ArgumentParser(prog="python -m experiments.studies.polish_residual",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--scene", default="object")
     parser.add_argument("--replay", default="none")

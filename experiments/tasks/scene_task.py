@@ -1,7 +1,7 @@
 """The scene task: learn a 3-D splat from a stream of posed RGB-D frames, score held-out views.
 
 The protocol (stream or static), evaluation and the run's record are in
-:mod:`experiments.protocol`; the learners, chosen by ``task.method`` from
+:mod:`experiments.tasks.protocol`; the learners, chosen by ``task.method`` from
 :data:`experiments.learners.LEARNERS`, in :mod:`experiments.learners`.
 """
 
@@ -13,20 +13,20 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.check import check_calibration, warn_inconsistent, within_trained_span
-from experiments.continual import check_segments
-from experiments.init_schemes import oracle_start
+from experiments.tasks.check import check_calibration, warn_inconsistent, within_trained_span
+from experiments.tasks.continual import check_segments
+from experiments.tasks.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.learners.gradient_learner import DEFAULT_CONFIG as BASELINE_CONFIG
-from experiments.protocol import (
+from experiments.tasks.protocol import (
     SceneResult,
     static_checkpoints,
     static_protocol,
     stream_protocol,
 )
-from experiments.sensor_swap import learned_surface, simulate_training_depth
-from experiments.tracking import TrackedLearner, check_poses
-from experiments.settings import (
+from experiments.tasks.sensor_swap import learned_surface, simulate_training_depth
+from experiments.tasks.tracking import TrackedLearner, check_poses
+from experiments.tasks.settings import (
     ASSIGN,
     AUTO_SCALE,
     COLOUR_RULE,
@@ -79,7 +79,7 @@ class SceneTask:
     assign: str = ASSIGN.default
     estep: str = ESTEP.default
     candidates: int = 16
-    init: str = INIT.default  # see experiments.init_schemes
+    init: str = INIT.default  # see experiments.tasks.init_schemes
     seed: int = 0
     opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.render.opacity) | constant
     opacity: float = VBGS_OPACITY  # the constant, with opacity_rule = "constant"
@@ -87,7 +87,7 @@ class SceneTask:
     splat_scale: float | str = VBGS_COV_SCALE
     splat_blur: float = VBGS_BLUR  # px², the pixel filter VBGS splats are rendered with
     # VBGS splat colours: the posterior colour means | fitted to the training pixels
-    # (vbgs.render.colour_fit; why off by default: experiments.settings.COLOUR_RULE)
+    # (vbgs.render.colour_fit; why off by default: experiments.tasks.settings.COLOUR_RULE)
     colour_rule: str = COLOUR_RULE.default
     colour_ridge: float = COLOUR_RIDGE  # pixels' worth of weight on the posterior colour (fit)
     depth_model: str | None = None
@@ -112,7 +112,7 @@ class SceneTask:
     # format's (vbgs.data.calibration): (fx, fy, cx, cy) in pixels of the stored images
     intrinsics: tuple | None = None
     depth_scale: float | None = None
-    # training poses: given | track | odometry (experiments.tracking), and the odometry's
+    # training poses: given | track | odometry (experiments.tasks.tracking), and the odometry's
     # drift per frame "SIGMA_T,SIGMA_R" (scene units, degrees; vbgs.tracking.drift)
     poses: str = "given"
     drift: str = DRIFT_DEFAULT
@@ -122,7 +122,7 @@ class SceneTask:
     steps: int = 3000
     protocol: str = PROTOCOL.default
     # the continual-learning matrix over this many consecutive segments of the stream
-    # (experiments.continual; 0: not measured; continual protocol only)
+    # (experiments.tasks.continual; 0: not measured; continual protocol only)
     cl_segments: int = 0
     # vbgs-polish only: weight of the posterior's anchor; None: by protocol
     # (experiments.learners.polish_learner.anchor_weight)
@@ -273,20 +273,20 @@ def prepare_scene(task) -> tuple[Scene, dict]:
 
 def depth_arrivals(task, scene: Scene, order, report: dict | None = None):
     """The stage the arriving training frames pass through: with a depth model, its
-    metric depth (:class:`experiments.depth_swap.EstimatedDepth`, which aligns each
+    metric depth (:class:`experiments.tasks.depth_swap.EstimatedDepth`, which aligns each
     frame to the frames before it); without one, for a network's depth (``sensor
     "mono"``) the same per-frame alignment alone
-    (:class:`experiments.sensor_swap.AlignedArrivals`, ``report`` the sensor report it
+    (:class:`experiments.tasks.sensor_swap.AlignedArrivals`, ``report`` the sensor report it
     extends); otherwise None (the depth as it is: exact-depth runs are unchanged)."""
     if not task.depth_model:
         if task.sensor == "mono":  # a network's depth: each frame aligned as it arrives
             from depth.perframe import FrameAlignConfig
-            from experiments.sensor_swap import AlignedArrivals
+            from experiments.tasks.sensor_swap import AlignedArrivals
 
             return AlignedArrivals(FrameAlignConfig(), report)
         return None
     from depth.stream import StreamConfig
-    from experiments.depth_swap import EstimatedDepth
+    from experiments.tasks.depth_swap import EstimatedDepth
 
     config = StreamConfig(kind=task.depth_kind, method=task.depth_align,
                           reference=task.depth_reference, seed=task.seed)
@@ -322,7 +322,7 @@ def run_scene_checkpoints(task: SceneTask, checkpoints, *, progress: bool = Fals
     """A static run of ``task`` to the largest of ``checkpoints`` (step counts; the
     task's ``steps`` is not read), yielding ``(steps, SceneResult)`` at each: the result
     :func:`run_scene` gives for ``steps`` steps (the learners' schedules are per step,
-    :func:`experiments.protocol.static_checkpoints`), ``seconds`` the training to that
+    :func:`experiments.tasks.protocol.static_checkpoints`), ``seconds`` the training to that
     count. The warnings are said once, at the last."""
     if task.protocol != "static" or "static" not in LEARNERS[task.method].PROTOCOLS:
         raise ValueError(f"checkpoints are steps of a static run: --method {task.method} "
