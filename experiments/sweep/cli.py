@@ -72,7 +72,7 @@ def add_sweep(sub) -> None:
 
 def add_report(sub) -> None:
     p = sub.add_parser("report", help="tables and plots of a sweep's results folder")
-    p.add_argument("results_dir", help="a sweep's results folder, e.g. results/quick")
+    p.add_argument("results_dir", help="a sweep's results folder, e.g. results/ablations")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 

@@ -37,7 +37,7 @@ def test_every_command_still_has_its_parser():
 
     parser = build_parser()
     assert parser.parse_args(["sweep", "--config", "quick"]).command == "sweep"
-    assert parser.parse_args(["report", "results/quick"]).command == "report"
+    assert parser.parse_args(["report", "results/ablations"]).command == "report"
     assert set(parser._subparsers._group_actions[0].choices) == set(COMMANDS)
 
 
