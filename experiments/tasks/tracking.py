@@ -145,7 +145,7 @@ def _ranges(numbers: list[int]) -> str:
 # against two, training poses' ATE (mm) of object / room / walk, exact and Kinect:
 # 0.20 / 0.10 / 1.24 and 12.5 / 3.2 / 8.6 against 0.15 / 0.11 / 1.33 and 11.4 / 3.3 /
 # 12.8 (sum 25.9 against 29.1), for one candidate search and solve less a frame.
-# Half the points and 4 Levenberg-Marquardt steps (stop 38, for the object's cost bound:
+# Half the points and 4 Levenberg-Marquardt steps (for the object's cost bound:
 # 2.7 ms of CPU less a frame): object / room / walk, exact and Kinect, and the walk's
 # odometry rows exact / Kinect: 0.30 / 0.14 / 1.71 and 13.2 / 3.3 / 6.4, odometry 1.51 /
 # 5.83, against 0.21 / 0.10 / 1.35 and 12.9 / 3.2 / 9.5, 1.19 / 9.05 with 2048 points and

@@ -1,5 +1,5 @@
 """``python -m experiments.run``: bad input is refused before any work, one line, exit 2;
-Ctrl-C ends with one line and exit 130 (issue 13, cases 5, 7, 9, 10)."""
+Ctrl-C ends with one line and exit 130."""
 
 import json
 

@@ -9,7 +9,7 @@ is the one of ``SCALES`` that draws the map's own training frames best (mean PSN
 frames that have arrived, never a held-out view): one number fitted to the data the
 map learned, as its colours and opacities are.
 
-Chosen so (stop 39, fit-scene's defaults, 128 px / 60 frames, `python -m
+Chosen so (fit-scene's defaults, 128 px / 60 frames, `python -m
 experiments.studies.val_probe fit-scene --scene S --components K --splat-scale auto`:
 `results/tuning/splat_scale/auto_val_*.json`; the grid's validation scores at each
 fixed scale are beside them), the scale is 1.2 on the object, the room and the walk at

@@ -1,5 +1,5 @@
 #!/bin/bash
-# Stop 38 GPU rows: answers at JAX's default precision (run side by side, so their seconds are not speed figures),
+# GPU rows: answers at JAX's default precision (run side by side, so their seconds are not speed figures),
 # the library's tracking/inference tests on the GPU, then alone (speed figures): the tracking cost pair on the
 # object (given, then tracked poses) and bench stream.
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
