@@ -110,7 +110,8 @@ def add(sub):
 
 
 def run(args) -> dict:
-    from experiments.tasks.scene_task import SceneTask, run_scene, save_views
+    from experiments.tasks.scene_report import save_views
+    from experiments.tasks.scene_task import SceneTask, run_scene
     from vbgs.mapping import BudgetConfig
 
     render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale),

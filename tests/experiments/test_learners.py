@@ -163,7 +163,7 @@ def test_uncovered_surface_is_said_and_small_splats_named(capsys, details, hint)
     """Background drawn over a test view's surface is said; with a median component of
     fewer than FEW_POINTS points and a fixed splat scale the warning also names small
     splats and what to try."""
-    from experiments.tasks.scene_task import FEW_POINTS, UNCOVERED_WARNING, warn_uncovered
+    from experiments.tasks.scene_report import FEW_POINTS, UNCOVERED_WARNING, warn_uncovered
 
     warn_uncovered(UNCOVERED_WARNING / 2, details)
     assert capsys.readouterr().err == ""

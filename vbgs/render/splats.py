@@ -275,7 +275,7 @@ def load_ply(path) -> Splats:
 # too, results/tuning/{object,room}.md). Checked again with the walk at 20k and 50k
 # components (results/tuning/splat_scale/, made by the command in each file): the walk at
 # 50k wants larger splats (its components hold few points and leave gaps;
-# experiments.tasks.scene_task.FEW_POINTS), the object and the room do not, and over both
+# experiments.tasks.scene_report.FEW_POINTS), the object and the room do not, and over both
 # counts and the three scenes 1.2 is still the best mean.
 # Opacity comes from evidence (vbgs.render.opacity); VBGS_OPACITY is the constant of the old
 # rule (`opacity_rule="constant"`), kept for comparison.
