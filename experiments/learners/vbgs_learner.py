@@ -12,8 +12,8 @@ import jax
 import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
-from experiments.protocol import SceneResult, task_sensor
-from experiments.settings import AUTO_SCALE, AUTO_SCALE_FRAMES
+from experiments.tasks.protocol import SceneResult, task_sensor
+from experiments.tasks.settings import AUTO_SCALE, AUTO_SCALE_FRAMES
 from vbgs import mapping
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference.bound import StreamBound
@@ -43,7 +43,7 @@ def task_config(task) -> mapping.Config:
 
 
 class VbgsLearner:
-    """A :class:`experiments.protocol.Learner`: conjugate updates, no replay. With
+    """A :class:`experiments.tasks.protocol.Learner`: conjugate updates, no replay. With
     ``splat_scale = "auto"`` it keeps a uniform sample of the arrived frames
     (``reservoir:AUTO_SCALE_FRAMES``, counted in ``replay_bytes``) to choose the splat
     scale on (:mod:`vbgs.render.scale_fit`) each time its splats are drawn."""

@@ -72,7 +72,7 @@ def add_sweep(sub) -> None:
 
 def add_report(sub) -> None:
     p = sub.add_parser("report", help="tables and plots of a sweep's results folder")
-    p.add_argument("results_dir", help="a sweep's results folder, e.g. results/quick")
+    p.add_argument("results_dir", help="a sweep's results folder, e.g. results/ablations")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
@@ -97,7 +97,7 @@ def _metrics(record: dict) -> str:
 
 
 def _write_plan(out: Path, config, plan, version: str) -> None:
-    from experiments.bench import machine
+    from experiments.benchmarks.bench import machine
     from vbgs.io_atomic import write_text_atomic
 
     doc = {"name": config.name, "description": config.description, "config": config.source,
@@ -252,7 +252,7 @@ def run_sweep(args) -> dict:
 
 def _strict_exit(summary: dict, *, as_json: bool) -> None:
     """``--strict``: print the summary as usual, then exit with status 1."""
-    from experiments.cli_common import print_result
+    from experiments.cli.output import print_result
 
     print_result("sweep", summary, as_json=as_json)
     what = [f"{summary['failed']} cell(s) failed"] if summary["failed"] else []
