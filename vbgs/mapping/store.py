@@ -4,7 +4,7 @@ stream resumed from a saved state learns what the uninterrupted stream would hav
 :func:`save` writes every array of a :class:`vbgs.mapping.MapState` (the mixture's prior,
 posterior and statistics, the opacity evidence, the colour sums, the growth tables, the
 random key) into one ``.npz`` file beside a small JSON schema of the state's structure,
-written to a temporary file and renamed, so a run killed while saving leaves the
+written atomically (:mod:`vbgs.io_atomic`), so a run killed while saving leaves the
 previous file whole. The compiled stepper is not pickled: :func:`load` builds it again
 for the loaded reference (as the first frame of a stream would) and then puts back the
 saved E-step terms, padded size and tiling, so the resumed stream computes with the
@@ -20,8 +20,6 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import jax
@@ -29,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from vbgs.inference import projective
+from vbgs.io_atomic import atomic_path
 from vbgs.inference.stepper import Stepper
 from vbgs.mapping.config import Config
 from vbgs.mapping.mapper import MapState, _sync_stepper
@@ -45,15 +44,8 @@ def save(path, state: MapState) -> Path:
     arrays: dict[str, np.ndarray] = {}
     schema = {"format": FORMAT, "state": _pack(state, "s", arrays)}
     arrays[_SCHEMA] = np.array(json.dumps(schema))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".part", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **arrays)
     return path
 
 
