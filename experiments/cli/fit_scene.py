@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from experiments.cli.options import (
     add_calibration,
     add_frames,
@@ -22,6 +24,7 @@ from experiments.tasks.settings import (
     DEPTH_REFERENCE,
     DRIFT_DEFAULT,
     ESTEP,
+    SEARCH,
     FORMAT,
     INIT,
     METHOD,
@@ -59,6 +62,7 @@ def add(sub):
     add_choice(p, "--assign", ASSIGN)
     add_choice(p, "--estep", ESTEP)
     p.add_argument("--candidates", type=int, default=16, help="components per point (sparse)")
+    add_choice(p, "--search", SEARCH)
     add_choice(p, "--init", INIT)
     add_seed(p)
     p.add_argument("--opacity", type=float, default=None, help="VBGS splat opacity")
@@ -104,6 +108,16 @@ def add(sub):
     p.add_argument("--plot", metavar="PNG", help="--poses track|odometry: top view of the "
                                                  "true, tracked (and odometry) trajectories")
     p.add_argument("--ply", metavar="OUT", help="save the splats as a 3DGS PLY")
+    p.add_argument("--save-map", metavar="NPZ",
+                   help="VBGS: save the map after every frame (vbgs.mapping.save; a run "
+                        "stopped midway loses only the frame in flight)")
+    p.add_argument("--resume-map", metavar="NPZ",
+                   help="VBGS: resume the stream from a saved map (the frames it learned "
+                        "are skipped; give the settings it was learned with)")
+    p.add_argument("--stage-times", action="store_true",
+                   help="VBGS: each stage's seconds a frame in the JSON (stage_seconds; "
+                        "the stages wait for their device work, so frames take a little "
+                        "longer)")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     add_json(p)
 
@@ -120,7 +134,8 @@ def run(args) -> dict:
     task = SceneTask(scene=args.scene, format=args.format, method=args.method,
                      components=args.components, frames=args.frames, n_test=args.test_views,
                      size=args.size, order=args.order, assign=args.assign, estep=args.estep,
-                     candidates=args.candidates, init=args.init, seed=args.seed,
+                     candidates=args.candidates, search=args.search, init=args.init,
+                     seed=args.seed,
                      replay=args.replay, steps_per_frame=args.steps_per_frame, steps=args.steps,
                      protocol=args.protocol, cl_segments=args.cl_segments,
                      depth_model=args.depth_model,
@@ -132,13 +147,23 @@ def run(args) -> dict:
                      sensor_holes=args.sensor_holes, sensor=args.sensor, poses=args.poses,
                      drift=args.drift, budget=BudgetConfig(points=args.budget_points,
                                                                saturation=args.budget_saturation),
-                     **calibration(args),
+                     save_map=args.save_map, resume_map=args.resume_map,
+                     stage_times=args.stage_times, **calibration(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
                          f"held-out views), got {args.test_views}")
     check_output_file(args.save, "--save", ".png")
     check_output_file(args.ply, "--ply", ".ply")
+    check_output_file(args.save_map, "--save-map", ".npz")
+    for flag, value in (("--save-map", args.save_map), ("--resume-map", args.resume_map),
+                        ("--stage-times", args.stage_times), ("--search", args.search != "kdtree")):
+        if value and args.method != "vbgs":
+            raise ValueError(f"{flag} is a setting of --method vbgs's map; --method "
+                             f"{args.method} has none: drop {flag}")
+    if args.resume_map and not Path(args.resume_map).is_file():
+        raise ValueError(f"--resume-map {args.resume_map}: no such file (write one with "
+                         f"--save-map)")
     check_output_file(args.plot, "--plot", ".png")
     if args.plot and args.poses == "given":
         raise ValueError("--plot draws the tracked trajectory: give --poses track or odometry")

@@ -35,6 +35,7 @@ from experiments.tasks.settings import (
     DEPTH_REFERENCE,
     DRIFT_DEFAULT,
     ESTEP,
+    SEARCH,
     FORMAT,
     INIT,
     MEASURED_BY,
@@ -79,6 +80,13 @@ class SceneTask:
     assign: str = ASSIGN.default
     estep: str = ESTEP.default
     candidates: int = 16
+    search: str = SEARCH.default  # VBGS: KD-tree or projective candidates
+    # VBGS: the map saved after every frame to this .npz (vbgs.mapping.save), a stream
+    # resumed from one (its frames already learned are skipped), and each stage's
+    # seconds a frame in the record (vbgs.mapping.stages)
+    save_map: str | None = None
+    resume_map: str | None = None
+    stage_times: bool = False
     init: str = INIT.default  # see experiments.tasks.init_schemes
     seed: int = 0
     opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.render.opacity) | constant
@@ -160,6 +168,7 @@ class SceneTask:
             raise ValueError(f"n_val must be a non-negative integer, got {self.n_val!r}")
         for name, choice in (("method", METHOD), ("protocol", PROTOCOL), ("order", ORDER),
                              ("assign", ASSIGN), ("estep", ESTEP), ("format", FORMAT),
+                             ("search", SEARCH),
                              ("depth_kind", DEPTH_KIND), ("opacity_rule", OPACITY_RULE),
                              ("depth_reference", DEPTH_REFERENCE),
                              ("colour_rule", COLOUR_RULE), ("simulate_sensor", SENSOR),

@@ -52,6 +52,10 @@ ASSIGN = Choice(("prior", "posterior"), "prior",
                 "responsibilities under the prior or the current posterior")
 STREAM = Choice(("none", "patches"), "none", "image fit on all pixels, or a stream of patches")
 ESTEP = Choice(("dense", "sparse"), "sparse", "E-step over all components, or the few nearby")
+SEARCH = Choice(("kdtree", "projective"), "kdtree",
+                "VBGS: how a frame's points find their nearby components: a KD-tree over "
+                "the map's means, or by projection at the frame's pose, on the device "
+                "(vbgs.inference.projective)")
 FORMAT = Choice(("blender", "replica", "tum"), None,
                 "dataset layout of a scene folder (detected from the folder if left out)")
 PROTOCOL = Choice(("continual", "static"), "continual",
