@@ -49,6 +49,8 @@ from experiments.tasks.continual import (
     nearest_test_views,
     stream_segments,
 )
+from experiments.tasks.change_scores import FIELDS as CHANGE_FIELDS
+from experiments.tasks.change_scores import change_scores
 from experiments.tasks.init_schemes import oracle_start
 from experiments.progress import progress as progress_bar
 from vbgs.compilation import compile_seconds
@@ -118,6 +120,8 @@ class SceneResult:
     # the continual-learning matrix and metrics (JSON: cl_*); None under the static
     # protocol or without task.cl_segments
     continual: ContinualScores | None = None
+    # a scene that changed while streamed: experiments.tasks.change_scores (None each else)
+    changes: Mapping[str, Any] = field(default_factory=lambda: dict.fromkeys(CHANGE_FIELDS))
 
     METRICS = ("oracle_start", "psnr", "ssim", "depth_l1", "seconds", "seconds_compiling",
                "seconds_per_frame",
@@ -133,7 +137,8 @@ class SceneResult:
             metrics.pop("images")
         continual = (self.continual.to_dict() if self.continual is not None
                      else dict.fromkeys(CL_FIELDS))
-        return {**self.settings, **self.depth, **metrics, **continual, **self.details}
+        return {**self.settings, **self.depth, **metrics, **self.changes, **continual,
+                **self.details}
 
 
 def task_settings(task) -> dict:
@@ -269,7 +274,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         forgetting_curve=curve, dropped=final.dropped, background_rgb=background.tolist(),
         uncovered=final.uncovered, images={"target": [f.rgb for f in scene.test], "render": final.renders},
         oracle_start=oracle_start(task.init), seconds_compiling=compiling,
-        continual=continual_scores(segments, rows, cl_seconds) if segments else None)
+        continual=continual_scores(segments, rows, cl_seconds) if segments else None,
+        changes=change_scores(scene, final.renders))
 
 
 PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates
@@ -320,5 +326,6 @@ def static_checkpoints(task, scene: Scene, learner, frames: list, checkpoints, *
             early_psnr_when_seen=None, early_psnr_at_end=None, forgetting_curve=None,
             dropped=final.dropped, background_rgb=background.tolist(),
             uncovered=final.uncovered, seconds_compiling=compiling,
-            images={"target": [f.rgb for f in scene.test], "render": final.renders})
+            images={"target": [f.rgb for f in scene.test], "render": final.renders},
+            changes=change_scores(scene, final.renders))
     bar.close()

@@ -50,6 +50,9 @@ class Scene(NamedTuple):
     is still tuned (render settings) is chosen on these, never on ``test``. Last, with
     a default, so positional construction ``Scene(name, train, test, bounds)`` keeps
     working (a scene built that way has none);
+    first_state, changes: a scene that changes while it is streamed
+    (:mod:`vbgs.data.changing`): its test views as the world was before the changes, and
+    the training frames at which it changed (empty for a static scene);
     record: what a loader wants said in a run's record: where a dataset's intrinsics and
     depth scale came from
     (:func:`vbgs.data.calibration.provenance`), views left out; empty for synthetic scenes.
@@ -62,6 +65,10 @@ class Scene(NamedTuple):
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     val: list[Frame] = []  # a NamedTuple field: shared default, never mutated
     record: dict = {}  # shared default, never mutated
+    # a scene that changes while streamed (vbgs.data.changing): the test views' poses in
+    # the first state, and the training frames at which the world changed
+    first_state: list[Frame] = []  # shared default, never mutated
+    changes: tuple[int, ...] = ()
 
 
 def validate_frame(frame: Frame, what: str = "frame") -> Frame:

@@ -68,8 +68,11 @@ N_VAL = 4  # validation views per synthetic scene by default
 SAMPLES = 3
 
 
-def object_primitives(seed: int = 0) -> list:
-    """Primitives of the ``"object"`` scene; ``seed`` jitters placement and yaw."""
+def object_primitives(seed: int = 0, changed: bool = False) -> list:
+    """Primitives of the ``"object"`` scene; ``seed`` jitters placement and yaw.
+    ``changed``: the scene after its change events (:mod:`vbgs.data.changing`): the sphere
+    taken away, the crate moved onto its place, a new ball added, and the cylinder's
+    texture replaced."""
     rng = np.random.default_rng(seed)
     jx, jy, jz = rng.uniform(-0.05, 0.05, (3, 2))  # [3, 2] xy jitters
     yaw = rng.uniform(0.0, np.pi / 2)
@@ -82,26 +85,33 @@ def object_primitives(seed: int = 0) -> list:
         Surface("brick", (0.85, 0.6, 0.45), (4.0, 1.0)),
         Surface("gravel", (0.7, 0.75, 0.9), (3.0, 3.0)),
     )
+    crate_xy = (sx, sy) if changed else (-0.40 + jy[0], 0.30 + jy[1])
     crate = box(
-        (-0.40 + jy[0], 0.30 + jy[1], 0.30),
+        (*crate_xy, 0.30),
         (0.30, 0.30, 0.30),
         yaw,
         Surface("coffee"),
         Surface("rocket"),
     )
     cap = Surface("immunohistochemistry")
+    side = Surface("rocket" if changed else "chelsea", repeat=(2.0, 1.0))
+    kept = [Sphere((sx, sy, 0.45), 0.45, Surface("astronaut"))] if not changed else \
+        [Sphere((-0.50 + jy[0], -0.50 + jy[1], 0.22), 0.22, Surface("colorwheel"))]
     return [
         *platform,
         *crate,
-        Sphere((sx, sy, 0.45), 0.45, Surface("astronaut")),
-        Cylinder((cx, cy), 0.22, 0.0, 0.7, Surface("chelsea", repeat=(2.0, 1.0))),
+        *kept,
+        Cylinder((cx, cy), 0.22, 0.0, 0.7, side),
         Disc((cx, cy, 0.7), 0.22, cap),
         Disc((cx, cy, 0.0), 0.22, cap),
     ]
 
 
-def room_primitives(seed: int = 0) -> list:
-    """Primitives of the ``"room"`` scene; ``seed`` jitters the furniture."""
+def room_primitives(seed: int = 0, changed: bool = False) -> list:
+    """Primitives of the ``"room"`` scene; ``seed`` jitters the furniture. ``changed``:
+    the room after its change events (:mod:`vbgs.data.changing`): the ball on the table
+    taken away, the ball on the floor moved across the room, a crate added by the wall
+    and the stool's texture replaced."""
     rng = np.random.default_rng(seed)
     j = rng.uniform(-0.08, 0.08, (4, 2))  # [4, 2] xy jitters
     yaw = rng.uniform(0.0, np.pi)
@@ -124,13 +134,20 @@ def room_primitives(seed: int = 0) -> list:
         Surface("colorwheel"),
     )
     px, py = -0.70 + j[1, 0], -0.40 + j[1, 1]
+    ball = (1.30 + j[3, 0], -1.00 + j[3, 1]) if changed else (-0.50 + j[3, 0], 0.70 + j[3, 1])
+    on_table = [] if changed else [
+        Sphere((tx + j[2, 0], ty + j[2, 1], 0.75 + 0.3), 0.3, Surface("astronaut"))]
+    added = box((-1.60, 1.40, 0.30), (0.30, 0.30, 0.30), 0.3, Surface("coffee"),
+                Surface("rocket")) if changed else []
     return [
         *room,
         *table,
-        Sphere((tx + j[2, 0], ty + j[2, 1], 0.75 + 0.3), 0.3, Surface("astronaut")),
-        Sphere((-0.50 + j[3, 0], 0.70 + j[3, 1], 0.35), 0.35, Surface("coffee")),
-        Cylinder((px, py), 0.25, 0.0, 1.0, Surface("chelsea", repeat=(2.0, 1.0))),
+        *on_table,
+        Sphere((*ball, 0.35), 0.35, Surface("coffee")),
+        Cylinder((px, py), 0.25, 0.0, 1.0,
+                 Surface("astronaut" if changed else "chelsea", repeat=(2.0, 1.0))),
         Disc((px, py, 1.0), 0.25, Surface("grass", (0.5, 0.9, 0.4))),
+        *added,
     ]
 
 
@@ -420,12 +437,26 @@ def render_views(name: str, poses, size=128, seed: int = 0, samples: int = SAMPL
     (``samples`` rays per pixel side, see :data:`SAMPLES`)."""
     fov, background = {"object": (OBJECT_FOV_X, OBJECT_BACKGROUND),
                        "room": (ROOM_FOV_X, (0.0, 0.0, 0.0)),
-                       "walk": (WALK_FOV_X, WALK_SKY)}[name]
+                       "walk": (WALK_FOV_X, WALK_SKY)}[name.removesuffix("-change")]
     return _frames(scene_primitives(name, seed), poses, size, fov, background, samples)
 
 
-SCENES = {"object": object_scene, "room": room_scene, "walk": walk_scene}
-PRIMITIVES = {"object": object_primitives, "room": room_primitives, "walk": walk_primitives}
+def _changing(name: str):
+    def build(**kw) -> Scene:
+        from vbgs.data.changing import changing_scene  # it builds on this module
+
+        return changing_scene(name, **kw)
+
+    build.__doc__ = f"The {name!r} scene changing half-way through its stream " \
+                    "(vbgs.data.changing)."
+    return build
+
+
+SCENES = {"object": object_scene, "room": room_scene, "walk": walk_scene,
+          "object-change": _changing("object"), "room-change": _changing("room")}
+PRIMITIVES = {"object": object_primitives, "room": room_primitives, "walk": walk_primitives,
+              "object-change": lambda seed=0: object_primitives(seed, changed=True),
+              "room-change": lambda seed=0: room_primitives(seed, changed=True)}
 
 
 def make_scene(name: str, **kw) -> Scene:
