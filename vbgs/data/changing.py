@@ -22,59 +22,32 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbgs.data.scene import Frame, Scene
-from vbgs.data.synthetic import (
-    N_VAL,
-    OBJECT_BACKGROUND,
-    OBJECT_FOV_X,
-    ROOM_FOV_X,
-    SAMPLES,
-    _frames,
-    object_poses,
-    object_primitives,
-    object_val_poses,
-    room_poses,
-    room_primitives,
-    room_val_poses,
-)
 from vbgs.data.raycast import bounds_of
+from vbgs.data.scene import Frame, Scene
 
 # A pixel changed when its colour moved more than this (any channel, in [0, 1]) or its
 # depth by more than this share of the depth between the two states' test views.
 COLOUR_CHANGE = 2.0 / 255.0
 DEPTH_CHANGE = 1e-3
 
-_BASES = {
-    "object": (object_primitives, object_poses, object_val_poses, OBJECT_FOV_X,
-               OBJECT_BACKGROUND),
-    "room": (room_primitives, room_poses, room_val_poses, ROOM_FOV_X, (0.0, 0.0, 0.0)),
-}
 
-
-def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
-                   n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
-    """The scene ``base`` ("object" or "room") changing after the first of two laps (see
-    the module docstring); ``n_train`` frames in all, at least 2."""
-    if base not in _BASES:
-        raise ValueError(f"no changing version of {base!r}: use one of {', '.join(_BASES)}")
+def two_laps(name: str, first: list, final: list, poses, val_poses, n_train: int,
+             n_test: int, n_val: int, seed: int, frames) -> Scene:
+    """A scene walked twice along its path, ``first`` primitives the first lap and
+    ``final`` the second (see the module docstring); ``poses(n_train, n_test, seed)`` and
+    ``val_poses(n_val, seed)`` its base scene's pose functions, ``frames(prims, poses)``
+    its renderer. ``n_train`` frames in all, at least 2."""
     if n_train < 2:
         raise ValueError(f"a changing scene walks its path twice: n_train must be at least "
                          f"2, got {n_train}")
-    primitives, poses, val_poses, fov, background = _BASES[base]
-    first, final = primitives(seed), primitives(seed, changed=True)
     lap = n_train // 2
     path, test = poses(lap, n_test, seed)
     second = poses(n_train - lap, n_test, seed)[0]
-
-    def frames(prims, at):
-        return _frames(prims, at, size, fov, background, samples)
-
-    lo0, hi0 = bounds_of(first)
-    lo1, hi1 = bounds_of(final)
-    return Scene(name=f"{base}-change", train=frames(first, path) + frames(final, second),
+    (lo0, hi0), (lo1, hi1) = bounds_of(first), bounds_of(final)
+    return Scene(name=name, train=frames(first, path) + frames(final, second),
                  test=frames(final, test), bounds=(np.minimum(lo0, lo1), np.maximum(hi0, hi1)),
-                 background=background, val=frames(final, val_poses(n_val, seed)),
-                 first_state=frames(first, test), changes=(lap,))
+                 val=frames(final, val_poses(n_val, seed)), first_state=frames(first, test),
+                 changes=(lap,))
 
 
 def changed_pixels(first: Frame, final: Frame) -> np.ndarray:

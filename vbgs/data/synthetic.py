@@ -34,8 +34,11 @@ and the same seed gives bit-identical frames.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
+from vbgs.data.changing import two_laps
 from vbgs.data.raycast import Cylinder, Disc, Quad, Sphere, Surface, bounds_of, box, render
 from vbgs.data.scene import Frame, Scene
 from vbgs.render.camera import from_fov, look_at
@@ -441,19 +444,31 @@ def render_views(name: str, poses, size=128, seed: int = 0, samples: int = SAMPL
     return _frames(scene_primitives(name, seed), poses, size, fov, background, samples)
 
 
-def _changing(name: str):
-    def build(**kw) -> Scene:
-        from vbgs.data.changing import changing_scene  # it builds on this module
+def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
+                   n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
+    """The scene ``base`` ("object" or "room") whose world changes between two laps of
+    its path (:mod:`vbgs.data.changing`): ``n_train`` frames in all, the first half before
+    the change; test and validation views of the final state, ``first_state`` the test
+    views before it."""
+    if base not in ("object", "room"):
+        raise ValueError(f"no changing version of {base!r}: use object or room")
+    primitives, poses, val_poses, fov, background = {
+        "object": (object_primitives, object_poses, object_val_poses, OBJECT_FOV_X,
+                   OBJECT_BACKGROUND),
+        "room": (room_primitives, room_poses, room_val_poses, ROOM_FOV_X, (0.0, 0.0, 0.0)),
+    }[base]
 
-        return changing_scene(name, **kw)
+    def frames(prims, at):
+        return _frames(prims, at, size, fov, background, samples)
 
-    build.__doc__ = f"The {name!r} scene changing half-way through its stream " \
-                    "(vbgs.data.changing)."
-    return build
+    scene = two_laps(f"{base}-change", primitives(seed), primitives(seed, changed=True),
+                     poses, val_poses, n_train, n_test, n_val, seed, frames)
+    return scene._replace(background=background)
 
 
 SCENES = {"object": object_scene, "room": room_scene, "walk": walk_scene,
-          "object-change": _changing("object"), "room-change": _changing("room")}
+          "object-change": partial(changing_scene, "object"),
+          "room-change": partial(changing_scene, "room")}
 PRIMITIVES = {"object": object_primitives, "room": room_primitives, "walk": walk_primitives,
               "object-change": lambda seed=0: object_primitives(seed, changed=True),
               "room-change": lambda seed=0: room_primitives(seed, changed=True)}

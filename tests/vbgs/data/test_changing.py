@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from vbgs.data.changing import changed_pixels, changing_scene
-from vbgs.data.synthetic import make_scene
+from vbgs.data.changing import changed_pixels
+from vbgs.data.synthetic import changing_scene, make_scene
 
 
 @pytest.mark.parametrize("base", ["object", "room"])
