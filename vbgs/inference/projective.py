@@ -12,22 +12,27 @@ near a pixel, as KinectFusion's and SplaTAM's projective association do:
    or inactive are left out;
 2. **bin** them into square tiles of ``T`` pixels (one spare tile round the image), each
    tile's list ordered nearest along the ray first and cut at ``L`` entries (a tile that
-   sees more components keeps those in front): two sorts of ``k`` keys;
-3. **choose**: each point, projected the same way, gathers the lists of its tile and the
-   eight round it (``9 L`` components) and keeps the ``C`` nearest in space (``top_k`` of
-   squared centred distances: elementwise, exact under TF32), the same rule as the
-   KD-tree's over the components its neighbourhood holds.
+   sees more components keeps those in front): one sort of ``k`` keys;
+3. **choose per tile**: each tile pools its own list and the eight round it (``9 L``
+   components) and keeps the ``C`` nearest its measured points (:func:`tile_candidates`:
+   across the image, the distance to the tile's box at the component's depth; along the
+   ray, the distance to the depth range its points span, ties broken towards its
+   nearest, mean and farthest depth), and every point of the tile takes those ``C``.
+   With ``Tiling.shortlist = M > C`` a tile keeps ``M`` and each point the ``C`` nearest
+   of them to itself, the KD-tree's rule over a shorter list (on a CPU that choice costs
+   ten times the rest, :data:`SHORTLIST`).
 
-A point whose neighbourhood holds fewer than ``C`` components keeps the ones it has; the
-other entries are ``-1`` and take no responsibility (:func:`vbgs.inference.model.e_step_with`
-masks them). Where a component near a point projects farther than a tile and a half
-from it (a tile spans less space than the candidates reach), the projective list misses
-it and the KD-tree would not; :func:`tile_size` sizes tiles from the component
-spacing and the depth so this is rare, and the test holds the two paths to the same
-responsibilities wherever they find the same components.
+A point whose tile holds fewer than ``C`` components keeps the ones it has; the other
+entries are ``-1`` and take no responsibility (:func:`vbgs.inference.model.e_step_with`
+masks them). A component near a point but projecting more than a tile and a half from
+its tile is missed where the KD-tree would list it; :func:`tile_size` sizes tiles from
+the component spacing and the depth so this is rare (on the object at 128 px the
+nearest component of 98% of the points is listed), and the tests hold the two paths to
+the same responsibilities wherever they list the same components.
 
-Cost: two sorts of the ``k`` projected means, ``9 L`` distances and a ``top_k`` per point;
-no host round trip. The candidate rule reads the assigning model and the frame only (the
+Cost: one sort of the ``k`` projected means, ``9 L`` scores and a ``top_k`` per tile, a
+gather per point; no host round trip. Precision: float32 throughout; the projection is
+three products of three terms, the scores differences of nearby lengths. The candidate rule reads the assigning model and the frame only (the
 camera and the points), so under prior assignment a stream still sums per-frame
 statistics: the same frames in any order or grouping give the same posterior when each
 frame keeps its own camera (a batch of frames is searched frame by frame).
@@ -50,8 +55,14 @@ LIST_LENGTH = 16
 # spacings) away across the image, beyond the mapper's reach of 2 cells.
 TILE_SPACINGS = 1.0
 # Each tile keeps this many times C components nearest its points, each point the C
-# nearest of those to itself (a tile's points differ in depth and place).
-SHORTLIST = 2
+# nearest of those to itself (a tile's points differ in depth and place). 1: every point
+# takes its tile's C. On a CPU the per-point choice costs ten times the rest of the
+# search at 640 x 480 (1.2 s against 0.12 s of CPU, 307k points) for the same share of
+# points whose nearest component is listed.
+SHORTLIST = 1
+# Within the depth range a tile's points span, components nearer one of its nearest,
+# mean and farthest depth rank first, by this weight on the squared distance to it.
+TIE_WEIGHT = 0.25
 # Tiles are at least this many pixels a side (smaller ones cost more lists than they save).
 MIN_TILE = 2
 
@@ -167,26 +178,30 @@ def neighbourhoods(lists: jnp.ndarray, count: jnp.ndarray, tiling: Tiling) -> jn
 
 
 def point_tiles(x: jnp.ndarray, w: jnp.ndarray, v: View, tiling: Tiling
-                ) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+                ) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Each point's tile ``[n]`` (points outside the tiled area, or of weight 0, in the
-    spare border, whose lists are empty), and each tile's nearest and farthest
-    measured depth ``[tiles]`` (+inf / -inf where it holds no point)."""
+    spare border, whose lists are empty), and each tile's nearest, mean and farthest
+    measured depth ``[tiles, 3]`` (+inf where it holds no point)."""
     tx, ty, z, inside = _tiles(v, x, tiling)
     n_tiles = tiling.tiles_x * tiling.tiles_y
     held = inside & (w > 0)
     tile = jnp.where(held, ty * tiling.tiles_x + tx, 0)
     near = jnp.full(n_tiles, jnp.inf, x.dtype).at[tile].min(jnp.where(held, z, jnp.inf))
     far = jnp.full(n_tiles, -jnp.inf, x.dtype).at[tile].max(jnp.where(held, z, -jnp.inf))
-    return tile, near, far
+    total = jnp.zeros(n_tiles, x.dtype).at[tile].add(jnp.where(held, z, 0.0))
+    count = jnp.zeros(n_tiles, x.dtype).at[tile].add(held.astype(x.dtype))
+    mean = jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
+    return tile, jnp.stack([near, mean, jnp.where(count > 0, far, jnp.inf)], -1)
 
 
-def tile_candidates(pool: jnp.ndarray, means: jnp.ndarray, v: View, near: jnp.ndarray,
-                    far: jnp.ndarray, tiling: Tiling) -> jnp.ndarray:
+def tile_candidates(pool: jnp.ndarray, means: jnp.ndarray, v: View, depths: jnp.ndarray,
+                    tiling: Tiling) -> jnp.ndarray:
     """Each tile's ``C`` candidates ``[tiles, C]`` (-1 where its pool held fewer): the
     pooled components nearest to the tile's measured points, the distance of a component
-    to the tile being its distance across the image to the tile's centre (pixels times
-    its depth over the focal length) and along the ray to the depth range the tile's
-    points span."""
+    to the tile being its distance across the image to the tile's box (pixels times its
+    depth over the focal length) and along the ray to the nearest of the tile's nearest,
+    mean and farthest measured depth ``depths [tiles, 3]`` (a tile across a depth edge
+    keeps components of both surfaces; one on a slanted surface, of its middle too)."""
     tx = jnp.arange(tiling.tiles_x)
     ty = jnp.arange(tiling.tiles_y)
     cu = ((tx - 1 + 0.5) * tiling.tile)[None, :].repeat(tiling.tiles_y, 0).reshape(-1)
@@ -203,9 +218,10 @@ def tile_candidates(pool: jnp.ndarray, means: jnp.ndarray, v: View, near: jnp.nd
     # at the component's depth; along the ray: how far it lies outside the points' range
     gap_u = jnp.maximum(jnp.abs(pu - cu[:, None]) - half, 0.0) * pz / fx
     gap_v = jnp.maximum(jnp.abs(pv - cv[:, None]) - half, 0.0) * pz / fy
-    gap_z = jnp.maximum(jnp.maximum(near[:, None] - pz, pz - far[:, None]), 0.0)
-    score = gap_u**2 + gap_v**2 + gap_z**2
-    score = jnp.where((pool >= 0) & jnp.isfinite(near)[:, None], score, jnp.inf)
+    slab = jnp.maximum(jnp.maximum(depths[:, None, 0] - pz, pz - depths[:, None, 2]), 0.0)
+    nearest = jnp.min(jnp.abs(pz[..., None] - depths[:, None, :]), -1)
+    score = gap_u**2 + gap_v**2 + slab**2 + TIE_WEIGHT * nearest**2
+    score = jnp.where((pool >= 0) & jnp.isfinite(depths[:, :1]), score, jnp.inf)
     c = min(max(tiling.n_candidates, tiling.shortlist), pool.shape[1])
     neg, at = jax.lax.top_k(-score, c)
     return jnp.where(jnp.isfinite(neg), jnp.take_along_axis(pool, at, 1), -1)
@@ -234,6 +250,6 @@ def search(means: jnp.ndarray, active: jnp.ndarray, v: View, x: jnp.ndarray, w: 
     origin."""
     lists, count = tile_lists(means, active, v, tiling)
     pool = neighbourhoods(lists, count, tiling)
-    tile, near, far = point_tiles(x, w, v, tiling)
-    cand = tile_candidates(pool, means, v, near, far, tiling)[tile]
+    tile, depths = point_tiles(x, w, v, tiling)
+    cand = tile_candidates(pool, means, v, depths, tiling)[tile]
     return nearest(means, x, cand, tiling.n_candidates)

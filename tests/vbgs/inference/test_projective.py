@@ -32,11 +32,12 @@ def grown(scene):
     return state, frame, (xyz - np.asarray(prior.origin)).astype(np.float32), rgb
 
 
-def _search(state, frame, x, n_candidates=C):
+def _search(state, frame, x, n_candidates=C, shortlist=0):
     prior = state.mixture.prior
     rot_t, shift = projective.world_to_camera(frame.camera, prior.origin)
     depth = float(np.median(x @ rot_t[2] + shift[2]))
     tiling = projective.plan(frame.camera, state.rule.cell, depth, n_candidates)
+    tiling = tiling._replace(shortlist=shortlist or tiling.shortlist)
     v = projective.view(frame.camera, prior.origin)
     cand, d2 = projective.search(prior.space.mean, prior.alpha > 1e-5, v, jnp.asarray(x),
                                  jnp.ones(len(x), jnp.float32), tiling)
@@ -63,7 +64,7 @@ def test_same_components_give_the_same_responsibilities(grown):
     responsibilities (and log-normaliser) are the same, whatever order they are listed in."""
     state, frame, x, rgb = grown
     prior = state.mixture.prior
-    cand, _ = _search(state, frame, x, n_candidates=4)
+    cand, _ = _search(state, frame, x, n_candidates=4, shortlist=8)
     _, kd = candidates.query_with_distance(candidates.means_tree(prior.space.mean), x, 4)
     same = np.array([set(a) == set(b) for a, b in zip(kd, cand, strict=True)])
     assert same.mean() > 0.5
