@@ -115,9 +115,9 @@ def add(sub):
                    help="VBGS: resume the stream from a saved map (the frames it learned "
                         "are skipped; give the settings it was learned with)")
     p.add_argument("--stage-times", action="store_true",
-                   help="VBGS: each stage's seconds a frame in the JSON (stage_seconds; "
-                        "the stages wait for their device work, so frames take a little "
-                        "longer)")
+                   help="VBGS: each stage's seconds a frame in the JSON (stage_seconds, "
+                        "the frames seconds_per_frame averages; the stages wait for their "
+                        "device work, so frames take a little longer)")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     add_json(p)
 

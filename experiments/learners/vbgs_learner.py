@@ -14,7 +14,7 @@ import jax
 import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
-from experiments.tasks.protocol import SceneResult, task_sensor
+from experiments.tasks.protocol import COMPILE_FRAMES, SceneResult, task_sensor
 from experiments.tasks.settings import AUTO_SCALE, AUTO_SCALE_FRAMES
 from vbgs import mapping
 from vbgs.mapping import stages
@@ -62,7 +62,8 @@ class VbgsLearner:
         if task.resume_map:
             self.state = mapping.load(task.resume_map, self.config)
             self.skip = self.state.n_frames
-        self.stage_seconds: dict[str, float] = {}  # summed over the frames learned
+        self.stage_seconds: dict[str, float] = {}  # summed over the steady frames timed
+        self.timed_frames = 0
         self.info: mapping.MapInfo | None = None  # the last frame's, for diagnose
         self.bound = StreamBound()
         self.arrived = Replay("reservoir", AUTO_SCALE_FRAMES, seed=task.seed)
@@ -98,10 +99,12 @@ class VbgsLearner:
         if self.skip:  # learned before the map was saved: the stream resumes after it
             self.skip -= 1
             return
+        steady = self.state.n_frames >= COMPILE_FRAMES  # as seconds_per_frame counts
         with stages.timing() if self.task.stage_times else nullcontext({}) as seconds:
             self.state, self.info = mapping.update(self.state, frame, self.config, background)
-        for name, value in seconds.items():
+        for name, value in seconds.items() if steady else ():
             self.stage_seconds[name] = self.stage_seconds.get(name, 0.0) + value
+        self.timed_frames += bool(seconds) and steady
         jax.block_until_ready((self.state.mixture.stats.count, self.state.colour.rhs))
         if self.task.save_map:  # atomically: a run killed now loses only this frame
             mapping.save(self.task.save_map, self.state)
@@ -133,8 +136,8 @@ class VbgsLearner:
         median points a component holds and, for a map that grows, the share of points
         no component learned."""
         extra = {"points_per_component": self.state.points_per_component}
-        if self.stage_seconds:  # each stage's mean seconds a learned frame
-            frames = max(self.state.n_frames, 1)
+        if self.stage_seconds:  # each stage's mean seconds a steady frame
+            frames = max(self.timed_frames, 1)
             extra["stage_seconds"] = {k: v / frames for k, v in self.stage_seconds.items()}
         if self.scale is not None:  # splat_scale "auto": what the arrived frames chose
             extra.update(splat_scale_chosen=self.scale[1],
