@@ -13,7 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.check import check_calibration, warn_inconsistent, within_trained_span
+from experiments.check import (
+    check_calibration,
+    folder_findings,
+    tum_reload,
+    warn_inconsistent,
+    within_trained_span,
+)
 from experiments.continual import check_segments
 from experiments.init_schemes import oracle_start
 from experiments.learners import LEARNERS
@@ -242,13 +248,14 @@ def load_task_scene(task: SceneTask) -> Scene:
     scene = load_scene(task.scene, format=task.format, size=task.size, **given)
     refuse_bad_cameras(scene.train + scene.test + scene.val,
                        scene.record.get("depth_scale"), f"scene {task.scene!r}")
-    scene = within_trained_span(scene, task.frames)
+    scene = within_trained_span(folder_findings(scene, task.scene), task.frames)
     scene = scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test],
                            val=scene.val[: task.n_val])
     if Path(task.scene).is_dir():  # a dataset folder (a real scene by name is one view)
         fmt = task.format or detect_format(task.scene)
         if any(np.any(f.depth > 0) for f in scene.train):  # RGB-only: nothing to compare
-            warn_inconsistent(scene, fmt, task.scene)
+            warn_inconsistent(scene, fmt, task.scene, tum_reload(
+                task.scene, fmt, task.size, given, task.frames))
         scene = scene._replace(record={"format": fmt, **scene.record})
     return scene
 
