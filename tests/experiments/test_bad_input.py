@@ -497,6 +497,113 @@ def test_given_intrinsics_are_used_and_reported(folders, room, capsys):
     assert record["intrinsics"][0] == pytest.approx(room.train[0].camera.fx)
 
 
+# --------------------------------------------------------------------------- what the doctor sees
+
+
+def each_line(name, edit):
+    """Rewrite every entry line of a TUM list file (the comment line kept)."""
+    return tum_lines(name, lambda lines: [out for line in lines for out in edit(line)])
+
+
+def later(seconds):
+    return lambda line: [f"{float(line.split()[0]) + seconds:.6f} {line.split()[1]}"]
+
+
+def frozen(folder):
+    first = (folder / "depth.txt").read_text().splitlines()[1].split()[1]
+    each_line("depth.txt", lambda line: [f"{line.split()[0]} {first}"])(folder)
+
+
+# Folders the doctor must not call healthy: (name, kind, change, extra flags, words).
+UNHEALTHY = [
+    ("duplicated frames", "tum", each_line("rgb.txt", lambda line: [line, line]), [],
+     "duplicates: 2 of 2 test views"),
+    ("depth 30 ms late", "tum", each_line("depth.txt", later(0.03)), [],
+     "subtract 0.033 s from depth.txt's stamps (tried: agreement"),
+    ("frozen depth", "tum", frozen, [], "frozen depth: 8 of 8 frames share"),
+    ("depth scale x5", "tum", lambda f: None, ["--depth-scale", "1000"],
+     "give --depth-scale 5000 (read at 1000 the depth is 5 x too long) (tried: agreement"),
+    ("depth scale /5", "replica", cam_params(scale=6553.5 * 5), [],
+     "give --depth-scale 6553.5 (read at 32767.5 the depth is 5 x too short)"),
+    ("another camera's aspect", "replica", cam_params(w=640, h=480, cx=319.5, cy=239.5), [],
+     "describes 640x480 images (aspect 1.333) and these are 24x24"),
+    ("half the poses", "tum", tum_lines("groundtruth.txt", lambda ls: ls[: len(ls) // 2]), [],
+     "5 have no pose (groundtruth.txt covers"),
+]
+
+
+@pytest.mark.parametrize("name, kind, change, extra, words", UNHEALTHY,
+                         ids=[c[0] for c in UNHEALTHY])
+def test_the_doctor_calls_none_of_these_healthy(folders, room, tmp_path, capsys, name, kind,
+                                                change, extra, words):
+    folder = copy(folders, kind, tmp_path)
+    change(folder)
+    given = ["--intrinsics", tum_intrinsics(room)] if kind == "tum" else []
+    record = refused(["check", "--scene", str(folder), "--size", "24", *given, *extra],
+                     capsys, words)
+    assert record["healthy"] is False
+    if "tried: agreement" in words:  # the fix named was tried and reached what the noise allows
+        assert record["fix_agreement"] >= 0.8 * record["expected_agreement"] > record[
+            "agreement"]
+
+
+@pytest.fixture
+def stopped(monkeypatch):
+    """Stop a run where the learner is built: after the scene's checks and warnings."""
+    monkeypatch.setitem(scene_task.LEARNERS, "vbgs", StopLearner)
+
+
+def test_a_score_from_leaked_test_views_is_refused(folders, room, tmp_path, capsys, stopped):
+    folder = copy(folders, "tum", tmp_path)
+    each_line("rgb.txt", lambda line: [line, line])(folder)
+    before = digest(folder)
+    refused(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)],
+            capsys, "every one of the 2 test views is bit-identical to a training frame")
+    assert digest(folder) == before
+
+
+@pytest.mark.parametrize("name, kind, change, words", [
+    ("frozen depth", "tum", frozen, "frozen depth: 8 of 8 frames share"),
+    ("another camera's aspect", "replica", cam_params(w=640, h=480, cx=319.5, cy=239.5),
+     "camera size: "),
+], ids=["frozen depth", "aspect"])
+def test_fit_scene_refuses_what_no_run_can_use(folders, room, tmp_path, capsys, stopped, name,
+                                               kind, change, words):
+    folder = copy(folders, kind, tmp_path)
+    change(folder)
+    given = ["--intrinsics", tum_intrinsics(room)] if kind == "tum" else []
+    refused(["fit-scene", "--scene", str(folder), *FIT, *given], capsys, words)
+
+
+def test_fit_scene_says_which_frames_it_left_out(folders, room, tmp_path, capsys, stopped):
+    """Half the poses: the frames without one are left out (the TUM association rule),
+    said on stderr; depth 30 ms late: the re-pairing that makes the views agree named."""
+    folder = copy(folders, "tum", tmp_path)
+    tum_lines("groundtruth.txt", lambda ls: ls[: len(ls) // 2])(folder)
+    refused(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)],
+            capsys, "stopped with 4 training frame(s)")
+    folder = copy(folders, "tum", tmp_path / "late")
+    each_line("depth.txt", later(0.03))(folder)
+    main(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)])
+    err = capsys.readouterr().err
+    assert "warning: consistency: only" in err and "subtract 0.033 s from depth.txt" in err
+
+
+def test_fit_scene_warns_on_half_the_poses(folders, room, tmp_path, capsys, stopped):
+    folder = copy(folders, "tum", tmp_path)
+    tum_lines("groundtruth.txt", lambda ls: ls[: len(ls) // 2])(folder)
+    main(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)])
+    err = capsys.readouterr().err
+    assert "warning: pairing: 5 of 10 rgb images paired" in err and "are left out" in err
+
+
+def test_a_folder_of_two_formats_is_refused(folders, tmp_path, capsys, stopped):
+    folder = copy(folders, "tum", tmp_path)
+    shutil.copy(folders["blender"] / "transforms_train.json", folder)
+    refused(["check", "--scene", str(folder), "--size", "24"], capsys,
+            "holds the files of 2 dataset formats")
+
+
 # --------------------------------------------------------------------------- flags
 
 
