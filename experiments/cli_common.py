@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
@@ -18,9 +17,9 @@ def fail(err: Exception, as_json: bool = False) -> int:
     parses the last line of stdout gets the failure, not nothing)."""
     print(f"error: {err}", file=sys.stderr)
     if as_json:
-        import json
+        from experiments.strict_json import dumps
 
-        print(json.dumps({"error": str(err), "error_type": type(err).__name__}))
+        print(dumps({"error": str(err), "error_type": type(err).__name__}))
     return 2
 
 
@@ -120,7 +119,9 @@ def _short(value):
 def print_result(command: str, result: dict, *, as_json: bool) -> None:
     """Print a readable summary, or with ``as_json`` one JSON object as the last line."""
     if as_json:
-        print(json.dumps(result, default=float))
+        from experiments.strict_json import dumps
+
+        print(dumps(result))
         return
     from tabulate import tabulate  # only for the readable summary (start-up time)
 

@@ -18,13 +18,13 @@ polish without replay went below VBGS").
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 import jax.numpy as jnp
 
 from experiments.learners import PolishLearner
 from experiments.protocol import evaluate, stream_frames
+from experiments.strict_json import dumps
 from experiments.scene_task import SceneTask, prepare_scene
 from vbgs.baseline import to_splats
 from vbgs.baseline.params import Params
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                      replay=args.replay, steps_per_frame=args.steps_per_frame,
                      n_val=args.val_views, size=args.size, components=args.components,
                      frames=args.frames, seed=args.seed)
-    print(json.dumps(run(task)))
+    print(dumps(run(task)))
     return 0
 
 
