@@ -52,8 +52,12 @@ RULES = {
         ("depth_reference", "--depth-reference", lambda a: bool(a.depth_model),
          "says what aligns the depth of --depth-model ONNX; without a model the folder's own "
          "depth is used"),
+        ("drift", "--drift", lambda a: a.poses == "odometry",
+         "sets the error of the simulated odometry of --poses odometry; with --poses "
+         "given or track there is none"),
     ),
 }
+
 
 
 def given_flags(parser: argparse.ArgumentParser, argv: list[str], dests) -> set[str]:

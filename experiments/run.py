@@ -218,9 +218,9 @@ def _add_write_scene(sub):
                    help="the scene's views and the sensor's noise, as fit-scene --seed")
     p.add_argument("--simulate-sensor", default=SENSOR.default,
                    metavar="{" + ",".join(SENSOR.values) + "}", help=SENSOR.help)
-    p.add_argument("--sensor-level", type=float, default=1.0, metavar="X",
+    p.add_argument("--sensor-level", type=float, default=None, metavar="X",
                    help="noise multiplier of the simulated sensor (0: exact depth values, "
-                        "1: the published model, 2: twice its noise)")
+                        "1: the published model (default), 2: twice its noise)")
     p.add_argument("--sensor-holes", default=SENSOR_HOLES_DEFAULT, metavar="SPEC",
                    help=SENSOR_HOLES_HELP)
     p.add_argument("--format", choices=WRITE_FORMATS, default=WRITE_FORMATS[0],
