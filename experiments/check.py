@@ -60,6 +60,20 @@ def within_trained_span(scene: Scene, frames: int) -> Scene:
                           record={**scene.record, "test_views_outside_span": outside})
 
 
+# Frames narrower or shorter than this many pixels hold too few pixels for a score to mean
+# anything (a 1x1 frame is one colour: any splat matches it).
+MIN_SIDE = 8
+
+
+def warn_tiny_frames(scene: Scene, where: str) -> None:
+    """Say on stderr when the frames are under MIN_SIDE pixels on a side."""
+    cam = scene.train[0].camera
+    if min(cam.width, cam.height) < MIN_SIDE:
+        print(f"warning: scene {where!r}: frames of {cam.width}x{cam.height} pixels: a score "
+              f"over so few pixels measures next to nothing (a 1x1 frame is one colour); "
+              f"give a --size of at least {MIN_SIDE}", file=sys.stderr)
+
+
 def folder_findings(scene: Scene, where: str) -> Scene:
     """A folder's own checks (:mod:`vbgs.data.scene_checks`) before fit-scene's work:
     intrinsics for another aspect and frozen depth refused; test views bit-identical to a

@@ -87,11 +87,43 @@ def size_arg(text: str):
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
-def check_scene_components(components: int, frames: int, size) -> None:
-    """:func:`check_fewer_components` for a stream of at most ``frames`` frames of
-    ``size`` (:func:`vbgs.data.scene.parse_size`)."""
+# Bytes a frame's pixel holds in memory: colour and depth (float32), and while a synthetic
+# frame is ray cast its 3x3 rays per pixel and their hits (float64): a lower bound.
+FRAME_BYTES_PER_PIXEL = 16
+RAYCAST_BYTES_PER_PIXEL = 9 * 3 * 8 * 2
+
+
+def physical_memory() -> int | None:
+    """This machine's memory in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_fits_memory(size, frames: int, flag: str = "--size") -> None:
+    """Refuse a frame size whose frames cannot fit in this machine's memory (a lower bound:
+    their colour and depth, and one frame's ray cast), instead of failing inside an
+    allocation with a traceback."""
     from vbgs.data.scene import size_pixels, size_text
 
+    pixels = size_pixels(size)
+    need = pixels * (frames * FRAME_BYTES_PER_PIXEL + RAYCAST_BYTES_PER_PIXEL)
+    have = physical_memory()
+    if have and need > have:
+        raise ValueError(f"{flag} {size_text(size)}: {frames} frame{'s' * (frames != 1)} of "
+                         f"{pixels:,} pixels "
+                         f"need at least {need / 2**30:,.0f} GiB, and this machine has "
+                         f"{have / 2**30:,.0f} GiB; give a smaller {flag}")
+
+
+def check_scene_components(components: int, frames: int, size) -> None:
+    """:func:`check_fewer_components` for a stream of at most ``frames`` frames of
+    ``size`` (:func:`vbgs.data.scene.parse_size`), and frames that fit in memory
+    (:func:`check_fits_memory`)."""
+    from vbgs.data.scene import size_pixels, size_text
+
+    check_fits_memory(size, frames)
     text = size_text(size)
     shown = text if "x" in text else f"{text}x{text}"
     check_fewer_components(components, frames * size_pixels(size),

@@ -25,6 +25,7 @@ import sys
 from experiments.cli_common import (
     SIZE_HELP,
     check_fewer_components,
+    check_fits_memory,
     check_output_file,
     check_scene_components,
     fail,
@@ -91,6 +92,8 @@ def _fit_image(args) -> dict:
                      order=args.order, assign=args.assign, patch=args.patch, reassign=reassign,
                      method=args.method, steps=args.steps)
     check_output_file(args.save, "--save", ".png")  # output paths and sizes before the fit
+    if args.size:
+        check_fits_memory(args.size, 1)
     root = cache_root()  # bundled photos kept resized: no skimage.transform, no SciPy
     image = task_image(task, cache=root and root / "images")  # once: checked, then fitted
     h, w, _ = image.shape

@@ -604,6 +604,75 @@ def test_a_folder_of_two_formats_is_refused(folders, tmp_path, capsys, stopped):
             "holds the files of 2 dataset formats")
 
 
+@pytest.mark.parametrize("name, weights, bias, words", [
+    ("1e9 everywhere", (0.0, 0.0, 0.0), 1e9, "the model's output is 1e+09 at every finite pixel"),
+    ("NaN", (0.0, 0.0, 0.0), float("nan"), "the model's output is NaN or infinite at all"),
+    ("negative", (-1.0, -1.0, -1.0), -0.1, "the model's output spans -3.1 to"),
+    ("zero", (0.0, 0.0, 0.0), 0.0, "the model's output spans 0 to 0: no pixel is > 0"),
+], ids=["1e9", "nan", "negative", "zero"])
+def test_a_depth_model_whose_output_is_no_depth_is_named(tmp_path, capsys, name, weights,
+                                                         bias, words):
+    from depth.testing import channel_sum_model
+
+    path = tmp_path / "model.onnx"
+    onnx.save(channel_sum_model(weights, bias), path)
+    refused(["fit-scene", "--scene", "object", "--size", "16", "--components", "20",
+             "--frames", "4", "--depth-model", str(path), "--depth-kind", "metric"], capsys,
+            f"--depth-model, frame 0: {words}")
+
+
+def test_depth_scale_for_npy_depth_is_refused(room, tmp_path, capsys):
+    """A .npy folder's depth is read as it is: a --depth-scale would be recorded as used and
+    change nothing."""
+    folder = write_blender(room, tmp_path / "npy", depth="npy")
+    refused(["fit-scene", "--scene", str(folder), *FIT, "--depth-scale", "1000"], capsys,
+            "--depth-scale 1000 converts 16-bit PNG depth codes to scene units, but")
+
+
+def test_tiny_frames_run_with_a_warning(capsys, stopped):
+    refused(["fit-scene", "--scene", "object", "--size", "1", "--components", "2",
+             "--frames", "4", "--test-views", "1"], capsys, "stopped with 4 training")
+    main(["fit-scene", "--scene", "object", "--size", "1", "--components", "2", "--frames",
+          "4", "--test-views", "1"])
+    assert "frames of 1x1 pixels: a score over so few pixels measures next to nothing" in \
+        capsys.readouterr().err
+
+
+def test_a_still_camera_is_named_and_its_leaked_views_refused(room, tmp_path, capsys,
+                                                              stopped):
+    """Twelve identical frames: the duplicates said on stderr, the score refused."""
+    still = room._replace(train=[room.train[0]] * 12, test=[room.train[0]],
+                          val=[room.train[0]])
+    folder = write_blender(still, tmp_path / "still")
+    refused(["fit-scene", "--scene", str(folder), *FIT], capsys,
+            "every one of the 1 test views is bit-identical to a training frame")
+    main(["fit-scene", "--scene", str(folder), *FIT])
+    assert "every frame is the same image: a still camera" in capsys.readouterr().err
+
+
+def test_tune_refuses_a_repeated_grid_value(capsys):
+    refused(["tune", "--scene", "object", "--size", "24", "--components", "50", "--frames",
+             "4", "--grid", "splat_scale=1.0,1.2,1.0"], capsys,
+            "--grid splat_scale: 1.0 is listed more than once")
+
+
+def test_write_scene_refuses_a_level_for_the_exact_sensor(tmp_path, capsys):
+    out = tmp_path / "folder"
+    refused(["write-scene", "--scene", "object", "--size", "16", "--out", str(out),
+             "--sensor-level", "2"], capsys, "the folder would record the level")
+    assert not out.exists()
+
+
+def test_a_sweep_refuses_a_simulated_sensor_on_an_image_cell():
+    from experiments.sweep.rules import apply_rules
+
+    verdict = apply_rules({"task": "image", "dataset": "astronaut", "method": "vbgs",
+                           "simulate_sensor": "kinect"})
+    assert verdict.settings is None and "an image has no depth" in verdict.reason
+    assert apply_rules({"task": "image", "dataset": "astronaut", "method": "vbgs",
+                        "simulate_sensor": "exact"}).settings is not None
+
+
 # --------------------------------------------------------------------------- flags
 
 
@@ -611,6 +680,15 @@ OBJECT = ["fit-scene", "--scene", "object", "--size", "24", "--components", "50"
           "4", "--test-views", "1"]
 
 FLAGS = [
+    ("drift with given poses", ["--drift", "0.01,0.5"],
+     "--drift sets the error of the simulated odometry of --poses odometry"),
+    ("drift with tracked poses", ["--drift", "0.01,0.5", "--poses", "track"],
+     "with --poses given or track there is none"),
+    ("sensor level without a sensor", ["--sensor-level", "2"],
+     "no noisy sensor is simulated (--simulate-sensor exact)"),
+    ("sensor level with exact", ["--sensor-level", "0.5", "--sensor", "exact"],
+     "sensor_level 0.5 scales a sensor's noise"),
+    ("size beyond memory", ["--size", "100000"], "give a smaller --size"),
     ("depth-scale 0", ["--depth-scale", "0"], "--depth-scale must be > 0"),
     ("depth-scale negative", ["--depth-scale", "-1000"], "--depth-scale must be > 0"),
     ("depth-scale nan", ["--depth-scale", "nan"], "give a finite number"),
