@@ -9,18 +9,25 @@ so the checks here look at what a convention mix-up does to the numbers:
 * **intrinsics**: a field of view under 180 degrees, the principal point inside the image;
 * **depth codes**: depth read from 16-bit PNGs whose codes are small integers (under
   :data:`SMALL_CODES`) was written in metres, not in the file's units;
+* **depth values**: depth maps holding one value (constant) carry no shape to compare;
 * **depth scale**: the camera's step between neighbouring frames against the median
   depth (a camera that moves many depths between frames has translations in other
   units than its depth);
 * **consistency**: each frame's depth points projected into other frames agree with
-  their depth (:func:`agreement`); a pose-convention mix-up (world-to-camera given
-  for camera-to-world, OpenGL axes for OpenCV, a quaternion read in the wrong order,
-  translations in millimetres) leaves almost no pixel agreeing. When consistency is
-  poor every candidate fix (:data:`FIXES`) is applied to the poses and the one that
-  makes the views agree is named, with the change to make in words.
+  their depth (:func:`agreement`), against what the depth's own noise allows
+  (:func:`expected_agreement`: neighbouring pixels of one frame agreeing); views are
+  healthy only at NEAR_NOISE of that. A pose-convention mix-up (world-to-camera given
+  for camera-to-world, OpenGL axes for OpenCV, a quaternion read in the wrong order),
+  another camera's focal length or depth off by one of the common scale factors (1000,
+  5000, 6553.5 codes per metre, metres) leaves few pixels agreeing. Every candidate fix
+  (:data:`FIXES`, and the caller's: a TUM folder's depth paired a frame later or
+  earlier, :mod:`vbgs.data.scene_checks`) is tried; one is named only when it brings
+  the views to the agreement their noise allows, with the agreement before and after.
+  Otherwise the check says what it saw and that no single fix explains it.
 
-:func:`examine` runs them all and returns a :class:`Report`; :func:`refuse_bad_cameras`
-is the cheap subset that ``fit-scene`` runs before any work.
+:func:`examine` runs them all (after a folder's own checks, given) and returns a
+:class:`Report`; :func:`refuse_bad_cameras` is the cheap subset that ``fit-scene`` runs
+before any work.
 """
 
 from __future__ import annotations

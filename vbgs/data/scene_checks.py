@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from vbgs.data.doctor import Check, Fix
+from vbgs.data.doctor import Check, Fix, camera_step
 from vbgs.data.scene import Frame, Scene
 
 # A camera this far (in median camera steps) from another is elsewhere: one depth map for
@@ -84,19 +84,11 @@ def check_duplicates(scene: Scene) -> Check:
     return Check("duplicates", False, f"{'; '.join(said)}: {cause}", frames)
 
 
-def camera_step(frames: list[Frame]) -> float:
-    """Median distance between neighbouring frames' camera centres (0 for one frame)."""
-    if len(frames) < 2:
-        return 0.0
-    centres = np.stack([f.camera.position for f in frames])
-    return float(np.median(np.linalg.norm(np.diff(centres, axis=0), axis=1)))
-
-
 def check_frozen_depth(frames: list[Frame]) -> Check:
     """One depth map given to frames whose cameras are apart (more than MOVED_STEPS
     median camera steps)."""
     groups = _groups([_digest(f.depth) for f in frames])
-    step = camera_step(frames)
+    step = camera_step(frames) if len(frames) > 1 else 0.0
     frozen = []
     for g in groups:
         if not np.any(frames[g[0]].depth > 0):
