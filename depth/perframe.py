@@ -46,21 +46,12 @@ the chain drifts (a random walk of the fit errors: from 3 to 40 % depth error by
 frame of the object with no shrink and a linear warp); pulled half-way toward the
 network's own alignment, the errors stay bounded.
 
-Measured on validation views (``python -m experiments.val_probe fit-scene --scene object
---size 64 --components 5000 --frames 20 --simulate-sensor mono --sensor mono --seed S``,
-4 views, seeds 0 / 1 / 2): without per-frame alignment 16.15 / 16.76 / 16.92 dB (mean
-16.61); the default (linear warp, ``ridge = shrink = shift_ridge = 1``, window 8) 16.16 /
-18.14 / 17.30 (17.20); scale and shift only (``warp_order=0``) 17.12; ``shrink=3`` 17.10;
-``window=16`` 17.14; a quadratic warp 16.10 / 18.22 on seeds 0 / 1. The depth error
-against the truth falls from 4.2 % to 2.7 % RMS (object) and from 4.8 % to 3.2 % (room).
-On test views, 128 px / 20k components / 60 frames: object 15.16 -> 15.97 dB (exact
-depth 25.97), room 18.73 -> 19.76 (exact 22.60), the object as an RGB-only folder through
-a lookup ONNX model 16.34 -> 16.98. What is left is mostly not the alignment's to
-remove: the same frames aligned to their TRUE depth (an oracle; scale and shift: 1.6 %
-error left, 17.36 dB; quadratic: 0.4 % left, 18.40 dB) stay far from exact depth (23.28
-at 64 px), and without the sensor model's edge bleeding the quadratic oracle gets 21.18:
-the object's picture needs its surfaces consistent to well under 1 %, and the 1-2 px of
-depth bled across every silhouette cost about 3 dB whatever the alignment.
+The defaults (a linear warp, ``ridge = shrink = shift_ridge = 1``, a window of 8) were
+chosen on validation views of the object under the ``mono`` sensor model, against no
+per-frame alignment, scale and shift alone, a stronger shrink, a wider window and a
+quadratic warp; no results table holds the grid: docs/validation.md
+("depth.perframe") keeps it. What is left after the alignment is mostly the depth bled
+across silhouettes, not the alignment's to remove.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Scene learners by method name; each follows :class:`experiments.protocol.Learner`.
+"""Scene learners by method name; each follows :class:`experiments.tasks.protocol.Learner`.
 
 A learner class takes ``(task, scene)``, has ``PROTOCOLS`` (the protocols it runs),
 ``check(task)`` (fails on bad settings before any work) and ``details(result)``

@@ -10,11 +10,11 @@ the extent of every camera. Component means, colour means and the prior's expect
 covariance become the splats' means, colours and scales. It trains with Adam on
 rendered frames:
 
-* ``protocol="continual"`` (:func:`experiments.protocol.stream_protocol`): on each
+* ``protocol="continual"`` (:func:`experiments.tasks.protocol.stream_protocol`): on each
   arriving frame the learner takes ``task.steps_per_frame`` steps, each on a frame
   drawn uniformly from {that frame} ∪ its replay buffer (``task.replay``: ``none``,
   ``fifo:K``, ``reservoir:K``, ``full``), then adds the frame to the buffer;
-* ``protocol="static"`` (:func:`experiments.protocol.static_protocol`): ``task.steps``
+* ``protocol="static"`` (:func:`experiments.tasks.protocol.static_protocol`): ``task.steps``
   steps on frames drawn uniformly from all training frames.
 
 The learning rates are a schedule of the step alone (the position rate decays over
@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
-from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points, task_sensor
+from experiments.tasks.protocol import PROGRESS_BLOCK, SceneResult, frame_points, task_sensor
 from vbgs.baseline import (
     TrainConfig,
     Trainer,
@@ -59,8 +59,8 @@ TRAIN_KEY = 1  # fold_in tag: the trainer's key, apart from the init's
 # The depth L1 term is on for scenes: the baseline sees the depth VBGS sees. Chosen on
 # validation views: results/tuning/baseline-depth (python -m experiments.run tune --scene
 # object room --method gradient --components 5000 --size 64 --init data --protocol static
-# --steps 600 --grid baseline.depth_weight=0,0.1,0.3 --out results/tuning/baseline-depth):
-# 0.1 gave 25.65 dB mean, 0.3 25.55, 0 25.53 (depth L1 0.122 vs 0.153 without it).
+# --steps 600 --grid baseline.depth_weight=0,0.1,0.3 --out results/tuning/baseline-depth): the
+# best mean validation PSNR over the object and the room (its mean.md).
 SCENE_DEPTH_WEIGHT = 0.1
 # Steps over which the position rate decays 100-fold (3DGS: 30k over its 30k steps): a
 # constant of the schedule, not the run's length, which a continual learner cannot know.
@@ -70,10 +70,9 @@ SCENE_LR_DECAY_STEPS = 3000
 # DensifyConfig's 100). Chosen on validation views: results/tuning/baseline-densify
 # (python -m experiments.run tune --scene object room --method gradient --components 5000
 # --size 64 --init data --protocol static --steps 600 --grid baseline.densify.every=50,100,200
-# --out results/tuning/baseline-densify): 200 gave 25.82 dB mean, 50 25.75, 100 25.65; the
-# gain is the object's (+0.40 dB; room -0.05) and not monotone in the spacing. Under seed
-# 1 (results/tuning/baseline-densify-seed1) 200 again led 100: 26.25 vs 26.05 dB mean
-# (object +0.56, room -0.16); one seed to the next moves a scene by up to 1 dB.
+# --out results/tuning/baseline-densify): the best
+# mean validation PSNR over the object and the room (its mean.md); under another seed
+# (results/tuning/baseline-densify-seed1) the same spacing led again.
 SCENE_DENSIFY_EVERY = 200
 DEFAULT_CONFIG = TrainConfig(depth_weight=SCENE_DEPTH_WEIGHT,
                              lr_decay_steps=SCENE_LR_DECAY_STEPS,
@@ -102,7 +101,7 @@ def train_arrays(task, frame: Frame):
 
 
 class GradientLearner:
-    """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
+    """A :class:`experiments.tasks.protocol.Learner` that can also ``train`` on all frames."""
 
     PROTOCOLS = ("continual", "static")
     blur = BLUR_VARIANCE  # renders as it trains: 3DGS's low-pass dilation (vbgs.render.raster)

@@ -71,25 +71,17 @@ residual on top of it, carried as it learns.
    its normal, where the points fixed it, as across its surface. (Static: the plain
    step, whose figures this rule was not measured on.)
 
-Why the polish without replay went below VBGS (object, 128 px, 20k components, 60 frames,
-10 steps a frame, seed 0, scored on 8 validation views by
-:mod:`experiments.polish_residual`: the splats of the end, VBGS's plus part of the polish's
-residual). Before item 5: VBGS 26.43 dB, the
-polish 25.63 dB. The residual of the means alone on VBGS's splats: 24.98 dB; the polish
-with every residual but the means': 27.59 dB. Of the means' residual, the part along each
-splat's thin axis alone: 24.69 dB; the polish without that part: 27.56 dB. Its median was
-3.3 thin scales (90th percentile 10), against 0.2 of the widest scale across the surface:
-the splats were pushed off their surface, and views other than the one stepped on saw them
-there. Along the stream the polish led VBGS on each view when first seen and lost the lead
-as later frames' steps moved the splats it shares (after 15 frames +0.60 dB, after 45
--0.29 dB). With item 5: 27.49 dB at the end (every one of the 8 views above VBGS's), +1.06
-after 30 frames, +1.04 after 45; the means' residual alone on VBGS's splats 26.69 dB.
+Why the polish without replay went below VBGS before rule 5: Adam pushed the splats'
+means off their surface along their thin axes, and views other than the one stepped on
+saw them there (:mod:`experiments.studies.polish_residual` scores each part of the
+residual on validation views; the figures are in docs/validation.md, "The continual
+polish's residual").
 
 Where it stands (validation views, ANCHOR_WEIGHT's note, with item 5): at the chosen weight
 the CL forgetting (how far each segment ends below its best along the stream, averaged over
 the segments) is at most 0.3 dB on the room and the walk, with no replay and with a FIFO of
 8, and each cell's final PSNR is at least the polish's before this rule but the walk's
-FIFO (23.73 against 24.10 dB).
+FIFO (docs/validation.md, "ANCHOR_WEIGHT").
 
 Not done: no densification (the rows are VBGS's components, and a moved row would lose
 its anchor). The learning rates are the baseline's schedule of the step alone (the
@@ -121,7 +113,7 @@ from experiments.learners.gradient_learner import (
 )
 from experiments.learners.start import init_key
 from experiments.learners.vbgs_learner import VbgsLearner
-from experiments.protocol import PROGRESS_BLOCK, SceneResult, frame_points, stream_frames
+from experiments.tasks.protocol import PROGRESS_BLOCK, SceneResult, frame_points, stream_frames
 from vbgs.baseline import (
     Trainer,
     camera_extent,
@@ -178,7 +170,7 @@ def draw_points(points: float, n_learned: int, n_draw: int) -> float:
 
 
 class PolishLearner:
-    """A :class:`experiments.protocol.Learner` that can also ``train`` on all frames."""
+    """A :class:`experiments.tasks.protocol.Learner` that can also ``train`` on all frames."""
 
     PROTOCOLS = ("continual", "static")
 

@@ -1,5 +1,5 @@
 """Where a scene learner starts: :func:`scene_prior` (the oracle starts ``data`` and
-``random`` of :mod:`experiments.init_schemes`, from every training frame); the ``stream``
+``random`` of :mod:`experiments.tasks.init_schemes`, from every training frame); the ``stream``
 start grows by :class:`vbgs.mapping.GrowthConfig` (the task's ``growth``). The key is ``jax.random.key(task.seed)`` for both
 learners, so VBGS and the gradient baseline start from the same components.
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from experiments.protocol import frame_points
+from experiments.tasks.protocol import frame_points
 from vbgs.data.scene import Scene
 from vbgs.inference import model
 

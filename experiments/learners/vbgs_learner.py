@@ -8,13 +8,16 @@ The task's settings become one :class:`vbgs.mapping.Config` (:func:`task_config`
 
 from __future__ import annotations
 
+from contextlib import nullcontext
+
 import jax
 import numpy as np
 
 from experiments.learners.start import init_key, scene_prior
-from experiments.protocol import SceneResult, task_sensor
-from experiments.settings import AUTO_SCALE, AUTO_SCALE_FRAMES
+from experiments.tasks.protocol import SceneResult, task_sensor
+from experiments.tasks.settings import AUTO_SCALE, AUTO_SCALE_FRAMES
 from vbgs import mapping
+from vbgs.mapping import stages
 from vbgs.data.scene import Frame, Scene
 from vbgs.inference.bound import StreamBound
 from vbgs.inference.grow import is_active
@@ -37,13 +40,14 @@ def task_config(task) -> mapping.Config:
         opacity_rule=task.opacity_rule, opacity=task.opacity,
         colour_rule=task.colour_rule, colour_ridge=task.colour_ridge)
     return mapping.Config(components=task.components, assign=task.assign, estep=task.estep,
-                          candidates=task.candidates, prior=task.prior, growth=task.growth,
+                          candidates=task.candidates, search=task.search,
+                          prior=task.prior, growth=task.growth,
                           evidence=task.evidence, render=render,
                           sensor=task_sensor(task), budget=task.budget)
 
 
 class VbgsLearner:
-    """A :class:`experiments.protocol.Learner`: conjugate updates, no replay. With
+    """A :class:`experiments.tasks.protocol.Learner`: conjugate updates, no replay. With
     ``splat_scale = "auto"`` it keeps a uniform sample of the arrived frames
     (``reservoir:AUTO_SCALE_FRAMES``, counted in ``replay_bytes``) to choose the splat
     scale on (:mod:`vbgs.render.scale_fit`) each time its splats are drawn."""
@@ -54,6 +58,11 @@ class VbgsLearner:
         self.task = task
         prior = None if task.init == "stream" else scene_prior(task, scene)
         self.state = mapping.init(self.config, key=init_key(task), prior=prior)
+        self.skip = 0  # frames a resumed map learned already
+        if task.resume_map:
+            self.state = mapping.load(task.resume_map, self.config)
+            self.skip = self.state.n_frames
+        self.stage_seconds: dict[str, float] = {}  # summed over the frames learned
         self.info: mapping.MapInfo | None = None  # the last frame's, for diagnose
         self.bound = StreamBound()
         self.arrived = Replay("reservoir", AUTO_SCALE_FRAMES, seed=task.seed)
@@ -86,8 +95,16 @@ class VbgsLearner:
         task_config(task)
 
     def learn(self, frame: Frame, background=None) -> None:
-        self.state, self.info = mapping.update(self.state, frame, self.config, background)
+        if self.skip:  # learned before the map was saved: the stream resumes after it
+            self.skip -= 1
+            return
+        with stages.timing() if self.task.stage_times else nullcontext({}) as seconds:
+            self.state, self.info = mapping.update(self.state, frame, self.config, background)
+        for name, value in seconds.items():
+            self.stage_seconds[name] = self.stage_seconds.get(name, 0.0) + value
         jax.block_until_ready((self.state.mixture.stats.count, self.state.colour.rhs))
+        if self.task.save_map:  # atomically: a run killed now loses only this frame
+            mapping.save(self.task.save_map, self.state)
         if self.auto_scale:
             self.arrived = self.arrived.add(frame)
             self.background = background
@@ -116,6 +133,9 @@ class VbgsLearner:
         median points a component holds and, for a map that grows, the share of points
         no component learned."""
         extra = {"points_per_component": self.state.points_per_component}
+        if self.stage_seconds:  # each stage's mean seconds a learned frame
+            frames = max(self.state.n_frames, 1)
+            extra["stage_seconds"] = {k: v / frames for k, v in self.stage_seconds.items()}
         if self.scale is not None:  # splat_scale "auto": what the arrived frames chose
             extra.update(splat_scale_chosen=self.scale[1],
                          splat_scale_scores=dict(zip(map(str, SCALES), self.scale[2],

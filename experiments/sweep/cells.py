@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from experiments.strict_json import dumps
+from experiments.cli.output import dumps
 from experiments.sweep.config import SweepConfig
 from experiments.sweep.rules import apply_rules
 from vbgs.io_atomic import write_atomic, write_text_atomic

@@ -1,4 +1,4 @@
-"""The continual-learning matrices of a sweep's cells (:mod:`experiments.continual`):
+"""The continual-learning matrices of a sweep's cells (:mod:`experiments.tasks.continual`):
 ``cl_matrix.csv`` (one row per cell, row i and column j of its matrix) and a heat-map,
 one panel per learner (the cells' line style, averaged over seeds), one row of panels
 per task and dataset. Cells without a matrix (``cl_segments = 0``, static protocol,

@@ -19,7 +19,7 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from experiments.progress import progress as progress_bar
-from experiments.strict_json import dumps
+from experiments.cli.output import dumps
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"  # the bundled configs
 
@@ -73,7 +73,7 @@ def add_sweep(sub) -> None:
 
 def add_report(sub) -> None:
     p = sub.add_parser("report", help="tables and plots of a sweep's results folder")
-    p.add_argument("results_dir", help="a sweep's results folder, e.g. results/quick")
+    p.add_argument("results_dir", help="a sweep's results folder, e.g. results/ablations")
     p.add_argument("--json", action="store_true", help="last stdout line: one JSON object")
 
 
@@ -98,7 +98,7 @@ def _metrics(record: dict) -> str:
 
 
 def _write_plan(out: Path, config, plan, version: str) -> None:
-    from experiments.bench import machine
+    from experiments.benchmarks.bench import machine
     from vbgs.io_atomic import write_text_atomic
 
     doc = {"name": config.name, "description": config.description, "config": config.source,
@@ -253,7 +253,7 @@ def run_sweep(args) -> dict:
 
 def _strict_exit(summary: dict, *, as_json: bool) -> None:
     """``--strict``: print the summary as usual, then exit with status 1."""
-    from experiments.cli_common import print_result
+    from experiments.cli.output import print_result
 
     print_result("sweep", summary, as_json=as_json)
     what = [f"{summary['failed']} cell(s) failed"] if summary["failed"] else []

@@ -28,7 +28,7 @@ from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any
 
-from experiments.settings import (
+from experiments.tasks.settings import (
     ASSIGN,
     COLOUR_RULE,
     DEPTH_KIND,

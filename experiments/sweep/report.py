@@ -7,7 +7,7 @@ the ELBO trace or the forgetting curve stay in ``cells/<key>.json``.
 ``tables.md`` gives PSNR / SSIM / depth L1 (and, where cells report them, forgetting =
 PSNR of the early views when seen minus at the end, seconds per frame, peak memory and
 replay-buffer size, and the continual-learning metrics of cells with a matrix:
-average final PSNR, forgetting and backward transfer, :mod:`experiments.continual`)
+average final PSNR, forgetting and backward transfer, :mod:`experiments.tasks.continual`)
 as mean ± std over seeds (n = number of seeds), one table per task,
 one row per combination of the other settings. A setting a
 cell does not have (``assign`` for a batch fit, say) shows as "—".

@@ -99,9 +99,9 @@ class TaskKind:
 
 
 TASKS: dict[str, TaskKind] = {
-    "image": TaskKind("image", "experiments.image_task", "ImageTask", "run_image",
+    "image": TaskKind("image", "experiments.tasks.image_task", "ImageTask", "run_image",
                       "image", _image_names, _image_values),
-    "scene": TaskKind("scene", "experiments.scene_task", "SceneTask", "run_scene",
+    "scene": TaskKind("scene", "experiments.tasks.scene_task", "SceneTask", "run_scene",
                       "scene", _scene_names, _scene_values),
 }
 
@@ -128,7 +128,7 @@ def build_task(settings: dict):
 
 def run_task(settings: dict) -> dict:
     """Build and run one cell's task; returns the task's result as a dict (a typed
-    result, such as :class:`experiments.protocol.SceneResult`, through ``to_dict``)."""
+    result, such as :class:`experiments.tasks.protocol.SceneResult`, through ``to_dict``)."""
     _, run = TASKS[settings["task"]].load()
     result = run(build_task(settings), progress=False)
     return result.to_dict() if hasattr(result, "to_dict") else result

@@ -103,7 +103,7 @@ def test_module_entry_point_reports_missing_model(tmp_path):
     assert done.returncode == 2 and "ONNX model not found" in done.stderr
 
 
-# issue 13: bad input never gives a silently wrong number ---------------------------------
+# bad input never gives a silently wrong number ------------------------------------------
 
 
 def _args(model, frames, out, *extra):

@@ -6,7 +6,7 @@ import pytest
 from depth.perframe import FrameAlignConfig, Reference, align_frame, apply, fit, init
 from depth.stream import StreamConfig, arrive, finish
 from depth.stream import init as stream_init
-from experiments.sensor_swap import AlignedArrivals
+from experiments.tasks.sensor_swap import AlignedArrivals
 from vbgs.data.synthetic import make_scene
 
 # no pull toward the frame as it came: the references are the truth here

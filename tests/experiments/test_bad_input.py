@@ -1,4 +1,4 @@
-"""Data as users bring it (issue 25): bad or unusual inputs, in-process through the
+"""Data as users bring it: bad or unusual inputs, in-process through the
 command-line entry points and the library. Every case ends one of three ways, each
 asserted: refused before any work with one line on stderr and exit 2 (with --json one
 object with an ``error`` field), or a clear ``SystemExit(2)`` from argparse, or accepted
@@ -21,7 +21,7 @@ from onnx import TensorProto, helper
 from PIL import Image
 from skimage import io as skio
 
-import experiments.scene_task as scene_task
+import experiments.tasks.scene_task as scene_task
 from depth.cli import main as depth_main
 from experiments.run import main
 from vbgs.data.blender import write_blender

@@ -6,7 +6,7 @@ import functools
 import json
 import math
 
-from experiments import bench
+from experiments.benchmarks import bench
 from experiments.run import main
 
 

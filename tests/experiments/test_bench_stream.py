@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.bench_stream import (
+from experiments.benchmarks.bench_stream import (
     LARGE_BUDGET,
     _prior,
     device_rows,
@@ -74,7 +74,7 @@ def test_device_rows_refuse_an_uneven_split_before_starting_processes():
 
 def test_a_gpu_run_writes_its_own_table(monkeypatch):
     """The committed CPU table is never overwritten by a run on another backend."""
-    from experiments import bench_stream
+    from experiments.benchmarks import bench_stream
 
     assert bench_stream.table_name() == "bench_stream"  # the CPU
     monkeypatch.setattr(bench_stream.jax, "default_backend", lambda: "gpu")

@@ -2,7 +2,7 @@
 
 import pandas as pd
 
-from experiments.bench import write_table
+from experiments.benchmarks.bench import write_table
 
 
 def test_rows_that_dropped_overlaps_are_marked(tmp_path):

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from experiments.run import main
-from experiments.scene_task import SceneTask, load_task_scene
+from experiments.tasks.scene_task import SceneTask, load_task_scene
 from vbgs.data.blender import write_blender
 from vbgs.data.synthetic import room_scene
 from vbgs.data.writers import write_replica

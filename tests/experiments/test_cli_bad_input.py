@@ -1,12 +1,12 @@
 """``python -m experiments.run``: bad input is refused before any work, one line, exit 2;
-Ctrl-C ends with one line and exit 130 (issue 13, cases 5, 7, 9, 10)."""
+Ctrl-C ends with one line and exit 130."""
 
 import json
 
 import pytest
 
-import experiments.image_task as image_task
-import experiments.scene_task as scene_task
+import experiments.tasks.image_task as image_task
+import experiments.tasks.scene_task as scene_task
 from experiments.run import main
 
 SCENE = ["fit-scene", "--scene", "object", "--components", "600", "--frames", "6",
@@ -110,7 +110,7 @@ def test_ctrl_c_is_one_line_and_status_130(monkeypatch, capsys):
     (["--ridge", "0"], "colour_ridge must be > 0"),
 ])
 def test_colour_gap_refuses_bad_input_before_any_work(extra, message, capsys, monkeypatch):
-    import experiments.colour_gap as colour_gap
+    import experiments.studies.colour_gap as colour_gap
 
     def gap(*a, **k):
         raise AssertionError("the diagnostic started before the input was checked")

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.continual import (
+from experiments.tasks.continual import (
     Segments,
     average_final_psnr,
     backward_transfer,
@@ -134,7 +134,7 @@ def test_sweep_csv_and_heat_map(tmp_path):
 def test_gradient_without_replay_forgets_more_than_vbgs(seed):
     """Walk, 32 px, 8 frames in 2 segments: measured forgetting 0.76 / 0.37 dB for the
     gradient learner without replay against -0.32 / -0.25 dB for VBGS (seeds 0 / 1)."""
-    from experiments.scene_task import SceneTask, run_scene
+    from experiments.tasks.scene_task import SceneTask, run_scene
 
     def cl_forgetting(method):
         task = SceneTask(scene="walk", method=method, components=600, frames=8, n_test=4,

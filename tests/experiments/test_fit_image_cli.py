@@ -39,7 +39,7 @@ def test_fit_image_patch_stream_summary_and_scores(capsys):
 
 
 def test_fit_image_loads_and_resizes_the_image_once(monkeypatch, capsys, tmp_path):
-    import experiments.image_task as image_task
+    import experiments.tasks.image_task as image_task
     import vbgs.data.images as images
     from vbgs.compilation import cache_dir
 

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.front import COLUMNS, mark_front, parse_counts, pareto
+from experiments.studies.front import COLUMNS, mark_front, parse_counts, pareto
 from experiments.run import main
 
 
@@ -103,8 +103,8 @@ class TickClock:
 def test_an_image_checkpoint_is_the_fit_of_its_length(monkeypatch):
     """The image front scores one gradient fit at several step counts (per-step schedule;
     candidate refreshes every REFRESH_EVERY steps from the start)."""
-    from experiments import image_task
-    from experiments.image_task import ImageTask, gradient_image_path, run_gradient_image
+    from experiments.tasks import image_task
+    from experiments.tasks.image_task import ImageTask, gradient_image_path, run_gradient_image
 
     task = ImageTask(image="astronaut", size=16, components=20, method="gradient", steps=40)
     alone = run_gradient_image(task, steps=30)  # compiles (a checkpoint's render is timed)
@@ -125,10 +125,10 @@ def test_a_checkpoint_is_the_run_of_its_length(method):
     relocation every 2 steps included)."""
     from dataclasses import replace
 
-    from experiments.scene_task import SceneTask, run_scene, run_scene_checkpoints
+    from experiments.tasks.scene_task import SceneTask, run_scene, run_scene_checkpoints
     from vbgs.baseline.densify import DensifyConfig
 
-    # each method's init as the front runs it (experiments.front.scene_runs: the polish
+    # each method's init as the front runs it (experiments.studies.front.scene_runs: the polish
     # streams, the gradient starts from the data), so the compiled learners are the ones
     # test_static_front_on_a_tiny_scene runs
     init = {"init": "data"} if method == "gradient" else {}

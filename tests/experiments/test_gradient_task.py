@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from experiments.image_task import ImageTask, run_gradient_image
+from experiments.tasks.image_task import ImageTask, run_gradient_image
 from experiments.learners import GradientLearner, VbgsLearner
-from experiments.protocol import task_settings
-from experiments.scene_task import SceneTask, prepare_scene, run_scene
+from experiments.tasks.protocol import task_settings
+from experiments.tasks.scene_task import SceneTask, prepare_scene, run_scene
 
 # What stream_protocol adds to the settings (the keys run_scene returns for VBGS).
 PROTOCOL_KEYS = {

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from experiments.learners import LEARNERS, GradientLearner, VbgsLearner
-from experiments.protocol import frame_points
-from experiments.scene_task import SceneTask, prepare_scene, run_scene
+from experiments.tasks.protocol import frame_points
+from experiments.tasks.scene_task import SceneTask, prepare_scene, run_scene
 from vbgs import mapping
 from vbgs.inference import grow
 
@@ -110,7 +110,7 @@ def test_the_streaming_bound_counts_only_the_points_learned(room_past_its_budget
 def test_each_learner_is_scored_with_its_own_pixel_filter(scene):
     """VBGS splats are drawn with the task's splat_blur, the gradient baseline's with the
     filter it trained under: the record's renders are those renders."""
-    from experiments.protocol import stream_protocol
+    from experiments.tasks.protocol import stream_protocol
     from vbgs.render.raster import BLUR_VARIANCE
     from vbgs.render.views import render_view
 
@@ -163,7 +163,7 @@ def test_uncovered_surface_is_said_and_small_splats_named(capsys, details, hint)
     """Background drawn over a test view's surface is said; with a median component of
     fewer than FEW_POINTS points and a fixed splat scale the warning also names small
     splats and what to try."""
-    from experiments.scene_task import FEW_POINTS, UNCOVERED_WARNING, warn_uncovered
+    from experiments.tasks.scene_report import FEW_POINTS, UNCOVERED_WARNING, warn_uncovered
 
     warn_uncovered(UNCOVERED_WARNING / 2, details)
     assert capsys.readouterr().err == ""

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from experiments.oracle import oracle_score
+from experiments.studies.oracle import oracle_score
 from experiments.run import main
 from vbgs.data import synthetic
 from vbgs.data.blender import write_blender

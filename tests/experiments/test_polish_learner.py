@@ -9,9 +9,9 @@ import pytest
 
 from experiments.learners import PolishLearner, VbgsLearner
 from experiments.learners.polish_learner import anchored_seen_step, draw_points
-from experiments.protocol import stream_frames
+from experiments.tasks.protocol import stream_frames
 from experiments.run import main
-from experiments.scene_task import SceneTask, prepare_scene
+from experiments.tasks.scene_task import SceneTask, prepare_scene
 from vbgs.baseline.anchor import ANCHOR_WEIGHT, anchor_terms
 from vbgs.baseline.params import params_from_splats, trainable
 from vbgs.compilation import enable_persistent_cache
@@ -137,7 +137,7 @@ def test_anchor_flag_is_the_polish_s_alone(capsys):
 
 
 def test_images_have_no_polish():
-    from experiments.image_task import ImageTask
+    from experiments.tasks.image_task import ImageTask
 
     with pytest.raises(ValueError, match="scene learner"):
         ImageTask(method="vbgs-polish")

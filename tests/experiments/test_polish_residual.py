@@ -5,7 +5,7 @@ import json
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.polish_residual import main, thin_axis_part, variants
+from experiments.studies.polish_residual import main, thin_axis_part, variants
 from vbgs.baseline.params import init_params
 from vbgs.render.splats import rotations_from_quaternions
 

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from experiments.oracle import masked_psnr, oracle_splats, render_oracle
+from experiments.studies.oracle import masked_psnr, oracle_splats, render_oracle
 from experiments.run import main
 from vbgs.data.formats import load_scene
 from vbgs.render.camera import valid_depth

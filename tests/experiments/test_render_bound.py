@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from experiments.render_bound import refine
+from experiments.studies.render_bound import refine
 from experiments.run import main
-from experiments.scene_task import SceneTask, load_task_scene
-from experiments.tune import learn_once
+from experiments.tasks.scene_task import SceneTask, load_task_scene
+from experiments.studies.tune import learn_once
 from vbgs.baseline import camera_extent, params_from_splats, to_splats
 from vbgs.render.views import evaluate
 
@@ -71,7 +71,7 @@ def test_render_bound_command_scores_each_refinement(capsys):
 
 
 def test_render_bound_refuses_bad_input_before_any_work(capsys, monkeypatch):
-    import experiments.render_bound as render_bound
+    import experiments.studies.render_bound as render_bound
 
     monkeypatch.setattr(render_bound, "render_bound",
                         lambda *a, **k: pytest.fail("the diagnostic started"))
@@ -82,7 +82,7 @@ def test_render_bound_refuses_bad_input_before_any_work(capsys, monkeypatch):
 def test_a_refinement_of_n_steps_is_the_first_n_of_a_longer_one(learned):
     """The schedule is per step (not the run's length): the splats after 3 steps of a
     6-step refinement are a 3-step refinement's."""
-    from experiments.render_bound import refine_path
+    from experiments.studies.render_bound import refine_path
 
     scene, splats, background, blur = learned
     extent = camera_extent([f.camera.position for f in scene.train])

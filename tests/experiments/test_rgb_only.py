@@ -10,8 +10,8 @@ onnx = pytest.importorskip("onnx")
 
 from depth.stream import StreamConfig  # noqa: E402
 from depth.testing import lookup_model  # noqa: E402
-from experiments.depth_study import mono_disparity  # noqa: E402
-from experiments.depth_swap import EstimatedDepth  # noqa: E402
+from experiments.studies.depth_study import mono_disparity  # noqa: E402
+from experiments.tasks.depth_swap import EstimatedDepth  # noqa: E402
 from experiments.run import main  # noqa: E402
 from vbgs.data.blender import load_blender, write_blender  # noqa: E402
 from vbgs.data.synthetic import make_scene  # noqa: E402

@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-import experiments.scene_task as scene_task
+import experiments.tasks.scene_task as scene_task
 from experiments.run import main
-from experiments.scene_task import SceneTask, prepare_scene
+from experiments.tasks.scene_task import SceneTask, prepare_scene
 from experiments.sweep.cells import expand
 from experiments.sweep.config import ConfigError, parse_config
 from experiments.sweep.tasks import build_task

@@ -1,14 +1,14 @@
 """Settings declared once: CLI defaults equal the task dataclasses' defaults, and the CLI,
-the tasks and the sweep validation accept the same choices (experiments.settings)."""
+the tasks and the sweep validation accept the same choices (experiments.tasks.settings)."""
 
 import dataclasses
 
 import pytest
 
-from experiments import settings
-from experiments.image_task import ImageTask
+from experiments.tasks import settings
+from experiments.tasks.image_task import ImageTask
 from experiments.run import build_parser
-from experiments.scene_task import SceneTask
+from experiments.tasks.scene_task import SceneTask
 from experiments.sweep.config import SETTINGS
 
 # CLI flags whose task field has another name, or whose value the command translates.

@@ -18,7 +18,7 @@ CODE = f"""
 import json, sys
 from experiments.run import build_parser
 build_parser("fit-image").parse_args(["fit-image", "--json"])
-import experiments.cli_common, experiments.image_task, vbgs.compilation
+import experiments.cli.output, experiments.tasks.image_task, vbgs.compilation
 print(json.dumps([m for m in {NOT_FOR_A_FIT!r} if m in sys.modules]))
 """
 
@@ -37,7 +37,7 @@ def test_every_command_still_has_its_parser():
 
     parser = build_parser()
     assert parser.parse_args(["sweep", "--config", "quick"]).command == "sweep"
-    assert parser.parse_args(["report", "results/quick"]).command == "report"
+    assert parser.parse_args(["report", "results/ablations"]).command == "report"
     assert set(parser._subparsers._group_actions[0].choices) == set(COMMANDS)
 
 

@@ -6,7 +6,7 @@ import numpy as np
 from PIL import Image
 
 from experiments.run import main
-from experiments.strict_json import dumps, sanitise
+from experiments.cli.output import dumps, sanitise
 
 
 def strict(line: str) -> dict:

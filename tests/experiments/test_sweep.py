@@ -242,7 +242,7 @@ def run_scene(task, progress=False):
 
 def test_scene_cells_through_a_stand_in_scene_task(tmp_path, monkeypatch, capsys):
     """Scene dispatch, the gradient/replay rules, depth tables and forgetting curves,
-    with a stand-in module in place of experiments.scene_task."""
+    with a stand-in module in place of experiments.tasks.scene_task."""
     (tmp_path / "fake_scene_task.py").write_text(FAKE_SCENE)
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setitem(TASKS, "scene", dataclasses.replace(TASKS["scene"],

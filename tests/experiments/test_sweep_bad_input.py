@@ -1,5 +1,5 @@
 """Sweep folders: another config's cells are not orphaned silently, unreadable cell files
-are counted and named (issue 13, cases 4 and 6). No cell is computed here: records are
+are counted and named. No cell is computed here: records are
 stored by hand and the backend is stubbed."""
 
 import json

@@ -16,11 +16,35 @@ def _config(**grid):
             "grid": [{"task": "image", "dataset": ["astronaut"], "components": [20], **grid}]}
 
 
-def test_quick_config_parses_and_expands():
-    """The default sweep covers what the README promises: both tasks, both methods, two
-    component counts, both inits, three stream orders, both assignment modes, two seeds."""
+def test_quick_config_has_one_cell_of_each_kind():
+    """The first command stays minutes long: one cell of each kind a user should see (both
+    tasks, both methods, the three stream orders, both assignment modes, the three
+    initialisations, a replay buffer, the three synthetic scenes), one seed."""
     config = load_config(CONFIGS / "quick.toml")
     assert config.name == "quick"
+    plan = expand(config)
+    cells = [c.as_dict() for c in plan.cells]
+    assert not plan.skipped and len(cells) <= 16
+    values = {k: {c[k] for c in cells if k in c} for k in ("task", "init", "order", "assign",
+                                                          "seed", "dataset", "replay")}
+    assert values["task"] == {"image", "scene"}
+    assert {c.get("method", "vbgs") for c in cells} == {"vbgs", "gradient"}
+    assert values["init"] == {"stream", "random", "data"}
+    assert values["order"] == {"sequential", "shuffled", "reversed"}
+    assert values["assign"] == {"prior", "posterior"} and values["seed"] == {0}
+    assert {"object", "room", "walk", "astronaut"} <= values["dataset"]
+    assert values["replay"] - {"none"}
+    assert {c["stream"] for c in cells if c["task"] == "image"} == {"none", "patches"}
+    # the batch fits and the gradient baseline: splats far fewer than pixels (>= 8 a splat)
+    batch = [c for c in cells if c["task"] == "image" and c.get("stream") == "none"]
+    assert batch and all(c["size"] ** 2 >= 8 * c["components"] for c in batch)
+
+
+def test_ablations_config_parses_and_expands():
+    """The long grid: both tasks, both methods, two component counts, every init, the
+    three stream orders, both assignment modes, two seeds."""
+    config = load_config(CONFIGS / "ablations.toml")
+    assert config.name == "ablations"
     plan = expand(config)
     cells = [c.as_dict() for c in plan.cells]
     assert not plan.skipped
@@ -33,7 +57,6 @@ def test_quick_config_parses_and_expands():
     assert values["assign"] == {"prior", "posterior"} and values["seed"] == {0, 1}
     assert len(values["dataset"]) >= 3
     assert all(c["stream"] == "patches" for c in cells if c["task"] == "image" and "order" in c)
-    # the batch fits and the gradient baseline: splats far fewer than pixels (>= 8 a splat)
     batch = [c for c in cells if c["task"] == "image" and c.get("stream") == "none"]
     assert batch and all(c["size"] ** 2 >= 8 * c["components"] for c in batch)
 

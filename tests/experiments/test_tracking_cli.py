@@ -65,12 +65,12 @@ def test_fit_scene_refuses_what_tracking_cannot_run(capsys):
         assert message in capsys.readouterr().err, extra
 
 
-@pytest.mark.slow  # the refinement is off by default (experiments.tracking.PHOTOMETRIC)
+@pytest.mark.slow  # the refinement is off by default (experiments.tasks.tracking.PHOTOMETRIC)
 def test_fit_scene_tracks_photometrically(monkeypatch, capsys):
-    # the photometric refinement is off by default (experiments.tracking.PHOTOMETRIC);
+    # the photometric refinement is off by default (experiments.tasks.tracking.PHOTOMETRIC);
     # on, a tiny walk under a Kinect (depth on the near road only: every frame refined,
     # the second from the search) runs end to end
-    import experiments.tracking as tracking
+    import experiments.tasks.tracking as tracking
 
     monkeypatch.setattr(tracking, "PHOTOMETRIC", True)
     calls = []

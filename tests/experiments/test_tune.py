@@ -6,12 +6,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import experiments.tune as tune_module
+import experiments.studies.tune as tune_module
 from experiments.learners import VbgsLearner
-from experiments.protocol import evaluate_validation, stream_frames
+from experiments.tasks.protocol import evaluate_validation, stream_frames
 from experiments.run import main
-from experiments.scene_task import SceneTask, load_task_scene
-from experiments.tune import inert_parameters, parse_grid, settings, tune
+from experiments.tasks.scene_task import SceneTask, load_task_scene
+from experiments.studies.tune import inert_parameters, parse_grid, settings, tune
 from vbgs.data.streams import stream_order
 
 TINY = SceneTask(components=150, frames=3, n_test=1, n_val=2, size=16, init="data")
@@ -111,7 +111,7 @@ def test_the_gradient_baseline_is_tuned_static_by_its_dotted_constants():
     """``baseline.NAME`` (the baseline's TrainConfig, densification included) is typed by
     its field; under the static protocol each value's row equals a fresh static run."""
     from experiments.learners import GradientLearner
-    from experiments.protocol import PROGRESS_BLOCK, static_background
+    from experiments.tasks.protocol import PROGRESS_BLOCK, static_background
 
     task = replace(TINY, method="gradient", protocol="static", steps=PROGRESS_BLOCK + 5)
     grid = parse_grid(["baseline.depth_weight=0,0.5", "baseline.densify.every=7"], task)

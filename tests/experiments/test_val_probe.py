@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from experiments.scene_task import SceneTask, load_task_scene
-from experiments.val_probe import scored_on_validation
+from experiments.tasks.scene_task import SceneTask, load_task_scene
+from experiments.studies.val_probe import scored_on_validation
 
 
 def test_the_scored_views_are_the_validation_views():

@@ -6,7 +6,7 @@ import json
 import numpy as np
 
 from experiments.run import main
-from experiments.scene_task import SceneTask, load_task_scene
+from experiments.tasks.scene_task import SceneTask, load_task_scene
 from experiments.sweep.cells import expand
 from experiments.sweep.config import load_config
 from experiments.sweep.tasks import TASKS, build_task

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from experiments.run import main
-from experiments.scene_task import SceneTask, load_task_scene, prepare_scene
-from experiments.sensor_swap import simulate_training_depth
-from experiments.write_scene import write_scene
+from experiments.tasks.scene_task import SceneTask, load_task_scene, prepare_scene
+from experiments.tasks.sensor_swap import simulate_training_depth
+from experiments.tasks.write_scene import write_scene
 from vbgs.data.sensor_record import SENSOR_RECORD
 
 HALF_MM = 0.0005 + 2e-6  # the PNG stores round(depth * 1000); float32 rounding on top
@@ -90,7 +90,7 @@ def test_fit_scene_on_the_folder_scores_as_in_memory(tmp_path, capsys):
     # measured: 32 px, 6 frames, 600 components: in memory 19.56 dB since the depth is
     # averaged over its surfaces (vbgs.mapping.denoise; 18.815 before, 20.270 with seeds
     # on their patch's plane: at 32 px a 48-point patch spans some 60 cm of the object,
-    # over which the quadric of stop 34 fits worse; at 128 px it gains)
+    # over which the growth's quadric fits worse; at 128 px it gains)
     assert memory["psnr"] > 19.0 and folder["psnr"] > 19.0
     assert abs(folder["psnr"] - memory["psnr"]) < 0.2
     assert abs(folder["depth_l1"] - memory["depth_l1"]) < 0.1 * memory["depth_l1"]

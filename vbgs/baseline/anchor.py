@@ -50,33 +50,11 @@ from vbgs.render.splats import rotations_from_quaternions, scale_rotation_from_c
 # stream (a static polish runs free, experiments.learners.polish_learner). Read as a
 # log-likelihood, the L1 loss per pixel is |r| / b nats for a Laplace error of scale b, so a
 # nat weighs b loss units, and b is about a hundredth to a tenth of a colour unit here.
-# Chosen on validation views (10 views cut into the 5 segments of the continual sweep,
-# experiments/configs/continual.toml: 64 px, 3000 components, 30 frames, 50 steps a frame,
-# seed 0; python -m experiments.val_probe --val-views 10 fit-scene ...): the weight with the
-# best mean CL final PSNR over room and walk, no replay and FIFO of 8, among those whose CL
-# forgetting is at most 0.3 dB in all four. CL final PSNR / CL forgetting (dB):
-#            room none       room fifo:8     walk none       walk fifo:8
-#   the polish as it is (centred on the polish as earlier frames left it, per point of the
-#   frames drawn, seen-only steps, log-covariance carry):
-#     0.1    22.25 / -0.53   23.38 / 0.39    22.43 / 0.64    24.31 / 0.16
-#     0.2    22.00 / -0.55   23.17 / 0.12    23.24 / 0.10    24.09 / 0.14   <- chosen then
-#     0.3    21.77 / -0.55   23.00 / -0.05   23.01 / 0.04    23.88 / 0.11
-#   the polish before (centred on the posterior, per point of all, linear carry), 0.01:
-#            20.03 / 0.14    22.32 / 1.01    22.09 / 0.89    24.10 / 0.59
-#   on the way (linear carry); centred on the posterior's splats, per draw, seen-only:
-#     0.03   20.77 / -0.59   21.74 / 0.55    21.80 / 0.16    23.76 / 0.42
-#     0.1    20.40 / -0.52   21.30 / 0.13    21.39 / 0.01    23.26 / 0.29
-#   centred on the polish: 0.1   22.10 / -0.45   23.35 / 0.29    21.41 / 1.55    24.22 / 0.12
-#   the gradient baseline, fifo:8: room 18.86 / 1.07, walk 21.59 / 0.37.
-#   (above: chosen before the continual steps were shaped by the splats, shape_mean_steps)
-#   with shaped mean steps (the same rule, views and settings):
-#     0.2    21.99 / -0.53   23.10 / 0.08    22.96 / 0.35    23.77 / 0.29   mean 22.96, over
-#     0.25   21.87 / -0.53   23.03 / -0.00   23.02 / 0.28    23.73 / 0.20   mean 22.91 <- chosen
-#     0.3    21.76 / -0.53   22.96 / -0.07   23.02 / 0.13    23.79 / 0.21   mean 22.88
-#     0.5    21.40 / -0.48   22.72 / -0.22   22.78 / 0.08    23.42 / 0.21   mean 22.58
-#     1.0    20.99 / -0.49   22.35 / -0.35   22.49 / 0.01    22.73 / 0.74   mean 22.14, over
-#   0.2 forgets 0.35 dB on the walk without replay; 0.25 keeps it at 0.28, 0.3 at 0.13 for
-#   0.03 dB less mean final PSNR.
+# Chosen on validation views (10 views cut into the 5 segments of the continual sweep's
+# settings, experiments/configs/continual.toml) by this rule: the weight with the best mean
+# final PSNR over room and walk, no replay and a FIFO of 8, among those whose forgetting is
+# at most 0.3 dB in all four. No results table holds the grid: docs/validation.md
+# ("ANCHOR_WEIGHT") keeps it.
 ANCHOR_WEIGHT = 0.25
 
 

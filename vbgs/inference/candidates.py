@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 # Candidates per point by default: enough that the truncated responsibilities match
 # the dense ones to within rendering precision for splat-sized components.
-# Fewer draw better with exact depth (stop 39; validation views, fit-scene's defaults,
+# Fewer draw better with exact depth (validation views, fit-scene's defaults,
 # `python -m experiments.val_probe fit-scene --scene S --candidates C`), object / room /
 # walk at C = 4, 8, 12, 16: 26.72 / 23.07 / 21.52, 26.74 / 22.86 / 21.68, 26.60 / 22.77 /
 # 21.67, 26.58 / 22.67 / 21.59 dB (means 23.77, 23.76, 23.68, 23.61), seconds a frame

@@ -117,6 +117,18 @@ def is_active(prior: Mixture) -> np.ndarray:
     return np.asarray(prior.alpha) > 10 * EMPTY_ALPHA
 
 
+def mean_spacing(prior: Mixture) -> float:
+    """The median distance from an active component's mean to the nearest other one: the
+    spacing of a fixed reference's components (a grown one's is its rule's cell)."""
+    from vbgs.inference.candidates import means_tree  # scipy, imported when used
+
+    means = np.asarray(prior.space.mean, np.float64)[is_active(prior)]
+    if len(means) < 2:
+        return 1.0
+    dist, _ = means_tree(means).query(means, k=2)
+    return float(np.median(dist[:, 1])) or 1.0
+
+
 def cell_index(x: np.ndarray, cell: float) -> np.ndarray:
     """Integer cell coordinates ``[n, d]`` of centred positions ``x [n, d]``."""
     return np.floor(np.asarray(x, np.float64) / cell).astype(np.int64)

@@ -451,7 +451,8 @@ def e_step(q: Mixture, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray, colour_no
 
 def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
                 colour_noise: float, chunk: int, cand: jnp.ndarray | None = None,
-                ray: jnp.ndarray | None = None) -> tuple[Stats, jnp.ndarray]:
+                ray: jnp.ndarray | None = None, partial_lists: bool = False
+                ) -> tuple[Stats, jnp.ndarray]:
     """:func:`e_step` given the assigning model's precomputed terms: feature weights
     ``[k, F]`` (:func:`log_joint_weights`) for the dense E-step, :class:`Terms` with
     ``cand [n, C]`` for the sparse one.
@@ -479,6 +480,9 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
     def one_chunk(acc, batch):
         xb, cb, wb, candb, rayb = batch
         phi = features(xb, cb)  # [chunk, F]
+        listed = None
+        if partial_lists:
+            listed, candb = candb >= 0, jnp.maximum(candb, 0)
         if candb is None:
             logits = feature_logits(phi, reference) - inv2var * jnp.sum(cb**2, -1, keepdims=True)
         elif rayb is None:
@@ -486,6 +490,8 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
         else:
             logits, beta, gamma = candidates.candidate_latent(xb, cb, reference, candb,
                                                               colour_noise, rayb)
+        if listed is not None:  # finite: a point with none listed has weight 0, no NaN
+            logits = jnp.where(listed, logits, jnp.finfo(logits.dtype).min / 2)
         lse = jax.nn.logsumexp(logits, -1)  # [chunk]
         resp = jnp.exp(logits - lse[:, None]) * wb[:, None]  # [chunk, k or C]
         if candb is None:

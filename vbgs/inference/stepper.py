@@ -42,10 +42,14 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import digamma
 
-from vbgs.inference import candidates, expfam, grid, model
+from vbgs.inference import candidates, expfam, grid, model, projective
 from vbgs.inference.model import Assign, EStep, Info, Mixture, PriorConfig, State
 
-Search = Literal["auto", "grid", "kdtree"]
+Search = Literal["auto", "grid", "kdtree", "projective"]
+SEARCHES = ("auto", "grid", "kdtree", "projective")
+# A slot whose concentration is below this holds no component (vbgs.inference.grow's
+# empty slots have 1e-6): the projective search leaves it out.
+ACTIVE_ALPHA = 1e-5
 
 
 class StepInfo(NamedTuple):
@@ -71,6 +75,7 @@ class StepConfig(NamedTuple):
     colour_noise: float
     chunk: int
     grid: grid.GridSpec | None  # set when the compiled step searches candidates itself
+    partial_lists: bool = False  # candidate lists may hold -1 (the projective search)
 
 
 class Fixed(NamedTuple):
@@ -152,7 +157,8 @@ def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, 
         reference = _reference(q, config.estep, config.colour_noise)
         kl = model.kl(q, state.prior, config.colour_noise)
     batch, lse = model.e_step_with(reference, x, c, w, config.colour_noise, config.chunk,
-                                   cand if config.estep == "sparse" else None, ray)
+                                   cand if config.estep == "sparse" else None, ray,
+                                   config.partial_lists)
     stats = expfam.add_stats(state.stats, batch)
     elbo = jnp.sum(lse * w) - kl
     # the prior is reattached by the caller (see model._update: passing an input through
@@ -194,7 +200,8 @@ class Stepper:
                  config: PriorConfig = PriorConfig(), estep: EStep = "dense",
                  n_candidates: int = candidates.DEFAULT_CANDIDATES,
                  max_points: int | None = None, search: Search = "auto",
-                 grows: bool = False, reach: float | None = None, follow: bool = False):
+                 grows: bool = False, reach: float | None = None, follow: bool = False,
+                 spacing: float | None = None):
         if assign not in ("prior", "posterior"):
             raise ValueError(f"unknown assignment mode {assign!r}: use 'prior' or 'posterior'")
         if estep not in ("dense", "sparse"):
@@ -204,17 +211,26 @@ class Stepper:
         self.n_candidates = int(min(n_candidates, prior.n_components))
         if self.n_candidates < 1:
             raise ValueError(f"n_candidates must be at least 1, got {n_candidates}")
-        if search not in ("auto", "grid", "kdtree"):
-            raise ValueError(f"unknown candidate search {search!r}: use 'auto', 'grid' or 'kdtree'")
+        if search not in SEARCHES:
+            raise ValueError(f"unknown candidate search {search!r}: use one of "
+                             f"{', '.join(SEARCHES)}")
+        projecting = search == "projective"
+        if projecting and (estep != "sparse" or prior.dim != 3 or not spacing or spacing <= 0):
+            raise ValueError("the projective search gives a frame's 3-D points their "
+                             "candidates: it needs estep='sparse', a 3-D model and the "
+                             f"components' spacing (a positive length), got estep={estep!r}, "
+                             f"{prior.dim}-D, spacing={spacing!r}")
         if grows and search == "grid":
             raise ValueError("a growing reference cannot use the grid search (its layout is "
                              "planned from the means): use search='kdtree' or 'auto'")
         # the grid is built once, so it serves only a fixed assigning model; on a CPU the
         # host KD-tree reads the device's own memory (the grid is not even planned)
         fixed_sparse = assign == "prior" and estep == "sparse" and not grows
-        if not fixed_sparse or (search == "auto" and jax.default_backend() == "cpu"):
+        if not projecting and (not fixed_sparse or (search == "auto"
+                                                    and jax.default_backend() == "cpu")):
             search = "kdtree"
-        spec = grid.plan(prior.space.mean, self.n_candidates) if search != "kdtree" else None
+        spec = grid.plan(prior.space.mean, self.n_candidates) \
+            if search in ("auto", "grid") else None
         if search == "auto":
             cheap = grid.build_cost(prior.space.mean, spec) <= grid.MAX_BUILD_COST
             search = "grid" if cheap else "kdtree"
@@ -225,7 +241,7 @@ class Stepper:
             if estep == "sparse" and self.search == "grid":
                 self.spec = spec
                 lists = grid.build(prior.space.mean, self.spec)
-            elif estep == "sparse":
+            elif estep == "sparse" and not projecting:
                 self._tree = candidates.means_tree(prior.space.mean)
             self.fixed = Fixed(_prior_terms(prior, estep, self.colour_noise),
                                jnp.zeros((), prior.alpha.dtype), lists)
@@ -237,6 +253,8 @@ class Stepper:
             raise ValueError(f"reach={reach!r} needs a positive distance, the sparse E-step "
                              "and the KD-tree search (estep='sparse', search='kdtree')")
         self.reach = reach
+        self.spacing = spacing
+        self.tiling: projective.Tiling | None = None  # fixed by the first frame
 
     def grow(self, prior: Mixture, rows) -> Stepper:
         """A stepper for the grown reference ``prior``, which differs from this one's only
@@ -286,14 +304,16 @@ class Stepper:
         d = self.prior.dim
         return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
 
-    def __call__(self, state: State, xyz, rgb, ray=None, reach=None, weight=None
-                 ) -> tuple[State, StepInfo]:
+    def __call__(self, state: State, xyz, rgb, ray=None, reach=None, weight=None,
+                 camera=None) -> tuple[State, StepInfo]:
         """Learn the batch ``xyz [n, d]``, ``rgb [n, 3]``; ``ray [n, d]``: measured
         points' noise along their rays (sparse E-step; :func:`vbgs.inference.model.update`);
         ``reach [n]``: each point's own reach, in place of the stepper's (a point seen
         coarsely reaches as far as the coarse components it may fall to); ``weight [n]``:
         each point's weight in the statistics (a thinned frame's, :mod:`vbgs.mapping.budget`;
-        None: 1)."""
+        None: 1); ``camera``: the frame the points were measured in
+        (:class:`vbgs.render.camera.Camera`), which the projective search reads (without
+        one it searches a KD-tree over the means)."""
         xyz, rgb = model.check_points_host(xyz, rgb)
         if xyz.shape[1] != self.prior.dim:
             raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
@@ -301,8 +321,11 @@ class Stepper:
         x, c, w = model.padded_batch(xyz, rgb, self._origin, size, self.prior.alpha.dtype)
         if weight is not None:
             w[:xyz.shape[0]] = weight
-        cand, learned = None, None
-        if self.estep == "sparse" and self.spec is None:
+        cand, learned, partial_lists = None, None, False
+        if self.search == "projective" and camera is not None:
+            cand, w, learned = self._project(state, x, w, xyz.shape[0], reach, camera)
+            partial_lists = True
+        elif self.estep == "sparse" and self.spec is None:
             n = xyz.shape[0]
             tree = self._tree or candidates.means_tree(state.posterior.space.mean)
             cand = np.zeros((size, self.n_candidates), np.int32)  # padding: weight 0
@@ -311,10 +334,38 @@ class Stepper:
                 learned = nearest <= (self.reach if reach is None else np.asarray(reach))
                 w[:n][~learned] = 0.0
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
-                            self.spec)
+                            self.spec, partial_lists)
         if ray is not None and self.estep != "sparse":
             raise ValueError("measurement noise (ray) needs the sparse E-step: estep='sparse'")
         rays = model.padded_rays(ray, xyz.shape[0], size, x.dtype)
         posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config, rays)
+        if learned is not None and not isinstance(learned, np.ndarray):
+            learned = np.asarray(learned)[:xyz.shape[0]]  # after the step is dispatched
         return state._replace(posterior=posterior, stats=stats), StepInfo(*info, learned)
+
+    def _project(self, state: State, x: np.ndarray, w: np.ndarray, n: int, reach,
+                 camera) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray | None]:
+        """The projective search (:mod:`vbgs.inference.projective`) of the padded centred
+        points ``x [size, 3]`` seen by ``camera``: candidates ``[size, C]``, the weights
+        with points beyond reach (or with no component listed near them) at 0, and which
+        points are within reach (``[size]`` on the device; None without a reach). The
+        tiling is fixed by the first frame (its median depth)."""
+        q = self.prior if self.assign == "prior" else state.posterior
+        if self.tiling is None:
+            rot_t, shift = projective.world_to_camera(camera, self._origin)
+            depth = np.asarray(x[:n], np.float64) @ rot_t[2] + shift[2]
+            self.tiling = projective.plan(camera, self.spacing, float(np.median(depth)),
+                                          self.n_candidates)
+        elif (self.tiling.width, self.tiling.height) != (camera.width, camera.height):
+            self.tiling = self.tiling._replace(width=int(camera.width),
+                                               height=int(camera.height))
+        v = projective.view(camera, self._origin, x.dtype)
+        active = q.alpha > ACTIVE_ALPHA
+        cand, d2 = projective.search(q.space.mean, active, v, x, w, self.tiling)
+        reaching = self.reach is not None or reach is not None
+        limit = np.inf if not reaching else (
+            self.reach if reach is None else np.pad(np.asarray(reach, x.dtype),
+                                                    (0, len(x) - n)))
+        within = d2 <= jnp.asarray(limit, x.dtype) ** 2
+        return cand, jnp.where(within, w, 0.0), within if reaching else None
 

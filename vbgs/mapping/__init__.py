@@ -26,8 +26,9 @@ from vbgs.mapping.mapper import (
     update,
     update_points,
 )
+from vbgs.mapping.store import load, save
 
 __all__ = ["BudgetConfig", "Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState",
            "Mapper", "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted",
-           "grow_components", "init", "mapper", "splats", "update", "update_points",
-           "with_dotted"]
+           "grow_components", "init", "load", "mapper", "save", "splats", "update",
+           "update_points", "with_dotted"]

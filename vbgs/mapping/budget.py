@@ -27,8 +27,8 @@ on validation views (``results/tuning/budget``: the room at 640 x 480, 100k comp
 18 frames, 2 validation views): every point 22.30 dB; 20k points a frame (stride 4)
 22.34 dB unweighted, 19.36 dB weighted; 80k (stride 2) 23.03 dB unweighted, 22.71 dB
 weighted. The budget bounds the cost; it cannot go far below a few points per
-component and frame. Measured again at 818bef3 (the same room and validation views,
-``tune --grid budget.points=...``; the stream has changed since; 167bcee's speed-ups
+component and frame. Measured again (the same room and validation views,
+``tune --grid budget.points=...``; the stream has changed since; later speed-ups
 leave every figure as it was): every point 23.11 dB;
 stride 2 (N = 80000) 23.04; stride 3 (40000 and 60000) 22.72; stride 4 (20000) 22.29;
 10000 20.92; 5000 19.78. Stride 2 is the only thinning within 0.2 dB of every point;

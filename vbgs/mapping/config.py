@@ -28,6 +28,7 @@ from vbgs.sensors import SENSOR_NAMES, WHITE_NOISE_SENSORS
 
 ASSIGN = ("prior", "posterior")
 ESTEP = ("dense", "sparse")
+SEARCH = ("kdtree", "projective")
 OPACITY_RULES = ("evidence", "constant")
 COLOUR_RULES = ("posterior", "fit")
 
@@ -277,6 +278,10 @@ class Config:
         order, when that reference is fixed: given to ``init``, not grown, not re-seeded)
         or the current ``posterior`` (order-dependent);
     estep: over all components (``dense``) or the ``candidates`` nearest (``sparse``);
+    search: how a frame's points find their sparse candidates: the ``kdtree`` over the
+        means (the reference), or by ``projective`` association, the map's components
+        binned by where they fall in the frame (:mod:`vbgs.inference.projective`, on the
+        device); bare points without a camera always take the KD-tree;
     local_iters: under posterior assignment, the most E-steps of a batch's local
         coordinate ascent (:func:`vbgs.inference.model.local_cavi`: components grown for
         the batch start at their prior and a single E-step would score them so against
@@ -298,6 +303,7 @@ class Config:
     assign: str = "prior"
     estep: str = "sparse"
     candidates: int = DEFAULT_CANDIDATES
+    search: str = "kdtree"
     local_iters: int = 1
     reseed: bool = False
     prior: PriorConfig = SURFACE_PRIOR
@@ -314,6 +320,7 @@ class Config:
             raise ValueError(f"candidates must be a positive integer, got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
+        _choice("search", self.search, SEARCH)
         value = self.local_iters
         if not isinstance(value, int) or isinstance(value, bool) or value < 1:
             raise ValueError(f"local_iters must be a positive integer, got {value!r}")

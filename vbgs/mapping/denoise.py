@@ -66,7 +66,7 @@ from vbgs.render.camera import valid_depth
 DENOISE_RADIUS = 1  # window half-side in pixels (3 x 3); 0: no smoothing. Chosen on validation
 # views at both of the project's sizes (8 views each, `python -m experiments.run tune --scene
 # object room --simulate-sensor kinect --sensor kinect --val-views 8 --grid
-# growth.denoise_radius=...`, results/tuning/denoise/ at ed6687b and size64/ at 1fb0137):
+# growth.denoise_radius=...`, results/tuning/denoise/ and its size64/):
 # 128 px / 20k / 60 frames, mean of the two scenes 0: 23.30 dB, 1: 23.63, 2: 23.64, 3: 23.43
 # (the object 24.60, 25.29, 25.30, 25.06; the room 22.01, 21.97, 21.98, 21.81); 64 px / 5000
 # / 20 frames 0: 20.96, 1: 21.50, 2: 21.14 (the object 21.67, 22.74, 22.17). A window is

@@ -40,7 +40,7 @@ it covers the pixel (alpha > 0.5) 23.23, the nearest depth only for rims unlike 
 measured neighbour in colour 23.60: points a little off a silhouette are seen from
 other views as a shell over the surface.
 
-Which rims (stop 39; object, 64 px / 5000 / 20 frames, the Kinect's physical holes at
+Which rims (object, 64 px / 5000 / 20 frames, the Kinect's physical holes at
 level 0, validation views; one-off scripts patching the training depth or the mapper):
 no fill 22.67 dB; every rim hole (within 2 px of an empty pixel: 58% of the holes) given
 its true depth 23.39. The 85% of them whose true depth lies within 4 pixel footprints of
@@ -51,7 +51,7 @@ every rim, gives 19.78 (only beside measured pixels whose depth changes less tha
 (level 1, its own holes; 24.61 without) the same fill learned as uncertain along its
 ray (2 footprints, the measurement model's latent depth) gives 21.22. A few footprints'
 error on a silhouette costs more than the silhouette's points are worth.
-Nor do other frames' measurements place them (stop 40; the same 64 px runs, 8 validation
+Nor do other frames' measurements place them (the same 64 px runs, 8 validation
 views: exact depth 23.09 dB, no fill 22.56): each rim given the nearest depth the last 8
 arrived frames measured inside its pixel (their points z-buffered into the frame), kept
 only within 4, 1, 1 or 0.5 footprints of a measured pixel within 2 px (and seen by 1, 1,

@@ -100,6 +100,7 @@ from vbgs.mapping.config import Config
 from vbgs.mapping.denoise import noise_left, smoothed
 from vbgs.mapping.holes import fill_holes
 from vbgs.mapping.measurement import depth_sigmas, depth_variance, point_footprints, point_rays
+from vbgs.mapping.stages import stage
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
 from vbgs.render.camera import unproject
@@ -197,6 +198,21 @@ def update(state: MapState, frame: Frame, config: Config,
     without a splat show; the colour fit reads it, and with a measured depth the opacity
     evidence (a depth-less pixel of its colour beside a silhouette shows it; pixels
     without depth are not points)."""
+    with stage("prepare"):
+        state, p = _prepare(state, frame, config, background)
+    state, info = update_points(state, p.xyz, p.rgb, config, ray=p.ray,
+                                footprint=p.footprint, weight=p.weight, camera=frame.camera)
+    with stage("evidence") as done:
+        state = _observe(state, info, p, config, background)
+        done(state.evidence, state.colour)
+    return state, info
+
+
+def _prepare(state: MapState, frame: Frame, config: Config, background):
+    """Steps 0 and 1 of the module docstring: the frame's depth averaged and its holes
+    filled for a measured sensor, thinned to the budget, unprojected, and its points
+    already explained skipped. Returns the state (its key split where the frame was
+    thinned or points skipped) and the :class:`_Prepared` frame."""
     sensor = config.sensor
     measured, empty, level = frame, None, sensor.level
     if not sensor.exact:  # holes in surfaces are neither background nor free space
@@ -219,9 +235,30 @@ def update(state: MapState, frame: Frame, config: Config,
     if kept is not None:
         xyz, rgb, ray, footprint, weight, keys = (
             None if a is None else a[kept] for a in (xyz, rgb, ray, footprint, weight, keys))
-    state, info = update_points(state, xyz, rgb, config, ray=ray, footprint=footprint,
-                                weight=weight)
-    state = _count_seen(state, xyz, footprint, config, keys)
+    return state, _Prepared(xyz, rgb, ray, footprint, weight, keys, frame, empty, level)
+
+
+class _Prepared(NamedTuple):
+    """A frame as :func:`_prepare` leaves it for the later steps."""
+
+    xyz: np.ndarray  # [n, 3] the points to learn
+    rgb: np.ndarray  # [n, 3]
+    ray: np.ndarray | None  # [n, 3] their noise along the rays (a measured sensor)
+    footprint: np.ndarray | None  # [n] their pixel footprints (a growing map)
+    weight: np.ndarray | None  # [n] a thinned frame's weights
+    keys: np.ndarray | None  # [n] their cells (budget.saturation)
+    frame: Frame  # its depth averaged (a white-noise sensor)
+    empty: np.ndarray | None  # [h, w] pixels that show nothing (a measured sensor)
+    level: float  # the sensor's noise level after the averaging
+
+
+def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config,
+             background) -> MapState:
+    """Steps 4 and 5 of the module docstring: the learned points counted in their cells
+    (saturation), the frame's opacity evidence and colour terms added."""
+    frame, empty, level = prepared.frame, prepared.empty, prepared.level
+    sensor = config.sensor
+    state = _count_seen(state, prepared.xyz, prepared.footprint, config, prepared.keys)
     if config.render.opacity_rule == "evidence":  # against the model that assigned
         geometry = mixture_geometry(state.mixture.prior if config.assign == "prior"
                                     else info.before)
@@ -237,11 +274,11 @@ def update(state: MapState, frame: Frame, config: Config,
                                     frame.rgb, 0.0 if background is None else background,
                                     blur=config.render.splat_blur)
         state = state._replace(colour=colour)
-    return state, info
+    return state
 
 
 def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footprint=None,
-                  weight=None) -> tuple[MapState, MapInfo]:
+                  weight=None, camera=None) -> tuple[MapState, MapInfo]:
     """Learn one arriving batch of points ``xyz [n, d]``, ``rgb [n, 3]`` (d = 3 for a
     scene, 2 for an image's pixels): the one stream loop's step, which :func:`update`
     takes every frame through after unprojection (steps 2 and 3 of the module
@@ -254,23 +291,18 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
 
     ``ray [n, 3]``: measured points' noise along their rays; ``footprint [n]``: their
     pixel footprints (far ground grows coarse cells); ``weight [n]``: each point's weight
-    in the statistics (a thinned frame's; None: 1); all from a frame
+    in the statistics (a thinned frame's; None: 1); ``camera``: the frame's camera, which
+    the projective candidate search reads (``config.search``); all from a frame
     (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.mapping.budget`), None for bare points."""
     if len(xyz) == 0:
         raise ValueError("the batch has no points: nothing to learn")
-    state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
-    if config.slow_path:
-        state, before, elbo = _learn_slowly(state, xyz, rgb, config)
-        learned = None
-    else:
-        state = _sync_stepper(state, slots, config)
-        reach = None  # each point's own, when far ground has coarse cells
-        levels = grow.point_levels(state.rule, footprint) if state.growing else None
-        if levels is not None and state.stepper.reach is not None:
-            reach = state.stepper.reach * 2.0**levels
-        before = state.mixture.posterior
-        mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight)
-        state, elbo, learned = state._replace(mixture=mixture), step.elbo, step.learned
+    with stage("grow") as done:
+        state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
+        done(state.mixture)
+    with stage("search+step") as done:
+        state, before, elbo, learned = _learn(state, slots, xyz, rgb, config, ray, footprint,
+                                              weight, camera)
+        done(state.mixture)
     n = len(xyz)
     if learned is not None:  # points beyond reach were left out
         xyz, rgb = xyz[learned], rgb[learned]
@@ -278,6 +310,25 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
                            n_unlearned=state.n_unlearned + n - len(xyz),
                            n_frames=state.n_frames + 1)
     return state, MapInfo(elbo, n, len(xyz), len(slots), before, xyz, rgb)
+
+
+def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, weight, camera
+           ) -> tuple[MapState, model.Mixture, jax.Array, np.ndarray | None]:
+    """:func:`update_points`' step 3: the batch learned once, by the compiled stepper
+    (its terms brought up to the grown ``slots`` first) or under ``config.slow_path``
+    by :func:`_learn_slowly`. Returns the state, the posterior the batch was learned
+    from, the batch's ELBO term and which points were within reach (None: all)."""
+    if config.slow_path:
+        state, before, elbo = _learn_slowly(state, xyz, rgb, config)
+        return state, before, elbo, None
+    state = _sync_stepper(state, slots, config)
+    reach = None  # each point's own, when far ground has coarse cells
+    levels = grow.point_levels(state.rule, footprint) if state.growing else None
+    if levels is not None and state.stepper.reach is not None:
+        reach = state.stepper.reach * 2.0**levels
+    before = state.mixture.posterior
+    mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight, camera)
+    return state._replace(mixture=mixture), before, step.elbo, step.learned
 
 
 def _learn_slowly(state: MapState, xyz, rgb, config: Config
@@ -563,12 +614,15 @@ def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapStat
     stepper sharing the compiled step) after the frame's growth filled ``slots``."""
     prior = state.mixture.prior
     if state.stepper is None or state.stepper.prior.n_components != prior.n_components:
-        reach = None
+        reach, search, spacing = None, "auto", None
         if state.growing and config.estep == "sparse":
             reach = grow.reach_of(state.rule, config.growth.reach_cells)
+        if config.search == "projective" and config.estep == "sparse" and prior.dim == 3:
+            search = "projective"
+            spacing = state.rule.cell if state.growing else grow.mean_spacing(prior)
         step = Stepper(prior, assign=config.assign, config=config.prior, estep=config.estep,
                        n_candidates=config.candidates, grows=state.growing, reach=reach,
-                       follow=config.budget.saturation > 0)
+                       follow=config.budget.saturation > 0, search=search, spacing=spacing)
     elif len(slots):
         step = state.stepper.grow(prior, slots)
     else:

@@ -52,7 +52,7 @@ with the holes) does not help either. With the measured means (this code) the sa
 picture: growth on the exact points 25.83 dB, merges chosen on the exact map 25.44,
 on its own 25.08 (the run as it is).
 
-Tried after that (issue 28; object, 128 px / 20k / 60 frames, the Kinect's own noise and
+Tried after that (object, 128 px / 20k / 60 frames, the Kinect's own noise and
 holes, 4 validation views, ``python -m experiments.val_probe fit-scene --scene object
 --simulate-sensor kinect --sensor kinect``: 24.61 dB, exact depth 26.58; room 22.25; a
 one-off script patching the mapper, not committed), none kept:

@@ -46,8 +46,8 @@ before; 128 px frames give a cell few points a frame, and there it skipped 32% o
 object's points for no time saved (each new octave of batch size compiles) and cost
 0.37 dB; ``--budget-saturation 32`` asks for it on a sensor's frames.
 
-Those figures predate the stream of stop 38 (``results/tuning/saturation/room640_stop38*``,
-the same room and views): every point 23.11 dB; N = 16: 22.48, 32: 22.67, 64: 22.80,
+Those figures predate the current stream; on it (``results/tuning/saturation/room640_16_64.*``
+and ``room640_128_256.*``, the same room and views): every point 23.11 dB; N = 16: 22.48, 32: 22.67, 64: 22.80,
 128: 22.97, 256: 23.02. The smallest within 0.2 dB is now 128, which skips 17% of the
 points for about no CPU saved (1.22 against 1.29 s a frame); a point budget of 80000
 (stride 2, :mod:`vbgs.mapping.budget`) holds 23.04 dB at 0.47 s.

@@ -49,11 +49,9 @@ from vbgs.render.splats import Splats
 # (never test views) by `python -m experiments.run tune --scene object room --components
 # 20000 --frames 60 --size 128 --grid colour_rule=fit,posterior
 # colour_ridge=16,32,64,128,256 --out results/tuning/colour` (results/tuning/colour/mean.md,
-# the surface prior of vbgs.inference.model.SURFACE_PRIOR): mean validation PSNR over the two
-# scenes 16: 23.50, 32: 23.52, 64: 23.50, 128: 23.47, 256: 23.43 dB (posterior colours
-# 23.35). 32 and 64 tie to 0.02 dB, as they did under the earlier isotropic prior (22.370
-# against 22.369, where 1 and 4 gave 22.04 and 22.18); 64, the best mean on the earlier
-# aliased frames (19.49 against 19.38), is kept.
+# the surface prior of vbgs.inference.model.SURFACE_PRIOR): the ridges from 16 to 256 lie
+# within a few hundredths of a dB of mean validation PSNR, 32 and 64 tied at the top;
+# 64, the best mean on the earlier aliased frames, is kept.
 RIDGE = 64.0
 
 

@@ -41,16 +41,16 @@ from vbgs.render.splats import Splats
 
 # A surface within 4 sigma (camera z) of the component is a hit. Chosen on validation
 # views: results/tuning/pass (python -m experiments.run tune --scene object room walk
-# --grid evidence.pass_sigmas=1,2,3,4,6 --out results/tuning/pass): 4 gave 23.63 dB mean
-# against 23.52 for the earlier 2 (chosen on room test PSNR); 3 to 6 lie within 0.02 dB.
+# --grid evidence.pass_sigmas=1,2,3,4,6 --out results/tuning/pass): the best mean over
+# the three scenes (results/tuning/pass/mean.md; 3 to 6 lie close together).
 PASS_SIGMAS = 4.0
 N_SAMPLES = 5  # footprint pixels read per component and frame: centre, +-1 sigma in u and v
 # Beta(1, 1): a uniform prior on opacity. A prior leaning to opaque (a component born
 # from a depth return is a surface) changes little on validation views
 # (results/tuning/evidence_prior/, `tune --scene object room walk --components K --grid
-# evidence.prior_hits=1,2,4`): mean 23.61 / 23.62 / 23.63 dB at K = 20000, 24.14 / 24.16 /
-# 24.18 at 50000 (the walk at 50k: 21.05 / 21.09 / 21.15). 4 is best, by 0.02-0.04 dB
-# mean; kept at 1, as every result would be re-made for a few hundredths.
+# evidence.prior_hits=1,2,4`): 4 is best there by a few hundredths of a dB of mean PSNR
+# (results/tuning/evidence_prior/k20000_mean.md, k50000_mean.md); kept at 1, as every
+# result would be re-made for a few hundredths.
 PRIOR_HITS = 1.0
 PRIOR_PASSES = 1.0
 

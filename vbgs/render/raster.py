@@ -62,7 +62,7 @@ and counted in ``RenderOutput.dropped`` (once per splat and tile). Check it, e.g
 gives the smallest capacity that drops nothing for a given view.
 
 Implementation (chosen by measurement on a 2-core CPU, see
-``experiments/bench_raster.py``): one depth sort of the splats; one int32 sort of
+``experiments/benchmarks/bench_raster.py``): one depth sort of the splats; one int32 sort of
 (tile, depth rank) keys gives every tile its nearest ``capacity`` splats
 (:func:`tile_lists`); then ``lax.map`` over tiles and ``lax.scan`` over chunks of
 DEPTH_CHUNK splats, where a ``lax.cond`` skips the chunks past the tile's count,

@@ -9,13 +9,12 @@ is the one of ``SCALES`` that draws the map's own training frames best (mean PSN
 frames that have arrived, never a held-out view): one number fitted to the data the
 map learned, as its colours and opacities are.
 
-Chosen so (stop 39, fit-scene's defaults, 128 px / 60 frames, `python -m
-experiments.val_probe fit-scene --scene S --components K --splat-scale auto`:
+Chosen so (fit-scene's defaults, 128 px / 60 frames, `python -m
+experiments.studies.val_probe fit-scene --scene S --components K --splat-scale auto`:
 `results/tuning/splat_scale/auto_val_*.json`; the grid's validation scores at each
 fixed scale are beside them), the scale is 1.2 on the object, the room and the walk at
-20k components and on the object and the room at 50k (the validation best, or within
-0.03 dB of it), and 1.5 on the walk at 50k (22.41 dB against 21.05 at 1.2: the best of
-the grid).
+20k components and on the object and the room at 50k, and 1.5 on the walk at 50k: on each
+the validation best or next to it.
 """
 
 from __future__ import annotations
@@ -30,10 +29,8 @@ from vbgs.render.views import render_view
 SCALES = (1.0, 1.1, 1.2, 1.35, 1.5)
 # Another scale replaces the base only when it draws the frames better by more than this
 # (dB of mean PSNR). The frames are the ones the map learned, which favour sharper
-# splats a little: the object at 50k draws its 12 kept frames 0.14 dB better at 1.1 than
-# at 1.2, but its validation views 0.06 dB worse (27.29 against 27.35); the walk at 50k
-# draws them 1.0 dB better at 1.5, and its validation views 1.36 dB better. Chosen on
-# those validation runs (`results/tuning/splat_scale/auto_val_*.json`).
+# splats a little; the margin keeps a scale that only draws them better. Chosen on
+# validation runs (`results/tuning/splat_scale/auto_val_*.json`; docs/validation.md).
 MARGIN_DB = 0.2
 
 

@@ -271,19 +271,12 @@ def load_ply(path) -> Splats:
 # to the points, so 0.3 bled past every silhouette (at 0.3, 50k components scored below
 # 20k). Both are chosen on VALIDATION views (never test views) together with the scene
 # prior (vbgs.inference.model.SURFACE_PRIOR, where the command and the table are: the best mean over
-# the object and the room, results/tuning/prior/mean.md). Validation PSNR object / room
-# with that prior at scale 1.2, blur 0.02: 26.12 / 20.57 dB; 1.4, 0.02: 25.83 / 19.92;
-# 1.2, 0: 24.86 / 20.52; 1.0, 0.05: 25.04 / 20.56. With the earlier isotropic prior scale
-# 1.2 and blur 0.02 were also the best (24.38 / 20.13; results/tuning/{object,room}.md),
-# the 3DGS-like 0.85, 0.3 gave 22.40 / 19.95 dB.
-# Checked again with the walk (results/tuning/splat_scale/; `python -m experiments.run tune
-# --scene object room walk --components K --frames 60 --size 128 --grid
-# splat_scale=1.2,1.35,1.5`), validation PSNR object / room / walk at 1.2, 1.35, 1.5:
-# K = 20000: 26.58 / 22.67 / 21.59, 26.11 / 22.21 / 21.62, 25.17 / 21.43 / 21.25;
-# K = 50000: 27.35 / 24.03 / 21.05, 26.89 / 23.67 / 22.08, 26.13 / 22.94 / 22.41.
-# The walk at 50k wants larger splats (its components hold a median 5.8 points and leave
-# gaps; experiments.scene_task.FEW_POINTS), the object and the room do not; over both K
-# and the three scenes 1.2 is still the best mean (23.88 against 23.77 and 23.22 dB).
+# the object and the room, results/tuning/prior/mean.md; with the earlier isotropic prior
+# too, results/tuning/{object,room}.md). Checked again with the walk at 20k and 50k
+# components (results/tuning/splat_scale/, made by the command in each file): the walk at
+# 50k wants larger splats (its components hold few points and leave gaps;
+# experiments.tasks.scene_report.FEW_POINTS), the object and the room do not, and over both
+# counts and the three scenes 1.2 is still the best mean.
 # Opacity comes from evidence (vbgs.render.opacity); VBGS_OPACITY is the constant of the old
 # rule (`opacity_rule="constant"`), kept for comparison.
 VBGS_OPACITY = 0.5

@@ -32,8 +32,8 @@ depth to) and the depth edges of the depth map as given
 (:func:`vbgs.sensors.holes.depth_edges`; depth bled across an edge is a steep ramp, so
 the test finds the ramp itself) are made depth-less. Left in, the first becomes a shell
 of splats around the scene and the second a fringe of splats behind every silhouette.
-(Cutting a further band of 1 px around the edges lost more surface than fringe: 15.2
-against 16.4 dB on the object at 64 px, 5000 components, 20 frames.)
+(Cutting a further band of 1 px around the edges lost more surface than fringe:
+docs/validation.md, "vbgs.sensors.mono".)
 """
 
 from __future__ import annotations
@@ -150,9 +150,8 @@ class Mono:
         ``z`` that is left once each frame is aligned to the frames before it (the depth
         a learner sees; ``ALIGNED_SHARE``); the shift drift, a fraction of the median
         depth, counted as a fraction of ``z``; edge bleeding, a loss of resolution,
-        left out. (On the object at 64 px the learner scored about the same with this
-        and with the unaligned 4.4 %: 17.20 and 17.18 dB mean validation PSNR over 3
-        seeds.)"""
+        left out. (The learner scored about the same with the unaligned share:
+        docs/validation.md, "vbgs.sensors.mono: sigma_z".)"""
         return self.aligned_share * self.relative_sigma(level) * np.asarray(z, np.float64)
 
     def surface(self, depth, camera, level: float = 1.0) -> np.ndarray:

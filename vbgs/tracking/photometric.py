@@ -64,7 +64,7 @@ relative error ~1e-6 sqrt(n), far below the damping); the 6x6 system is solved b
 Cholesky factorisation after damping (the translation and rotation columns differ in
 scale by the scene's depth, which the diagonal damping absorbs).
 
-Status (measured on the walk, 64 px unless said; experiments.tracking.PHOTOMETRIC):
+Status (measured on the walk, 64 px unless said; experiments.tasks.tracking.PHOTOMETRIC):
 on a synthetic textured ground plane an 8 cm, 1.5 degree offset along it is recovered
 to 1e-5 units; against VBGS maps it is not accurate yet. From odometry guesses (1 cm a
 frame) with exact depth, refined at 32 then 64 px, the track's ATE was 12.8 cm where

@@ -1,5 +1,5 @@
 #!/bin/bash
-# Stop 37 GPU rows: answers at JAX's default precision (run side by side, so their seconds are not speed figures),
+# GPU rows: answers at JAX's default precision (run side by side, so their seconds are not speed figures),
 # the library's tracking/inference tests on the GPU, then bench stream alone (its seconds are the speed figures).
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1

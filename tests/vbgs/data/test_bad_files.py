@@ -1,5 +1,4 @@
-"""Bad dataset files give a one-line error naming the file, never a silently wrong number
-(issue 13, cases 1, 2, 8 and 10)."""
+"""Bad dataset files give a one-line error naming the file, never a silently wrong number."""
 
 import json
 

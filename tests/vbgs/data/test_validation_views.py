@@ -3,7 +3,7 @@
 import numpy as np
 from skimage import io as skio
 
-from experiments.scene_task import SceneTask, load_task_scene
+from experiments.tasks.scene_task import SceneTask, load_task_scene
 from vbgs.data.depth_png import write_depth_png
 from vbgs.data.formats import load_replica, load_scene, write_blender
 from vbgs.data.scene import Scene, hold_out_validation

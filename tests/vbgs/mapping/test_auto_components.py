@@ -47,7 +47,7 @@ def test_capacity_grows_in_buckets_without_a_compilation_per_frame(scene, monkey
         state, _ = mapping.update(state, frame, config)
         capacities.append(state.mixture.prior.n_components)
         active.append(int(grow.is_active(state.mixture.prior).sum()))
-    # measured (the Bayes-factor splits of stop 34): capacities 256, 256, 512 x6; 152
+    # measured (under the Bayes-factor splits): capacities 256, 256, 512 x6; 152
     # active after the first frame, 431 at the end (without splits the same capacities
     # and 399; the per-frame colour gain before split to 2048 slots and 1373)
     assert capacities == sorted(capacities) and len(set(capacities)) >= 2

@@ -1,0 +1,23 @@
+#!/bin/bash
+# GPU rows: answers at JAX's default precision (run side by side, so their seconds are not speed figures),
+# the library's tracking/inference tests on the GPU, then alone (speed figures): the tracking cost pair on the
+# object (given, then tracked poses) and bench stream.
+export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
+export PYTHONPATH=/tmp/site:$PWD
+nvidia-smi -L; git log --oneline -1 2>/dev/null
+python3 -c "import jax; print('jax', jax.__version__, jax.devices())" 2>&1 | tail -1
+ans() { name=$1; t=$2; shift 2; s=$(date +%s); timeout $t python3 -m experiments.run "$@" > /tmp/$name.out 2> /tmp/$name.err; rc=$?; e=$(date +%s); echo "== $name rc=$rc wall=$((e - s)) s $*"; tail -1 /tmp/$name.out > $OUT/$name.json; tail -3 /tmp/$name.err | cut -c1-300; }
+ans fit_image 150 fit-image --json &
+ans fit_scene_object 200 fit-scene --scene object --json &
+ans fit_scene_room 220 fit-scene --scene room --json &
+ans fit_scene_walk 220 fit-scene --scene walk --json &
+ans track_room 220 fit-scene --scene room --poses track --json &
+timeout 200 python3 -m pytest -q -o addopts="" --import-mode=importlib -m "not slow" -n 4 --dist loadfile -p no:cacheprovider -rf tests/vbgs/tracking tests/vbgs/inference > /tmp/pytest.log 2>&1; echo "pytest rc=$?"; tail -6 /tmp/pytest.log
+wait
+ans cost_object_given 150 fit-scene --scene object --json
+ans cost_object_track 150 fit-scene --scene object --poses track --json
+s=$(date +%s); timeout 150 python3 -m experiments.run bench stream --sizes 128 640x480 --out /tmp/bench > /tmp/bench.out 2>/tmp/bench.err; echo "== bench rc=$? wall=$(( $(date +%s) - s )) s"
+tail -30 /tmp/bench.out; tail -3 /tmp/bench.err
+cp /tmp/bench/bench_stream_gpu.md $OUT/ 2>/dev/null; cp /tmp/bench/bench_stream_gpu_profile.md $OUT/ 2>/dev/null
+for f in $OUT/*.json; do python3 -c "import json,sys; d=json.load(open('$f')); print('$f', {k: d.get(k) for k in ('psnr','seconds_per_frame','tracking_seconds_per_frame','ate_rmse')})" 2>/dev/null; done

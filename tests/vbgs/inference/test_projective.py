@@ -1,0 +1,149 @@
+"""vbgs.inference.projective: candidates by projection, held to the KD-tree reference."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from vbgs import mapping
+from vbgs.data.formats import load_scene
+from vbgs.inference import candidates, grow, model, projective
+from vbgs.inference.stepper import Stepper
+from vbgs.render.camera import unproject
+
+C = 16
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene("object", size=48, n_train=12, n_test=1, seed=0)
+
+
+@pytest.fixture(scope="module")
+def grown(scene):
+    """A map grown on eight frames, and the next frame's points, centred."""
+    config = mapping.Config(components=3000)
+    state = mapping.init(config, key=jax.random.key(0))
+    for frame in scene.train[:8]:
+        state, _ = mapping.update(state, frame, config)
+    frame = scene.train[8]
+    xyz, rgb = unproject(frame.camera, frame.rgb, frame.depth)
+    prior = state.mixture.prior
+    return state, frame, (xyz - np.asarray(prior.origin)).astype(np.float32), rgb
+
+
+def _search(state, frame, x, n_candidates=C):
+    prior = state.mixture.prior
+    rot_t, shift = projective.world_to_camera(frame.camera, prior.origin)
+    depth = float(np.median(x @ rot_t[2] + shift[2]))
+    tiling = projective.plan(frame.camera, state.rule.cell, depth, n_candidates)
+    v = projective.view(frame.camera, prior.origin)
+    cand, d2 = projective.search(prior.space.mean, prior.alpha > 1e-5, v, jnp.asarray(x),
+                                 jnp.ones(len(x), jnp.float32), tiling)
+    return np.asarray(cand), np.asarray(d2)
+
+
+def test_projection_finds_the_kdtree_nearest_components(grown):
+    """Each point's nearest component (the one that takes most of its responsibility) is
+    among its projective candidates for nearly every point, and the distance to the
+    nearest candidate is the KD-tree's wherever it found that component."""
+    state, frame, x, _ = grown
+    prior = state.mixture.prior
+    cand, d2 = _search(state, frame, x)
+    dist, kd = candidates.query_with_distance(candidates.means_tree(prior.space.mean), x, C)
+    found = np.array([a[0] in set(b) for a, b in zip(kd, cand, strict=True)])
+    assert found.mean() > 0.97
+    np.testing.assert_allclose(np.sqrt(d2[found]), dist[found], rtol=1e-4, atol=1e-6)
+    active = grow.is_active(prior)
+    assert active[cand[cand >= 0]].all()  # empty slots are never candidates
+
+
+def test_same_components_give_the_same_responsibilities(grown):
+    """Where the two searches list the same components for a point, the E-step's
+    responsibilities (and log-normaliser) are the same, whatever order they are listed in."""
+    state, frame, x, rgb = grown
+    prior = state.mixture.prior
+    cand, _ = _search(state, frame, x, n_candidates=4)
+    _, kd = candidates.query_with_distance(candidates.means_tree(prior.space.mean), x, 4)
+    same = np.array([set(a) == set(b) for a, b in zip(kd, cand, strict=True)])
+    assert same.mean() > 0.5
+    terms = model.component_terms(prior, 0.1)
+    xs, cs = jnp.asarray(x[same]), jnp.asarray(rgb[same])
+    lp = candidates.candidate_logits(xs, cs, terms, jnp.asarray(cand[same]), 0.1)
+    lk = candidates.candidate_logits(xs, cs, terms, jnp.asarray(kd[same]), 0.1)
+    order_p, order_k = np.argsort(cand[same], 1), np.argsort(kd[same], 1)
+    rp = np.take_along_axis(np.asarray(jax.nn.softmax(lp, -1)), order_p, 1)
+    rk = np.take_along_axis(np.asarray(jax.nn.softmax(lk, -1)), order_k, 1)
+    np.testing.assert_allclose(rp, rk, atol=1e-6)
+
+
+def _few_components():
+    """Nine components on a wall 2 units in front of an identity camera, and its pixels."""
+    from vbgs.render.camera import Camera
+
+    cam = Camera(40.0, 40.0, 16.0, 16.0, 32, 32, np.eye(4))
+    g = np.linspace(-0.6, 0.6, 3)
+    means = np.array([(a, b, 2.0) for a in g for b in g], np.float32)
+    rng = np.random.default_rng(0)
+    xyz = np.concatenate([means + rng.normal(0, 0.05, means.shape) for _ in range(30)])
+    rgb = rng.uniform(0, 1, (len(xyz), 3)).astype(np.float32)
+    prior = model.init(means, rng.uniform(0, 1, (9, 3)).astype(np.float32), 9,
+                       key=jax.random.key(0), scheme="data")
+    return cam, prior, xyz.astype(np.float32), rgb
+
+
+def test_stepper_with_projection_equals_the_kdtree_stepper_when_all_are_listed():
+    """Nine components, all within every point's neighbourhood: both searches list them
+    all, so the learned posteriors are the same (the fast path against its reference)."""
+    cam, prior, xyz, rgb = _few_components()
+    spacing = grow.mean_spacing(prior)
+    kd = Stepper(prior, estep="sparse", n_candidates=C, search="kdtree")
+    pj = Stepper(prior, estep="sparse", n_candidates=C, search="projective", spacing=spacing)
+    pj.tiling = projective.Tiling(32, 32, 16, 16, C)  # 2 x 2 tiles: every pool holds all
+    a, ia = kd(model.start(prior), xyz, rgb)
+    b, ib = pj(model.start(prior), xyz, rgb, camera=cam)
+    for u, w in zip(jax.tree.leaves(a.posterior), jax.tree.leaves(b.posterior), strict=True):
+        np.testing.assert_allclose(np.asarray(u), np.asarray(w), rtol=2e-5, atol=1e-5)
+    np.testing.assert_allclose(float(ia.elbo), float(ib.elbo), rtol=1e-5)
+
+
+def test_a_point_with_no_component_near_is_not_learned():
+    """Points whose pool is empty (nothing of the map projects near them) get weight 0
+    and are counted out by the reach, as the KD-tree's far points are."""
+    cam, prior, xyz, rgb = _few_components()
+    far = np.array([[0.0, 0.0, 0.5]], np.float32)  # in front of the wall, off every list
+    pj = Stepper(prior, estep="sparse", n_candidates=C, search="projective", spacing=0.6,
+                 reach=1.0)
+    pj.tiling = projective.Tiling(32, 32, 4, 16, C)
+    pts = np.concatenate([xyz[:20], far * 0 + [[5.0, 5.0, 2.0]]]).astype(np.float32)
+    cols = np.concatenate([rgb[:20], rgb[:1]])
+    _, info = pj(model.start(prior), pts, cols, camera=cam)
+    assert info.learned[:20].all() and not info.learned[20]
+
+
+def test_projective_stream_of_a_fixed_reference_is_order_free(scene):
+    """Under prior assignment with a fixed reference the candidates depend on the
+    reference and the frame only: the frames in reverse order give the same posterior."""
+    config = mapping.Config(components=400, search="projective")
+    xyz, rgb = (np.concatenate(a) for a in zip(
+        *(unproject(f.camera, f.rgb, f.depth) for f in scene.train[:6]), strict=True))
+    prior = model.init(xyz, rgb, 400, key=jax.random.key(0), scheme="data",
+                       config=config.prior, bounds=scene.bounds)
+
+    def run(frames):
+        state = mapping.init(config, key=jax.random.key(0), prior=prior)
+        for frame in frames:
+            state, _ = mapping.update(state, frame, config)
+        return state.mixture.posterior
+
+    a, b = run(scene.train[:6]), run(scene.train[:6][::-1])
+    for u, w in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_allclose(np.asarray(u), np.asarray(w), rtol=1e-4, atol=1e-4)
+
+
+def test_bad_settings_are_refused():
+    _, prior, _, _ = _few_components()
+    with pytest.raises(ValueError, match="projective search .* spacing"):
+        Stepper(prior, estep="sparse", search="projective")
+    with pytest.raises(ValueError, match="search must be one of kdtree, projective"):
+        mapping.Config(search="octree")

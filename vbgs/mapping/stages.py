@@ -1,0 +1,60 @@
+"""Where a frame's time goes: an opt-in timer of the mapper's stages.
+
+JAX dispatches device work asynchronously, so a host profiler charges a stage's device
+time to whichever later line first waits for it. Inside :func:`timing`, each stage of
+:func:`vbgs.mapping.update` waits for what it produced before its clock stops, so each
+stage is charged its own work (the price: no overlap of host and device work, so the
+sum is a little more than an untimed frame). Outside it, :func:`stage` costs a function
+call and times nothing::
+
+    with stages.timing() as seconds:
+        state, info = learner.update(state, frame)
+    seconds   # {"prepare": ..., "grow": ..., "search+step": ..., "evidence": ...}
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import jax
+
+_seconds: list[dict[str, float] | None] = [None]
+
+
+@contextmanager
+def timing() -> Iterator[dict[str, float]]:
+    """Time the stages run inside: yields the dict of seconds per stage it fills."""
+    before, _seconds[0] = _seconds[0], {}
+    try:
+        yield _seconds[0]
+    finally:
+        _seconds[0] = before
+
+
+class _Stage:
+    __slots__ = ("outputs",)
+
+    def __init__(self):
+        self.outputs = []
+
+    def __call__(self, *trees):
+        """Register what the stage produced (its clock stops when that is ready)."""
+        self.outputs.extend(trees)
+        return trees[0] if len(trees) == 1 else trees
+
+
+@contextmanager
+def stage(name: str) -> Iterator[_Stage]:
+    """Charge the time inside to ``name`` when :func:`timing` is on (after waiting for
+    the arrays passed to the yielded callable)."""
+    s = _Stage()
+    seconds = _seconds[0]
+    if seconds is None:
+        yield s
+        return
+    t0 = time.perf_counter()
+    yield s
+    jax.block_until_ready([o for o in s.outputs if o is not None])
+    seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - t0
