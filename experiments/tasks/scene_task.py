@@ -231,12 +231,6 @@ class SceneTask:
         simulated sensor on a folder whose record says its training depth already came
         from one is refused."""
         data = data_sensor(self.scene, self.format)
-        if (self.sensor_level is not None and valid_level(self.sensor_level)
-                and self.simulate_sensor == "exact" and (self.sensor or data.sensor) == "exact"):
-            raise ValueError(f"sensor_level {self.sensor_level!r} scales a sensor's noise, but "
-                             f"no noisy sensor is simulated (--simulate-sensor exact) or "
-                             f"learned under (--sensor exact); give --simulate-sensor or "
-                             f"--sensor kinect|realsense|mono with it, or drop it")
         if self.sensor is None:
             object.__setattr__(self, "sensor", data.sensor)
         if self.sensor_level is None:
@@ -248,15 +242,6 @@ class SceneTask:
                              f"{self.simulate_sensor!r} on top of it would corrupt it twice: "
                              f"drop --simulate-sensor (the folder's sensor is the default "
                              f"--sensor)")
-
-
-def valid_level(level) -> bool:
-    """A well-formed sensor level (a malformed one is refused with its own message)."""
-    try:
-        check_level(level)
-    except ValueError:
-        return False
-    return True
 
 
 def load_task_scene(task: SceneTask) -> Scene:

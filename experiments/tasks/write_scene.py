@@ -30,12 +30,13 @@ import time
 from pathlib import Path
 
 from experiments.progress import progress as progress_bar
-from experiments.tasks.scene_task import SceneTask, load_task_scene, valid_level
+from experiments.tasks.scene_task import SceneTask, load_task_scene
 from experiments.tasks.sensor_swap import simulate_training_depth
 from vbgs.data.blender import depth_files, write_blender
 from vbgs.data.scene import size_text
 from vbgs.data.sensor_record import SENSOR_RECORD, write_sensor_record
 from vbgs.data.synthetic import SCENES
+from vbgs.sensors import check_level
 
 WRITERS = {"blender": write_blender}  # layouts with train, test and val splits of their own
 
@@ -51,6 +52,15 @@ def check_out(out, force: bool) -> Path:
         raise ValueError(f"--out {out} is not empty ({n} entries); give a new folder, or "
                          f"--force to write into it (files of the same names are replaced)")
     return out
+
+
+def valid_level(level) -> bool:
+    """A well-formed sensor level (a malformed one is refused with its own message)."""
+    try:
+        check_level(level)
+    except ValueError:
+        return False
+    return True
 
 
 def write_scene(scene: str, out, *, size=128, frames: int = 60, n_test: int = 8,

@@ -687,7 +687,7 @@ FLAGS = [
     ("sensor level without a sensor", ["--sensor-level", "2"],
      "no noisy sensor is simulated (--simulate-sensor exact)"),
     ("sensor level with exact", ["--sensor-level", "0.5", "--sensor", "exact"],
-     "sensor_level 0.5 scales a sensor's noise"),
+     "--sensor-level scales a sensor's noise, but no noisy sensor"),
     ("size beyond memory", ["--size", "100000"], "give a smaller --size"),
     ("depth-scale 0", ["--depth-scale", "0"], "--depth-scale must be > 0"),
     ("depth-scale negative", ["--depth-scale", "-1000"], "--depth-scale must be > 0"),
