@@ -205,6 +205,26 @@ def _batches(items: list, size: int):
         yield items[start:start + size]
 
 
+# A model input side under this many pixels leaves the network nothing to see: it gives
+# one depth for the whole frame.
+MIN_INPUT_SIDE = 8
+
+
+def check_numbers(args) -> None:
+    """The scales (PNG codes per scene unit) finite and > 0; an input side of at least
+    MIN_INPUT_SIDE pixels."""
+    for flag, value, of in (("--depth-scale", args.depth_scale, "written depth PNGs"),
+                            ("--reference-scale", args.reference_scale, "the reference's "
+                                                                         "depth PNGs")):
+        if not (np.isfinite(value) and value > 0):
+            raise CliError(f"{flag} must be a finite number > 0 (codes per scene unit of "
+                           f"{of}: 1000 for millimetres, 5000 for TUM), got {value:g}")
+    if args.input_size is not None and args.input_size < MIN_INPUT_SIDE:
+        raise CliError(f"--input-size must be at least {MIN_INPUT_SIDE} pixels (the model "
+                       f"input's shorter side), got {args.input_size}: smaller leaves the "
+                       f"network nothing to see and gives one depth for the whole frame")
+
+
 def run(args) -> dict:
     """Run the CLI on parsed arguments; returns the summary it prints."""
     from tqdm import tqdm
@@ -214,6 +234,7 @@ def run(args) -> dict:
                        "download a depth model to .onnx and pass its path)")
     if not 0.0 < args.reference_fraction <= 1.0:
         raise CliError(f"--reference-fraction must be in (0, 1], got {args.reference_fraction}")
+    check_numbers(args)
     check_output_folder(args.output)
     check_apart(args.input, args.output)
     frames = list_frames(args.input)

@@ -159,11 +159,37 @@ def _release(state: StreamState, config: StreamConfig) -> tuple[StreamState, lis
     return state._replace(held=()), ready
 
 
+# A prediction whose finite values span less than this share of their largest magnitude
+# is one value: the network saw nothing it could tell apart.
+CONSTANT_SPREAD = 1e-6
+
+
+def prediction_problem(prediction: np.ndarray) -> str | None:
+    """What makes a network's raw output ``[h, w]`` unusable as depth, in words naming the
+    output (its range), or None: no finite value, none > 0, or one value everywhere."""
+    pred = np.asarray(prediction, np.float64)
+    finite = pred[np.isfinite(pred)]
+    if not finite.size:
+        return f"the model's output is NaN or infinite at all {pred.size} pixels"
+    lo, hi = float(finite.min()), float(finite.max())
+    spans = f"the model's output spans {lo:.4g} to {hi:.4g}"
+    if hi <= 0:
+        return f"{spans}: no pixel is > 0 (depth is positive; inverse depth too)"
+    if hi - lo <= CONSTANT_SPREAD * max(abs(lo), abs(hi)):
+        return f"the model's output is {hi:.4g} at every finite pixel: one value, no shape"
+    return None
+
+
 def arrive(state: StreamState, frame, prediction: np.ndarray, config: StreamConfig
            ) -> tuple[StreamState, list]:
     """One frame arrives with the network's ``prediction [h, w]``: the new state and the
     frames released now, ``[(frame, depth [h, w])]`` in arrival order (none while the
-    alignment waits for more frames)."""
+    alignment waits for more frames). A prediction no depth can come from
+    (:func:`prediction_problem`) is refused, naming the model's output."""
+    problem = prediction_problem(prediction)
+    if problem:
+        raise ValueError(f"--depth-model, frame {state.arrived}: {problem}; check the model "
+                         f"and --depth-kind (python -m depth on the frames says more)")
     state = state._replace(held=(*state.held, Arrived(state.arrived, frame,
                                                       np.asarray(prediction))),
                            arrived=state.arrived + 1)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from experiments.cli.options import add_json, add_seed
-from experiments.cli.output import check_fewer_components, check_output_file
+from experiments.cli.output import check_fewer_components, check_fits_memory, check_output_file
 from experiments.tasks.settings import ASSIGN, INIT, METHOD, ORDER, STREAM, add_choice
 
 
@@ -37,6 +37,8 @@ def run(args) -> dict:
                      order=args.order, assign=args.assign, patch=args.patch, reassign=reassign,
                      method=args.method, steps=args.steps)
     check_output_file(args.save, "--save", ".png")  # output paths and sizes before the fit
+    if args.size:
+        check_fits_memory(args.size, 1)
     root = cache_root()  # bundled photos kept resized: no skimage.transform, no SciPy
     image = task_image(task, cache=root and root / "images")  # once: checked, then fitted
     h, w, _ = image.shape

@@ -18,6 +18,31 @@ _VBGS_STREAMS = ("VBGS learns each frame once by a conjugate update: it takes no
 _STEPPED = ("gradient", "vbgs-polish")  # the methods that take optimiser steps
 _FOR_STEPPED = "applies to the gradient baseline and vbgs-polish (--method gradient | vbgs-polish)"
 
+def _noisy_sensor(a) -> bool:
+    """A noisy sensor is simulated, learned under, or measured the folder's depth (its
+    record); a malformed level counts as applying (it is refused with its own message)."""
+    from vbgs.data.sensor_record import data_sensor
+    from vbgs.sensors import check_level
+
+    try:
+        check_level(a.sensor_level)
+    except ValueError:
+        return True
+    if a.simulate_sensor != "exact":
+        return True
+    if a.sensor is not None:
+        return a.sensor != "exact"
+    try:
+        return data_sensor(a.scene, a.format).sensor != "exact"
+    except ValueError:  # a malformed record is refused when the task reads it
+        return True
+
+
+_SENSOR_LEVEL = ("sensor_level", "--sensor-level", _noisy_sensor,
+                 "scales a sensor's noise, but no noisy sensor is simulated (--simulate-sensor "
+                 "exact) or learned under (--sensor exact, this scene's own); give "
+                 "--simulate-sensor or --sensor kinect|realsense|mono with it, or drop it")
+
 RULES = {
     "fit-scene": (
         ("replay", "--replay", lambda a: a.method in _STEPPED,
@@ -52,8 +77,14 @@ RULES = {
         ("depth_reference", "--depth-reference", lambda a: bool(a.depth_model),
          "says what aligns the depth of --depth-model ONNX; without a model the folder's own "
          "depth is used"),
+        ("drift", "--drift", lambda a: a.poses == "odometry",
+         "sets the error of the simulated odometry of --poses odometry; with --poses "
+         "given or track there is none"),
+        _SENSOR_LEVEL,
     ),
+    "tune": (_SENSOR_LEVEL,),
 }
+
 
 
 def given_flags(parser: argparse.ArgumentParser, argv: list[str], dests) -> set[str]:

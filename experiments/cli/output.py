@@ -1,11 +1,18 @@
-"""Printing results and errors the same way for every command."""
+"""Printing results and errors the same way for every command, and the one JSON writer
+(:func:`dumps`): strict JSON, a number that is not finite (a PSNR of +inf when the render
+equals its target, NaN where nothing was measured) ``null`` with a reason beside it
+(``"psnr": null, "psnr_note": "..."``), so strict parsers (JavaScript's ``JSON.parse``,
+``jq``) read every line."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 from pathlib import Path
+
+import numpy as np
 
 # Keys shown first in the human-readable summary, when present.
 _HEADLINE = ("psnr", "ssim", "depth_l1", "seconds", "seconds_per_frame", "components_used",
@@ -18,9 +25,7 @@ def fail(err: Exception, as_json: bool = False) -> int:
     parses the last line of stdout gets the failure, not nothing)."""
     print(f"error: {err}", file=sys.stderr)
     if as_json:
-        import json
-
-        print(json.dumps({"error": str(err), "error_type": type(err).__name__}))
+        print(dumps({"error": str(err), "error_type": type(err).__name__}))
     return 2
 
 
@@ -88,11 +93,43 @@ def size_arg(text: str):
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
-def check_scene_components(components: int, frames: int, size) -> None:
-    """:func:`check_fewer_components` for a stream of at most ``frames`` frames of
-    ``size`` (:func:`vbgs.data.scene.parse_size`)."""
+# Bytes a frame's pixel holds in memory: colour and depth (float32), and while a synthetic
+# frame is ray cast its 3x3 rays per pixel and their hits (float64): a lower bound.
+FRAME_BYTES_PER_PIXEL = 16
+RAYCAST_BYTES_PER_PIXEL = 9 * 3 * 8 * 2
+
+
+def physical_memory() -> int | None:
+    """This machine's memory in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_fits_memory(size, frames: int, flag: str = "--size") -> None:
+    """Refuse a frame size whose frames cannot fit in this machine's memory (a lower bound:
+    their colour and depth, and one frame's ray cast), instead of failing inside an
+    allocation with a traceback."""
     from vbgs.data.scene import size_pixels, size_text
 
+    pixels = size_pixels(size)
+    need = pixels * (frames * FRAME_BYTES_PER_PIXEL + RAYCAST_BYTES_PER_PIXEL)
+    have = physical_memory()
+    if have and need > have:
+        raise ValueError(f"{flag} {size_text(size)}: {frames} frame{'s' * (frames != 1)} of "
+                         f"{pixels:,} pixels "
+                         f"need at least {need / 2**30:,.0f} GiB, and this machine has "
+                         f"{have / 2**30:,.0f} GiB; give a smaller {flag}")
+
+
+def check_scene_components(components: int, frames: int, size) -> None:
+    """:func:`check_fewer_components` for a stream of at most ``frames`` frames of
+    ``size`` (:func:`vbgs.data.scene.parse_size`), and frames that fit in memory
+    (:func:`check_fits_memory`)."""
+    from vbgs.data.scene import size_pixels, size_text
+
+    check_fits_memory(size, frames)
     text = size_text(size)
     shown = text if "x" in text else f"{text}x{text}"
     check_fewer_components(components, frames * size_pixels(size),
@@ -120,7 +157,7 @@ def _short(value):
 def print_result(command: str, result: dict, *, as_json: bool) -> None:
     """Print a readable summary, or with ``as_json`` one JSON object as the last line."""
     if as_json:
-        print(json.dumps(result, default=float))
+        print(dumps(result))
         return
     from tabulate import tabulate  # only for the readable summary (start-up time)
 
@@ -134,3 +171,56 @@ def print_result(command: str, result: dict, *, as_json: bool) -> None:
     keys = [k for k in _HEADLINE if k in result] + [k for k in result if k not in _HEADLINE]
     print(f"{command}:")
     print(tabulate([(k, _short(result[k])) for k in keys], tablefmt="plain"))
+
+
+# --------------------------------------------------------------------------- strict JSON
+
+
+def _plain(value):
+    """numpy and jax scalars and arrays as Python numbers and lists; the rest unchanged."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if not isinstance(value, (str, bytes, dict, list, tuple)) and hasattr(value, "__array__"):
+        return np.asarray(value).tolist()
+    return value
+
+
+def _why(key: str, value: float) -> str:
+    if math.isnan(value):
+        return "not a number (NaN): nothing to measure it on in this run"
+    sign = "+" if value > 0 else "-"
+    if value > 0 and "psnr" in key.lower():
+        return "+infinity: zero error, the render equals its target exactly"
+    return f"{sign}infinity: the quantity has no finite value in this run"
+
+
+def _bad(value) -> bool:
+    return isinstance(value, float) and not math.isfinite(value)
+
+
+def sanitise(value, key: str = ""):
+    """``value`` with every non-finite float ``null`` and, in a dict, a ``<key>_note``
+    saying why (for a list: which entries)."""
+    value = _plain(value)
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            v = _plain(v)
+            if _bad(v):
+                out[k], out[f"{k}_note"] = None, _why(str(k), v)
+                continue
+            if isinstance(v, (list, tuple)):
+                bad = [i for i, x in enumerate(v) if _bad(_plain(x))]
+                if bad:
+                    out[f"{k}_note"] = (f"entries {', '.join(map(str, bad[:8]))} are null: "
+                                        f"{_why(str(k), float(_plain(v[bad[0]])))}")
+            out[k] = sanitise(v, str(k))
+        return out
+    if isinstance(value, (list, tuple)):
+        return [None if _bad(_plain(v)) else sanitise(v, key) for v in value]
+    return value
+
+
+def dumps(value, **kw) -> str:
+    """Strict JSON of ``value`` (:func:`sanitise` first; unknown types as ``str``)."""
+    return json.dumps(sanitise(value), allow_nan=False, default=str, **kw)

@@ -25,8 +25,8 @@ def add(sub):
     add_val_views(p, help="validation views")
     p.add_argument("--seed", type=int, default=0,
                    help="the scene's views and the sensor's noise, as fit-scene --seed")
-    add_simulated_sensor(p, 1.0, "noise multiplier of the simulated sensor (0: exact depth "
-                         "values, 1: the published model, 2: twice its noise)")
+    add_simulated_sensor(p, None, "noise multiplier of the simulated sensor (0: exact depth "
+                         "values, 1: the published model (default), 2: twice its noise)")
     p.add_argument("--format", choices=WRITE_FORMATS, default=WRITE_FORMATS[0],
                    help="dataset layout (blender: train, test and val splits)")
     p.add_argument("--out", required=True, metavar="FOLDER", help="the folder to write")

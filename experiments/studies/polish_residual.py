@@ -18,12 +18,12 @@ polish without replay went below VBGS").
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 import jax.numpy as jnp
 
 from experiments.learners import PolishLearner
+from experiments.cli.output import dumps
 from experiments.tasks.protocol import evaluate, stream_frames
 from experiments.tasks.scene_task import SceneTask, prepare_scene
 from vbgs.baseline import to_splats
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
                      replay=args.replay, steps_per_frame=args.steps_per_frame,
                      n_val=args.val_views, size=args.size, components=args.components,
                      frames=args.frames, seed=args.seed)
-    print(json.dumps(run(task)))
+    print(dumps(run(task)))
     return 0
 
 

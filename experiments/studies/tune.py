@@ -152,6 +152,12 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
                              f"values") from None
     if not grid:
         raise ValueError("--grid needs at least one NAME=V1,V2,... entry")
+    for name, values in grid.items():
+        repeated = sorted({str(v) for v in values if values.count(v) > 1})
+        if repeated:
+            raise ValueError(f"--grid {name}: {', '.join(repeated)} is listed more than once; "
+                             f"give each value once (a repeated value makes the table's "
+                             f"spread read as if {name} had less effect)")
     return grid
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from experiments.progress import progress as progress_bar
+from experiments.cli.output import dumps
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"  # the bundled configs
 
@@ -106,7 +107,7 @@ def _write_plan(out: Path, config, plan, version: str) -> None:
                      for c in plan.cells],
            "skipped": [{"grid": s.grid, "settings": dict(s.settings), "reason": s.reason}
                        for s in plan.skipped]}
-    write_text_atomic(out / "plan.json", json.dumps(doc, indent=1, default=str))
+    write_text_atomic(out / "plan.json", dumps(doc, indent=1))
     write_text_atomic(out / "config.toml", Path(config.source).read_text())
 
 

@@ -84,6 +84,10 @@ RULES: tuple[Rule, ...] = (
     Rule("steps_per_frame", lambda s: s["task"] == "image", DROP,
          "an image has no frames"),
     Rule("protocol", lambda s: s["task"] == "image", DROP, "an image has no frame stream"),
+    Rule("simulate_sensor", lambda s: s["task"] == "image"
+         and s.get("simulate_sensor", "exact") != "exact", SKIP,
+         "an image has no depth for a simulated sensor to corrupt (its cell would run "
+         "without the sensor asked for)"),
     # both methods learn from the same corrupted training frames: no method rule
     Rule("simulate_sensor", lambda s: s.get("simulate_sensor", "exact") != "exact"
          and s.get("depth_model", "sensor") not in ("sensor", "none", "", None), SKIP,

@@ -16,6 +16,7 @@ from vbgs.data.calibration import check_depth_scale, check_intrinsics
 from vbgs.data.doctor import examine
 from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene, inside_span
+from vbgs.data.doctor import folder_checks, leaked_views, pairing_fixes
 from vbgs.data.synthetic import SCENES
 
 # fit-scene's consistency check looks at this many frames (the doctor at DOCTOR_FRAMES).
@@ -59,10 +60,60 @@ def within_trained_span(scene: Scene, frames: int) -> Scene:
                           record={**scene.record, "test_views_outside_span": outside})
 
 
-def warn_inconsistent(scene: Scene, format: str | None, where: str) -> None:
+# Frames narrower or shorter than this many pixels hold too few pixels for a score to mean
+# anything (a 1x1 frame is one colour: any splat matches it).
+MIN_SIDE = 8
+
+
+def warn_tiny_frames(scene: Scene, where: str) -> None:
+    """Say on stderr when the frames are under MIN_SIDE pixels on a side."""
+    cam = scene.train[0].camera
+    if min(cam.width, cam.height) < MIN_SIDE:
+        print(f"warning: scene {where!r}: frames of {cam.width}x{cam.height} pixels: a score "
+              f"over so few pixels measures next to nothing (a 1x1 frame is one colour); "
+              f"give a --size of at least {MIN_SIDE}", file=sys.stderr)
+
+
+def folder_findings(scene: Scene, where: str) -> Scene:
+    """A folder's own checks (:func:`vbgs.data.doctor.folder_checks`) before fit-scene's work:
+    intrinsics for another aspect and frozen depth refused; test views bit-identical to a
+    training frame left out of the scores (none left: refused); duplicate frames and rgb
+    images left out in pairing said on stderr."""
+    more = f"`python -m experiments.run check --scene {where}` says more"
+    for check in folder_checks(scene):
+        if check.ok is not False:
+            continue
+        if check.name in ("camera size", "frozen depth"):
+            raise ValueError(f"scene {where!r}: {check.name}: {check.message}; {more}")
+        print(f"warning: {check.name}: {check.message} ({more})", file=sys.stderr)
+    leaked = leaked_views(scene.train, scene.test)
+    if leaked.all() and len(leaked):
+        raise ValueError(f"scene {where!r}: every one of the {len(leaked)} test views is "
+                         f"bit-identical to a training frame, so no score would measure "
+                         f"what was learned; {more}")
+    if leaked.any():
+        print(f"note: {int(leaked.sum())} of {len(leaked)} test views are bit-identical to a "
+              f"training frame and are not scored", file=sys.stderr)
+        scene = scene._replace(test=[f for f, k in zip(scene.test, leaked, strict=True)
+                                     if not k],
+                               record={**scene.record, "test_views_leaked": int(leaked.sum())})
+    return scene
+
+
+def tum_reload(scene: str, format: str | None, size, given: dict, frames: int | None):
+    """``depth_delay -> training frames`` of a TUM folder loaded as ``scene`` was (the
+    doctor's re-pairing fixes); None for other formats."""
+    if format != "tum":
+        return None
+    return lambda delay: load_scene(scene, format=format, size=size, depth_delay=delay,
+                                    **given).train[:frames]
+
+
+def warn_inconsistent(scene: Scene, format: str | None, where: str, reload=None) -> None:
     """Say on stderr when a few training frames' depth does not agree across views,
-    naming the pose fix that makes it agree when one does."""
-    report = examine(scene.train, format, scene.record.get("depth_scale"), FIT_FRAMES)
+    naming the fix that makes it agree when one does."""
+    extra = pairing_fixes(scene.record, reload) if reload else ()
+    report = examine(scene.train, format, scene.record.get("depth_scale"), FIT_FRAMES, extra)
     check = report.checks[-1]
     if check.ok is False:
         fix = f"; likely: {report.fix_words}" if report.fix else ""
@@ -85,10 +136,15 @@ def check_scene(scene: str, format: str | None = None, size: int | None = 128,
     format = format or (detect_format(scene) if folder else None)
     loaded = load_scene(scene, format=format, size=size, **given)
     train = loaded.train[:frames]
-    report = examine(train, format, loaded.record.get("depth_scale"), DOCTOR_FRAMES)
+    reload = tum_reload(scene, format, size, given, frames)
+    extra = pairing_fixes(loaded.record, reload) if reload else ()
+    before = folder_checks(loaded._replace(train=train)) if folder else ()
+    report = examine(train, format, loaded.record.get("depth_scale"), DOCTOR_FRAMES, extra,
+                     tuple(before))
     cam = train[0].camera
     out = {"scene": scene, "format": format or "synthetic", "frames": len(train),
-           "healthy": report.healthy, "agreement": report.agreement, "fix": report.fix,
+           "healthy": report.healthy, "agreement": report.agreement,
+           "expected_agreement": report.expected, "fix": report.fix,
            "fix_words": report.fix_words, "fix_agreement": report.fix_agreement,
            "intrinsics": [float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)],
            "image_size": [int(cam.width), int(cam.height)], **loaded.record,

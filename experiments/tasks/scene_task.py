@@ -13,7 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.tasks.check import check_calibration, warn_inconsistent, within_trained_span
+from experiments.tasks.check import (
+    check_calibration,
+    folder_findings,
+    tum_reload,
+    warn_inconsistent,
+    warn_tiny_frames,
+    within_trained_span,
+)
 from experiments.tasks.continual import check_segments
 from experiments.tasks.init_schemes import oracle_start
 from experiments.learners import LEARNERS
@@ -242,8 +249,10 @@ def load_task_scene(task: SceneTask) -> Scene:
     ``task.n_val`` validation views (synthetic: extra views drawn like the test views;
     datasets: their validation split, see :mod:`vbgs.data.formats`)."""
     if task.scene in SCENES and not Path(task.scene).is_dir():
-        return load_scene(task.scene, size=task.size, n_train=task.frames, n_test=task.n_test,
-                          seed=task.seed, n_val=task.n_val)
+        scene = load_scene(task.scene, size=task.size, n_train=task.frames, n_test=task.n_test,
+                           seed=task.seed, n_val=task.n_val)
+        warn_tiny_frames(scene, task.scene)
+        return scene
     given = {k: v for k in ("intrinsics", "depth_scale") if (v := getattr(task, k)) is not None}
     if task.depth_model and Path(task.scene).is_dir() and (
             task.format or detect_format(task.scene)) == "blender":
@@ -251,13 +260,15 @@ def load_task_scene(task: SceneTask) -> Scene:
     scene = load_scene(task.scene, format=task.format, size=task.size, **given)
     refuse_bad_cameras(scene.train + scene.test + scene.val,
                        scene.record.get("depth_scale"), f"scene {task.scene!r}")
-    scene = within_trained_span(scene, task.frames)
+    warn_tiny_frames(scene, task.scene)
+    scene = within_trained_span(folder_findings(scene, task.scene), task.frames)
     scene = scene._replace(train=scene.train[: task.frames], test=scene.test[: task.n_test],
                            val=scene.val[: task.n_val])
     if Path(task.scene).is_dir():  # a dataset folder (a real scene by name is one view)
         fmt = task.format or detect_format(task.scene)
         if any(np.any(f.depth > 0) for f in scene.train):  # RGB-only: nothing to compare
-            warn_inconsistent(scene, fmt, task.scene)
+            warn_inconsistent(scene, fmt, task.scene, tum_reload(
+                task.scene, fmt, task.size, given, task.frames))
         scene = scene._replace(record={"format": fmt, **scene.record})
     return scene
 

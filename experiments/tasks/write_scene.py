@@ -36,6 +36,7 @@ from vbgs.data.blender import depth_files, write_blender
 from vbgs.data.scene import size_text
 from vbgs.data.sensor_record import SENSOR_RECORD, write_sensor_record
 from vbgs.data.synthetic import SCENES
+from vbgs.sensors import check_level
 
 WRITERS = {"blender": write_blender}  # layouts with train, test and val splits of their own
 
@@ -53,8 +54,17 @@ def check_out(out, force: bool) -> Path:
     return out
 
 
+def valid_level(level) -> bool:
+    """A well-formed sensor level (a malformed one is refused with its own message)."""
+    try:
+        check_level(level)
+    except ValueError:
+        return False
+    return True
+
+
 def write_scene(scene: str, out, *, size=128, frames: int = 60, n_test: int = 8,
-                n_val: int = 4, seed: int = 0, sensor: str = "exact", level: float = 1.0,
+                n_val: int = 4, seed: int = 0, sensor: str = "exact", level: float | None = None,
                 holes: str = "sensor", format: str = "blender", force: bool = False,
                 progress: bool = False) -> dict:
     """Write synthetic ``scene`` to folder ``out`` in ``format``, sensor ``sensor``'s
@@ -74,8 +84,14 @@ def write_scene(scene: str, out, *, size=128, frames: int = 60, n_test: int = 8,
                          f"validation split the loader holds every 8th training frame out "
                          f"for validation, and the folder's stream would be shorter than "
                          f"the scene's")
+    if level is not None and sensor == "exact" and valid_level(level):
+        raise ValueError(f"--sensor-level {level:g} scales a simulated sensor's noise, and "
+                         f"--simulate-sensor exact has none (the folder would record the "
+                         f"level for every later run): give --simulate-sensor "
+                         f"kinect|realsense|mono with it, or drop it")
     task = SceneTask(scene=scene, size=size, frames=frames, n_test=n_test, n_val=n_val,
-                     seed=seed, simulate_sensor=sensor, sensor_level=level,
+                     seed=seed, simulate_sensor=sensor,
+                     sensor_level=level,
                      sensor_holes=holes, sensor="exact")  # checks the settings
     out = check_out(out, force)
     start = time.perf_counter()

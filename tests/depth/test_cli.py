@@ -195,3 +195,21 @@ def test_output_in_the_input_folder_is_refused_and_nothing_is_written(scene, cap
                  "--kind", "metric", "--no-progress"]) == 2
     assert "--input folder" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in frames.iterdir()} == before
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--depth-scale", "0"], "--depth-scale must be a finite number > 0"),
+    (["--reference-scale", "0"], "--reference-scale must be a finite number > 0"),
+    (["--input-size", "-1"], "--input-size must be at least 8 pixels"),
+    (["--input-size", "0"], "--input-size must be at least 8 pixels"),
+    (["--input-size", "1"], "gives one depth for the whole frame"),
+], ids=["depth scale 0", "reference scale 0", "input -1", "input 0", "input 1"])
+def test_numbers_that_cannot_work_are_refused_before_any_frame(scene, capsys, extra, words):
+    tmp, frames, rgb, depth = scene
+    model = _save(depth_lookup_model(rgb, depth, 1.0, 0.0, space="depth"), tmp / "m.onnx")
+    out = tmp / "out"
+    code = main(["--model", model, "--input", str(frames), "--output", str(out),
+                 "--kind", "metric", "--no-progress", *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and not out.exists()

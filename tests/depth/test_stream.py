@@ -65,11 +65,21 @@ def test_sensor_reference_without_sensor_depth_is_refused(frames):
     rgb_only = [f._replace(depth=np.zeros_like(f.depth)) for f in frames[:2]]
     config = StreamConfig(kind="relative", reference="sensor")
     state, _, _ = init(), None, None
-    for f in rgb_only:
-        state, ready = arrive(state, f, _prediction(f, 1.0), config)
+    for f, seen in zip(rgb_only, frames[:2], strict=True):  # the model sees the scene
+        state, ready = arrive(state, f, _prediction(seen, 1.0), config)
         assert ready == []
     with pytest.raises(ValueError, match="--depth-reference views"):
         finish(state, config)
+
+
+@pytest.mark.parametrize("value, words", [
+    (1e9, "the model's output is 1e+09 at every finite pixel"),
+    (float("nan"), "NaN or infinite at all"), (-1.0, "no pixel is > 0"),
+    (0.0, "spans 0 to 0: no pixel is > 0")], ids=["1e9", "nan", "negative", "zero"])
+def test_a_prediction_that_is_no_depth_is_refused_naming_it(frames, value, words):
+    config = StreamConfig(kind="relative", reference="views")
+    with pytest.raises(ValueError, match=words.replace("+", r"\+")):
+        arrive(init(), frames[0], np.full_like(frames[0].depth, value), config)
 
 
 def test_metric_model_is_not_aligned_and_its_sky_is_cut(frames):

@@ -497,6 +497,182 @@ def test_given_intrinsics_are_used_and_reported(folders, room, capsys):
     assert record["intrinsics"][0] == pytest.approx(room.train[0].camera.fx)
 
 
+# --------------------------------------------------------------------------- what the doctor sees
+
+
+def each_line(name, edit):
+    """Rewrite every entry line of a TUM list file (the comment line kept)."""
+    return tum_lines(name, lambda lines: [out for line in lines for out in edit(line)])
+
+
+def later(seconds):
+    return lambda line: [f"{float(line.split()[0]) + seconds:.6f} {line.split()[1]}"]
+
+
+def frozen(folder):
+    first = (folder / "depth.txt").read_text().splitlines()[1].split()[1]
+    each_line("depth.txt", lambda line: [f"{line.split()[0]} {first}"])(folder)
+
+
+# Folders the doctor must not call healthy: (name, kind, change, extra flags, words).
+UNHEALTHY = [
+    ("duplicated frames", "tum", each_line("rgb.txt", lambda line: [line, line]), [],
+     "duplicates: 2 of 2 test views"),
+    ("depth 30 ms late", "tum", each_line("depth.txt", later(0.03)), [],
+     "subtract 0.033 s from depth.txt's stamps (tried: agreement"),
+    ("frozen depth", "tum", frozen, [], "frozen depth: 8 of 8 frames share"),
+    ("depth scale x5", "tum", lambda f: None, ["--depth-scale", "1000"],
+     "give --depth-scale 5000 (read at 1000 the depth is 5 x too long) (tried: agreement"),
+    ("depth scale /5", "replica", cam_params(scale=6553.5 * 5), [],
+     "give --depth-scale 6553.5 (read at 32767.5 the depth is 5 x too short)"),
+    ("another camera's aspect", "replica", cam_params(w=640, h=480, cx=319.5, cy=239.5), [],
+     "describes 640x480 images (aspect 1.333) and these are 24x24"),
+    ("half the poses", "tum", tum_lines("groundtruth.txt", lambda ls: ls[: len(ls) // 2]), [],
+     "5 have no pose (groundtruth.txt covers"),
+]
+
+
+@pytest.mark.parametrize("name, kind, change, extra, words", UNHEALTHY,
+                         ids=[c[0] for c in UNHEALTHY])
+def test_the_doctor_calls_none_of_these_healthy(folders, room, tmp_path, capsys, name, kind,
+                                                change, extra, words):
+    folder = copy(folders, kind, tmp_path)
+    change(folder)
+    given = ["--intrinsics", tum_intrinsics(room)] if kind == "tum" else []
+    record = refused(["check", "--scene", str(folder), "--size", "24", *given, *extra],
+                     capsys, words)
+    assert record["healthy"] is False
+    if "tried: agreement" in words:  # the fix named was tried and reached what the noise allows
+        assert record["fix_agreement"] >= 0.8 * record["expected_agreement"] > record[
+            "agreement"]
+
+
+@pytest.fixture
+def stopped(monkeypatch):
+    """Stop a run where the learner is built: after the scene's checks and warnings."""
+    monkeypatch.setitem(scene_task.LEARNERS, "vbgs", StopLearner)
+
+
+def test_a_score_from_leaked_test_views_is_refused(folders, room, tmp_path, capsys, stopped):
+    folder = copy(folders, "tum", tmp_path)
+    each_line("rgb.txt", lambda line: [line, line])(folder)
+    before = digest(folder)
+    refused(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)],
+            capsys, "every one of the 2 test views is bit-identical to a training frame")
+    assert digest(folder) == before
+
+
+@pytest.mark.parametrize("name, kind, change, words", [
+    ("frozen depth", "tum", frozen, "frozen depth: 8 of 8 frames share"),
+    ("another camera's aspect", "replica", cam_params(w=640, h=480, cx=319.5, cy=239.5),
+     "camera size: "),
+], ids=["frozen depth", "aspect"])
+def test_fit_scene_refuses_what_no_run_can_use(folders, room, tmp_path, capsys, stopped, name,
+                                               kind, change, words):
+    folder = copy(folders, kind, tmp_path)
+    change(folder)
+    given = ["--intrinsics", tum_intrinsics(room)] if kind == "tum" else []
+    refused(["fit-scene", "--scene", str(folder), *FIT, *given], capsys, words)
+
+
+def test_fit_scene_says_which_frames_it_left_out(folders, room, tmp_path, capsys, stopped):
+    """Half the poses: the frames without one are left out (the TUM association rule),
+    said on stderr; depth 30 ms late: the re-pairing that makes the views agree named."""
+    folder = copy(folders, "tum", tmp_path)
+    tum_lines("groundtruth.txt", lambda ls: ls[: len(ls) // 2])(folder)
+    refused(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)],
+            capsys, "stopped with 4 training frame(s)")
+    folder = copy(folders, "tum", tmp_path / "late")
+    each_line("depth.txt", later(0.03))(folder)
+    main(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)])
+    err = capsys.readouterr().err
+    assert "warning: consistency: only" in err and "subtract 0.033 s from depth.txt" in err
+
+
+def test_fit_scene_warns_on_half_the_poses(folders, room, tmp_path, capsys, stopped):
+    folder = copy(folders, "tum", tmp_path)
+    tum_lines("groundtruth.txt", lambda ls: ls[: len(ls) // 2])(folder)
+    main(["fit-scene", "--scene", str(folder), *FIT, "--intrinsics", tum_intrinsics(room)])
+    err = capsys.readouterr().err
+    assert "warning: pairing: 5 of 10 rgb images paired" in err and "are left out" in err
+
+
+def test_a_folder_of_two_formats_is_refused(folders, tmp_path, capsys, stopped):
+    folder = copy(folders, "tum", tmp_path)
+    shutil.copy(folders["blender"] / "transforms_train.json", folder)
+    refused(["check", "--scene", str(folder), "--size", "24"], capsys,
+            "holds the files of 2 dataset formats")
+
+
+@pytest.mark.parametrize("name, weights, bias, words", [
+    ("1e9 everywhere", (0.0, 0.0, 0.0), 1e9, "the model's output is 1e+09 at every finite pixel"),
+    ("NaN", (0.0, 0.0, 0.0), float("nan"), "the model's output is NaN or infinite at all"),
+    ("negative", (-1.0, -1.0, -1.0), -0.1, "the model's output spans -3.1 to"),
+    ("zero", (0.0, 0.0, 0.0), 0.0, "the model's output spans 0 to 0: no pixel is > 0"),
+], ids=["1e9", "nan", "negative", "zero"])
+def test_a_depth_model_whose_output_is_no_depth_is_named(tmp_path, capsys, name, weights,
+                                                         bias, words):
+    from depth.testing import channel_sum_model
+
+    path = tmp_path / "model.onnx"
+    onnx.save(channel_sum_model(weights, bias), path)
+    refused(["fit-scene", "--scene", "object", "--size", "16", "--components", "20",
+             "--frames", "4", "--depth-model", str(path), "--depth-kind", "metric"], capsys,
+            f"--depth-model, frame 0: {words}")
+
+
+def test_depth_scale_for_npy_depth_is_refused(room, tmp_path, capsys):
+    """A .npy folder's depth is read as it is: a --depth-scale would be recorded as used and
+    change nothing."""
+    folder = write_blender(room, tmp_path / "npy", depth="npy")
+    refused(["fit-scene", "--scene", str(folder), *FIT, "--depth-scale", "1000"], capsys,
+            "--depth-scale 1000 converts 16-bit PNG depth codes to scene units, but")
+
+
+def test_tiny_frames_run_with_a_warning(capsys, stopped):
+    refused(["fit-scene", "--scene", "object", "--size", "1", "--components", "2",
+             "--frames", "4", "--test-views", "1"], capsys, "stopped with 4 training")
+    main(["fit-scene", "--scene", "object", "--size", "1", "--components", "2", "--frames",
+          "4", "--test-views", "1"])
+    assert "frames of 1x1 pixels: a score over so few pixels measures next to nothing" in \
+        capsys.readouterr().err
+
+
+def test_a_still_camera_is_named_and_its_leaked_views_refused(room, tmp_path, capsys,
+                                                              stopped):
+    """Twelve identical frames: the duplicates said on stderr, the score refused."""
+    still = room._replace(train=[room.train[0]] * 12, test=[room.train[0]],
+                          val=[room.train[0]])
+    folder = write_blender(still, tmp_path / "still")
+    refused(["fit-scene", "--scene", str(folder), *FIT], capsys,
+            "every one of the 1 test views is bit-identical to a training frame")
+    main(["fit-scene", "--scene", str(folder), *FIT])
+    assert "every frame is the same image: a still camera" in capsys.readouterr().err
+
+
+def test_tune_refuses_a_repeated_grid_value(capsys):
+    refused(["tune", "--scene", "object", "--size", "24", "--components", "50", "--frames",
+             "4", "--grid", "splat_scale=1.0,1.2,1.0"], capsys,
+            "--grid splat_scale: 1.0 is listed more than once")
+
+
+def test_write_scene_refuses_a_level_for_the_exact_sensor(tmp_path, capsys):
+    out = tmp_path / "folder"
+    refused(["write-scene", "--scene", "object", "--size", "16", "--out", str(out),
+             "--sensor-level", "2"], capsys, "the folder would record the level")
+    assert not out.exists()
+
+
+def test_a_sweep_refuses_a_simulated_sensor_on_an_image_cell():
+    from experiments.sweep.rules import apply_rules
+
+    verdict = apply_rules({"task": "image", "dataset": "astronaut", "method": "vbgs",
+                           "simulate_sensor": "kinect"})
+    assert verdict.settings is None and "an image has no depth" in verdict.reason
+    assert apply_rules({"task": "image", "dataset": "astronaut", "method": "vbgs",
+                        "simulate_sensor": "exact"}).settings is not None
+
+
 # --------------------------------------------------------------------------- flags
 
 
@@ -504,6 +680,15 @@ OBJECT = ["fit-scene", "--scene", "object", "--size", "24", "--components", "50"
           "4", "--test-views", "1"]
 
 FLAGS = [
+    ("drift with given poses", ["--drift", "0.01,0.5"],
+     "--drift sets the error of the simulated odometry of --poses odometry"),
+    ("drift with tracked poses", ["--drift", "0.01,0.5", "--poses", "track"],
+     "with --poses given or track there is none"),
+    ("sensor level without a sensor", ["--sensor-level", "2"],
+     "no noisy sensor is simulated (--simulate-sensor exact)"),
+    ("sensor level with exact", ["--sensor-level", "0.5", "--sensor", "exact"],
+     "--sensor-level scales a sensor's noise, but no noisy sensor"),
+    ("size beyond memory", ["--size", "100000"], "give a smaller --size"),
     ("depth-scale 0", ["--depth-scale", "0"], "--depth-scale must be > 0"),
     ("depth-scale negative", ["--depth-scale", "-1000"], "--depth-scale must be > 0"),
     ("depth-scale nan", ["--depth-scale", "nan"], "give a finite number"),

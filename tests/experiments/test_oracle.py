@@ -42,7 +42,9 @@ def test_oracle_reproduces_the_view_and_its_neighbours(name):
 
 
 def test_oracle_command_on_a_loaded_folder(tmp_path, capsys):
-    write_blender(small_scene("room", size=48), tmp_path / "walk")
+    scene = small_scene("room", size=48)  # its test view, a training frame's twin, replaced
+    test = synthetic.render_views("room", [synthetic.room_poses(60, 1, 0)[0][7]], 48)
+    write_blender(scene._replace(test=test), tmp_path / "walk")
     assert main(["oracle", "--scene", str(tmp_path / "walk"), "--size", "48", "--json"]) == 0
     result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert result["psnr_same"] >= 30.0 and result["psnr_surround"] >= 24.0, result

@@ -161,6 +161,18 @@ def _reference_size(intr: dict, width: int, height: int, first, what: str):
     return first or (width, height)
 
 
+def _refuse_scale_for_npy(train_json: Path, depth_scale: float) -> None:
+    """A depth scale given for a folder whose training depth is all ``.npy`` (float depth
+    in scene units, no codes to scale) would be recorded as used and change nothing."""
+    pngs = list(train_json.parent.rglob("*_depth.png"))
+    npys = list(train_json.parent.rglob("*_depth.npy"))
+    if npys and not pngs:
+        raise ValueError(f"--depth-scale {depth_scale:g} converts 16-bit PNG depth codes to "
+                         f"scene units, but {train_json.parent}'s depth is {len(npys)} .npy "
+                         f"file(s) (float depth in scene units, read as they are): drop "
+                         f"--depth-scale, or rescale the .npy files")
+
+
 def _load_split(path: Path, keep, size, background, depth_scale, require_depth,
                 intrinsics=None) -> list[Frame]:
     """Frames of one transforms file; ``keep(n)`` gives the frame indices to read."""
@@ -249,6 +261,8 @@ def load_blender(
         raise FileNotFoundError(f"{folder}: neither {tests[0].name} nor {tests[1].name} found")
     background = tuple(float(c) for c in background)
     args = (size, background, depth_scale, require_depth, intrinsics)
+    if depth_from == "--depth-scale":
+        _refuse_scale_for_npy(train_json, depth_scale)
     train = _load_split(train_json, lambda n: select(n, stride, max_frames), *args)
     test = _load_split(test_json, lambda n: list(range(n))[:max_test], *args)
     val_json = folder / "transforms_val.json"

@@ -150,11 +150,22 @@ def load_replica(
                 f"{results / f'depth{images[i].name[5:-4]}.png'}"
             )
         rgb = read_rgb(images[i], background=_WHITE)
+        if not frames:
+            calibration = {**calibration, **stored_size(intrinsics, rgb)}
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], poses[k])
         depth = read_depth_png(depths[i], depth_scale)
         frame = validate_frame(Frame(rgb, depth, cam), f"{images[i]} (depth {depths[i].name})")
         frames.append(resize_frame(require_some_depth(frame, f"{depths[i]}"), size))
     return _split(folder.name, frames, test_every, val_every, calibration)
+
+
+def stored_size(intrinsics: Intrinsics, rgb: np.ndarray) -> dict:
+    """The image size the intrinsics were written for, when it is known, and the size of
+    the images as stored (a record's ``intrinsics_for``, ``images_stored``)."""
+    if not intrinsics.width:
+        return {}
+    return {"intrinsics_for": [int(intrinsics.width), int(intrinsics.height)],
+            "images_stored": [int(rgb.shape[1]), int(rgb.shape[0])]}
 
 
 def _split(name: str, frames: list[Frame], test_every, val_every, calibration) -> Scene:
@@ -229,19 +240,25 @@ def load_tum(
     depth_scale: float | None = None,
     max_time_diff: float = 0.02,
     val_every: int | None = VAL_EVERY,
+    depth_delay: float = 0.0,
 ) -> Scene:
     """Load a TUM RGB-D sequence (see module docstring); intrinsics and depth scale as
-    given, else the Freiburg preset the folder's name names (:mod:`vbgs.data.calibration`)."""
+    given, else the Freiburg preset the folder's name names (:mod:`vbgs.data.calibration`).
+    ``depth_delay`` (seconds) is taken off every depth.txt stamp before pairing (a depth
+    clock running late). The record says how the rgb images were paired
+    (:func:`pairing_record`)."""
     folder = Path(folder)
     intrinsics, depth_scale, calibration = tum_calibration(folder, intrinsics, depth_scale)
     rgb_t, rgb_rows = _read_list(folder / "rgb.txt", 1)
     depth_t, depth_rows = _read_list(folder / "depth.txt", 1)
+    depth_t = depth_t - depth_delay
     pose_t, pose_rows = _read_list(folder / "groundtruth.txt", 7)
     d_order, p_order = np.argsort(depth_t), np.argsort(pose_t)
-    matches = []
+    matches, no_depth, no_pose = [], 0, 0
     for i in np.argsort(rgb_t, kind="stable"):
         jd, dd = _nearest(depth_t[d_order], rgb_t[i])
         jp, dp = _nearest(pose_t[p_order], rgb_t[i])
+        no_depth, no_pose = no_depth + (dd > max_time_diff), no_pose + (dp > max_time_diff)
         if dd <= max_time_diff and dp <= max_time_diff:
             matches.append((i, d_order[jd], p_order[jp]))
     if not matches:
@@ -249,6 +266,9 @@ def load_tum(
             f"{folder}: no rgb image has both a depth image and a pose within "
             f"{max_time_diff} s; check the timestamps or raise max_time_diff"
         )
+    calibration = {**calibration, "pairing": pairing_record(
+        rgb_t, pose_t, [depth_rows[jd][0] for _, jd, _ in matches], no_depth, no_pose,
+        max_time_diff, depth_delay)}
     frames = []
     for k in select(len(matches), stride, max_frames):
         i, jd, jp = matches[k]
@@ -259,6 +279,8 @@ def load_tum(
         except ValueError as err:
             raise ValueError(f"{folder / 'groundtruth.txt'} at {pose_t[jp]}: {err}") from None
         rgb = read_rgb(folder / rgb_rows[i][0], background=_WHITE)
+        if not frames:
+            calibration = {**calibration, **stored_size(intrinsics, rgb)}
         depth = read_depth_png(folder / depth_rows[jd][0], depth_scale)
         cam = intrinsics.camera(rgb.shape[1], rgb.shape[0], pose)
         what = f"{folder / rgb_rows[i][0]} (depth {depth_rows[jd][0]})"
@@ -267,20 +289,45 @@ def load_tum(
     return _split(folder.name, frames, test_every, val_every, calibration)
 
 
+def pairing_record(rgb_t, pose_t, depth_files: list[str], no_depth: int, no_pose: int,
+                   max_time_diff: float, depth_delay: float = 0.0) -> dict:
+    """How a TUM folder's rgb images found their depth and pose (each the nearest within
+    ``max_time_diff`` s, the benchmark's association rule): images listed, those left out
+    for want of a depth image or a pose, the span groundtruth.txt covers, the frame period
+    and the depth files paired with more than one image."""
+    rgb_t = np.sort(np.asarray(rgb_t, np.float64))
+    names, counts = np.unique(np.asarray(depth_files), return_counts=True)
+    return {"rgb_listed": len(rgb_t), "rgb_paired": len(depth_files),
+            "rgb_without_depth": int(no_depth), "rgb_without_pose": int(no_pose),
+            "rgb_span": [float(rgb_t[0]), float(rgb_t[-1])],
+            "pose_span": [float(np.min(pose_t)), float(np.max(pose_t))],
+            "frame_period": float(np.median(np.diff(rgb_t))) if len(rgb_t) > 1 else None,
+            "depth_files_reused": int((counts > 1).sum()),
+            "depth_file_most_reused": [str(names[counts.argmax()]), int(counts.max())],
+            "max_time_diff": max_time_diff, "depth_delay": depth_delay}
+
+
 # --------------------------------------------------------------------------- entry point
 
 LOADERS = {"blender": load_blender, "replica": load_replica, "tum": load_tum}
+FORMAT_NAMES = {"blender": "Blender", "replica": "Replica", "tum": "TUM RGB-D"}
 
 
 def detect_format(folder) -> str:
     """``"blender"``, ``"replica"`` or ``"tum"`` from the files in ``folder``."""
     folder = Path(folder)
-    if any(folder.glob("transforms_*.json")):
-        return "blender"
-    if (folder / "traj.txt").exists() or (folder / "results").is_dir():
-        return "replica"
-    if any((folder / n).exists() for n in ("rgb.txt", "depth.txt", "groundtruth.txt")):
-        return "tum"
+    found = {name: marks for name, marks in (
+        ("blender", sorted(p.name for p in folder.glob("transforms_*.json"))),
+        ("replica", [n for n in ("traj.txt", "results") if (folder / n).is_file()
+                     or any((folder / n).glob("frame*.jpg"))]),
+        ("tum", [n for n in ("rgb.txt", "depth.txt", "groundtruth.txt")
+                 if (folder / n).exists()])) if marks}
+    if len(found) > 1:
+        held = "; ".join(f"{', '.join(m)} ({FORMAT_NAMES[k]})" for k, m in found.items())
+        raise ValueError(f"{folder} holds the files of {len(found)} dataset formats: {held}; "
+                         f"give --format {' or --format '.join(found)} to say which to read")
+    if found:
+        return next(iter(found))
     raise FileNotFoundError(
         f"cannot tell the dataset format of {folder}: expected transforms_train.json (Blender), "
         f"traj.txt + results/ (Replica) or rgb.txt + depth.txt + groundtruth.txt (TUM RGB-D)"

@@ -174,6 +174,26 @@ def validate_scene(scene: Scene) -> Scene:
     return scene
 
 
+def scale_scene(scene: Scene, factor: float) -> Scene:
+    """The same scene with every length times ``factor`` (depth, camera positions, bounds):
+    a scene given in other units. Nothing a learner or renderer does should change but
+    the units of its lengths."""
+    if not (np.isfinite(factor) and factor > 0):
+        raise ValueError(f"a scene's scale must be a finite number > 0, got {factor!r}")
+
+    def frame(f: Frame) -> Frame:
+        pose = np.array(f.camera.pose, np.float64)
+        pose[:3, 3] *= factor
+        return f._replace(depth=(f.depth * factor).astype(np.float32),
+                          camera=f.camera._replace(pose=pose))
+
+    lo, hi = scene.bounds
+    return scene._replace(train=[frame(f) for f in scene.train],
+                          test=[frame(f) for f in scene.test],
+                          val=[frame(f) for f in scene.val],
+                          bounds=(np.asarray(lo) * factor, np.asarray(hi) * factor))
+
+
 def bounds_from_frames(frames: list[Frame], max_depth: float = np.inf):
     """World box ``(lo [3], hi [3])`` float32 around all valid depth points of ``frames``.
 

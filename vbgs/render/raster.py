@@ -15,8 +15,12 @@ least about a pixel wide.
 
 Where splats may be (the camera inside a room sees splats beside and behind it):
 
-* **near plane**: splats with ``z <= near`` (default ``NEAR`` = 0.2 scene units,
-  as 3DGS) are culled; close to the camera the linearisation behind J breaks down.
+* **near the camera**: splats whose depth is within ``NEAR_SIGMAS`` (1) of their own
+  spread (``z² <= NEAR_SIGMAS² tr Σ``: the camera inside the splat's one-sigma ball) are
+  culled, and so is every splat at ``z <= near`` (default ``NEAR`` = 0: none in front
+  of the camera); close to the camera the linearisation behind J breaks down, and how
+  close is relative to the splat, not a length in scene units (3DGS's fixed 0.2 units
+  culled the whole of a scene given in kilometres).
 * **clamped Jacobian**: J is evaluated at ``t_x / z, t_y / z`` clamped to
   ``FRUSTUM_CLAMP`` (1.3) times the frustum's extent on each side of the optical
   axis (``-cx / fx .. (w - cx) / fx`` in x, likewise in y), as 3DGS does. Without
@@ -97,7 +101,8 @@ from vbgs.render.splats import Splats, check_splats
 BLUR_VARIANCE = 0.3  # px², low-pass dilation added to every projected covariance
 DEFAULT_TILE = 16  # tile side in pixels (measured best of 8/16/32 on a 2-core CPU)
 DEFAULT_CAPACITY = 2048  # splats kept per tile, nearest first (8 per pixel at tile 16)
-NEAR = 0.2  # default near plane (scene units, camera z), as 3DGS
+NEAR = 0.0  # default fixed near plane (scene units, camera z): none besides z > 0
+NEAR_SIGMAS = 1.0  # splats with z <= NEAR_SIGMAS * sqrt(tr Σ) are culled (scale-free)
 FRUSTUM_CLAMP = 1.3  # J is evaluated with x/z, y/z clamped to 1.3x the frustum extent (3DGS)
 FRUSTUM_CULL = 2.0  # means beyond 2x the frustum extent are culled (guard band beyond the clamp)
 MAX_FOOTPRINT = 1.0  # splats whose projected sigma exceeds 1 image size (longer side) are culled
@@ -142,7 +147,8 @@ def project(
     rot_wc = pose[:3, :3].T  # W, world -> camera
     t_cam = matmul(splats.means - pose[:3, 3], rot_wc.T)  # [k, 3]
     z = t_cam[:, 2]
-    in_front = z > near
+    spread = jnp.trace(splats.covs, axis1=-2, axis2=-1)  # [k] tr Σ, the one-sigma ball²
+    in_front = (z > near) & (z * z > NEAR_SIGMAS**2 * spread)
     z_safe = jnp.where(in_front, z, 1.0)  # keeps culled rows finite (and their gradients)
     tan_xy = t_cam[:, :2] / z_safe[:, None]  # [k, 2] x/z, y/z
     lo, hi = frustum_tangents(fx, fy, cx, cy, width, height)

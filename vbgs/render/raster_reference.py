@@ -11,7 +11,8 @@ splat through) shows up as a difference between the two.
 For a splat with world mean μ, covariance Σ, colour c and opacity o seen by a
 camera with camera-to-world pose ``[R | C]`` and intrinsics fx, fy, cx, cy:
 
-1. camera coordinates ``t = Rᵀ (μ - C)``; culled unless ``t_z > near``;
+1. camera coordinates ``t = Rᵀ (μ - C)``; culled unless ``t_z > near`` and
+   ``t_z² > NEAR_SIGMAS² tr Σ``;
 2. tangents ``τ = (t_x / t_z, t_y / t_z)``; culled unless, per axis,
    ``FRUSTUM_CULL · lo <= τ <= FRUSTUM_CULL · hi`` with ``lo = -c / f``,
    ``hi = (size - c) / f``;
@@ -41,6 +42,7 @@ from vbgs.render.raster import (
     FRUSTUM_CULL,
     MAX_FOOTPRINT,
     NEAR,
+    NEAR_SIGMAS,
     RenderOutput,
 )
 from vbgs.render.splats import Splats
@@ -66,7 +68,7 @@ def project_reference(splats: Splats, camera: Camera, near: float = NEAR,
     for i in range(k):
         t = rot.T @ (means[i] - centre)
         depth[i] = t[2]
-        if not t[2] > near:
+        if not (t[2] > near and t[2] ** 2 > NEAR_SIGMAS**2 * np.trace(covs[i])):
             continue
         tangent = t[:2] / t[2]
         if np.any(tangent < FRUSTUM_CULL * lo) or np.any(tangent > FRUSTUM_CULL * hi):

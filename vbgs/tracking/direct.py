@@ -78,13 +78,15 @@ FACTORS = (4, 2, 1)
 ITERATIONS = (6, 4, 3)
 # Cauchy scale c in units of each term's robust scale.
 ROBUST = 2.5
-# The robust scales' floors: intensity (of [0, 1]) and inverse depth (1 / scene units):
-# exact depth matches to interpolation error only, and a scale that small lets the
-# depth term's interpolation and pooling errors outweigh the colours. Chosen on the
+# The robust scales' floors: intensity (of [0, 1]) and inverse depth, the latter a share
+# of the previous frame's median inverse depth (relative: a scene in other units tracks
+# the same): exact depth matches to interpolation error only, and a scale that small lets
+# the depth term's interpolation and pooling errors outweigh the colours. Chosen on the
 # training streams' chained motions (128 px, 60 frames, true poses; no view's score):
 # the walk with exact depth 3.7 units / 15.1 / 11.7 / 20.3 mm ATE at 1e-4 / 1e-3 / 3e-3
-# / 1e-2, under a Kinect 5.8 / 5.8 / 2.8 / 8.7 mm.
-FLOOR_I, FLOOR_D = 1e-3, 3e-3
+# / 1e-2 (1 / scene units), under a Kinect 5.8 / 5.8 / 2.8 / 8.7 mm; 3e-3 is 0.013 of
+# the walk's median inverse depth (0.23 per unit).
+FLOOR_I, FLOOR_D = 1e-3, 0.013
 # The MAD's factor to a Gaussian standard deviation.
 MAD_SIGMA = 1.4826
 
@@ -194,9 +196,12 @@ def _solve(t, p, src, w, planes, k, robust, damping, use_depth, *, iterations: i
     """Levenberg-Marquardt over one level: the final ``t``, the Hessian ``[6, 6]`` (in
     units of the robust scales) and the share of points inside the new frame."""
     hp = jax.lax.Precision.HIGHEST
+    inverse = jnp.where((w > 0) & (p[:, 2] > 0), 1.0 / jnp.where(p[:, 2] > 0, p[:, 2], 1.0),
+                        jnp.nan)
+    floor_d = FLOOR_D * jnp.nan_to_num(jnp.nanmedian(inverse), nan=1.0)
 
     def scales(r, m):
-        return jnp.stack([_mad(r[:, 0], m[:, 0], FLOOR_I), _mad(r[:, 1], m[:, 1], FLOOR_D)])
+        return jnp.stack([_mad(r[:, 0], m[:, 0], FLOOR_I), _mad(r[:, 1], m[:, 1], floor_d)])
 
     def normal(r, jac, m):
         sig = scales(r, m)

@@ -5,7 +5,6 @@ import numpy as np
 
 from vbgs.render import opacity
 from vbgs.render.camera import from_fov
-from vbgs.render.raster import NEAR
 
 
 def toy():
@@ -61,7 +60,7 @@ def test_evidence_adds_up_in_any_order():
 
 def test_components_behind_the_camera_or_the_near_plane_get_nothing():
     cam, depth, _, _ = toy()
-    means = jnp.asarray([[0.0, 0.0, -1.0], [0.0, 0.0, 0.5 * NEAR]])
+    means = jnp.asarray([[0.0, 0.0, -1.0], [0.0, 0.0, 0.1]])  # z 0.1 < sqrt(tr cov) = 0.17
     ev = opacity.observe(opacity.no_evidence(2), means, jnp.tile(0.01 * jnp.eye(3), (2, 1, 1)),
                          cam, depth)
     assert float(jnp.max(ev.hits)) == 0.0 and float(jnp.max(ev.passes)) == 0.0

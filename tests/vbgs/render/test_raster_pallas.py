@@ -20,7 +20,7 @@ def mixed_scene(seed, k=120, width=32, height=16):
     means = rng.normal(0, 0.35, (k, 3)) + [0.0, 2.5, 0.0]  # overlapping cluster in view
     q = k // 6
     means[:q] *= [1, -1, 1]  # behind the camera
-    means[q : 2 * q, 1] = rng.uniform(NEAR * 0.8, NEAR * 1.5, q)  # around the near plane
+    means[q : 2 * q, 1] = rng.uniform(0.08, 0.3, q)  # around z = sqrt(tr cov) (~0.14): culled near
     means[2 * q : 3 * q, 0] += rng.choice([-3.0, 3.0], q)  # beside the view
     scales = 0.08 * np.exp(rng.normal(0, 0.5, (k, 3)))
     covs = covs_from_scale_rotation(jnp.asarray(scales), jnp.asarray(rng.normal(size=(k, 4))))

@@ -95,3 +95,19 @@ def test_pyramid_holds_each_level_s_pixels_with_depth(street):
         z = blocks.mean((1, 3))[full]
         np.testing.assert_allclose(level.points[:n, 2], z, rtol=1e-6)
         assert level.planes.shape == (h, w, 7)
+
+
+@pytest.mark.parametrize("factor", [1e-3, 1e3])
+def test_a_scene_in_other_units_tracks_the_same(street, planes, factor):
+    """Every length of the frames times ``factor``: the motion found is the same motion in
+    those units (the inverse depth's robust floor is a share of the frame's own)."""
+    pose, first = street
+    second = planes.cast(moved(pose), planes.ground)
+    base = direct.align(first.camera, first.rgb, first.depth, second.rgb, second.depth)
+    found = direct.align(first.camera, first.rgb, first.depth * factor, second.rgb,
+                         second.depth * factor)
+    scaled = np.array(base.motion)
+    scaled[:3, 3] *= factor
+    trans, rot = error(found.motion, scaled)
+    assert trans < 1e-3 * factor * np.linalg.norm(base.motion[:3, 3]) + 1e-6 * factor
+    assert rot < 1e-3
