@@ -20,6 +20,9 @@ def test_fit_image_json_and_png(tmp_path):
     result = json.loads(out.stdout.strip().splitlines()[-1])
     for key in ("psnr", "ssim", "seconds", "components_used", "elbo"):
         assert key in result
+    assert result["command"] == ("python -m experiments.run fit-image --image coffee --size 32 "
+                                 f"--components 300 --iters 4 --save {png} --json")
+    assert result["code_version"]  # the commit, +dirty, or unknown
     # measured 30.26 dB, SSIM 0.945
     assert result["psnr"] > 29.0 and 0.9 < result["ssim"] <= 1
     assert len(result["elbo"]) == 4 and result["elbo"][-1] >= result["elbo"][0]
