@@ -38,7 +38,7 @@ from vbgs.io_atomic import write_atomic, write_text_atomic
 # Grouping columns in this order first; any other varying setting follows.
 GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
                "replay", "estep", "depth")
-METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("lpips", "LPIPS"), ("depth_l1", "depth L1"),
+METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("depth_l1", "depth L1"),
            ("forgetting_db", "forgetting (dB)"), ("cl_avg_final_psnr", "CL final PSNR (dB)"),
            ("cl_forgetting", "CL forgetting (dB)"), ("cl_backward_transfer", "CL BWT (dB)"),
            ("seconds", "fit s"),
