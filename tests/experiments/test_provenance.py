@@ -112,3 +112,19 @@ def test_committed_results_name_their_code_and_command(suffix):
 
 def test_the_unstamped_list_names_only_files_that_exist():
     assert [f for f in _listed() if not (RESULTS / f).is_file()] == []
+
+
+def test_the_tracking_validation_refuses_the_reported_trajectories_and_stamps_its_table(
+        tmp_path, capsys):
+    from argparse import Namespace
+
+    from experiments.tune_tracking import STREAMS, main, write_table
+
+    with pytest.raises(SystemExit):
+        main(["--seeds", "0", "1"])
+    assert "seed 0 is the trajectories the tracking table reports" in capsys.readouterr().err
+    assert len(STREAMS) == 9
+    args = Namespace(seeds=[1], size=128, frames=60, components=20000)
+    md = [p for p in write_table([{"variant": "default", "sum": 1.0}], tmp_path, args)
+          if p.suffix == ".md"]
+    _first_line_ok(md[0])
