@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
                                                                        for s in args.seeds)))
         row["wall s"] = time.perf_counter() - start
         rows.append(row)
-    files = write_table(rows, Path(args.out), args)
+        files = write_table(rows, Path(args.out), args)  # after each row: a stop keeps them
     print(json.dumps({"rows": rows, "files": [str(f) for f in files]}))
     return 0
 
