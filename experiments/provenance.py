@@ -46,6 +46,7 @@ def record_command(argv: list[str], program: str = "python -m experiments.run") 
     """Remember the command line being run: ``program`` followed by ``argv``."""
     global _command
     _command = " ".join([program, shlex.join(argv)]) if argv else program
+    code_version()  # read now, as the code starts: a commit made while it runs is not its
 
 
 def command() -> str:
