@@ -57,8 +57,8 @@ def _ratio(value: float) -> None:
 # name -> (what it moves, the patch applied in the run's process before anything compiles)
 VARIANTS = {
     "default": ("the defaults", lambda: None),
-    "after_direct=2048x6": ("experiments.tracking.AFTER_DIRECT: 2048 points, 6 steps "
-                            "(default 1024, 4)", lambda: _after_direct(2048, 6)),
+    "after_direct=1024x4": ("experiments.tracking.AFTER_DIRECT: 1024 points, 4 steps "
+                            "(default 2048, 6)", lambda: _after_direct(1024, 4)),
     "direct.iterations=10,8,6": ("vbgs.tracking.direct.ITERATIONS (default 6, 4, 3)",
                                  lambda: _direct_iterations((10, 8, 6))),
     "direct.floor_d=1e-3": ("vbgs.tracking.direct.FLOOR_D (default 3e-3)",
