@@ -36,6 +36,7 @@ from experiments.cli import (
 )
 from experiments.cli.inapplicable import given_flags, refuse_inapplicable, watched
 from experiments.cli.output import fail, interrupted, meaningless_score_warning, print_result
+from experiments.provenance import record_command, stamp
 
 
 def _sweep_cli(name: str):
@@ -84,8 +85,10 @@ def _command_parser(name: str) -> argparse.ArgumentParser:
     return sub.choices[name]
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, program: str = "python -m experiments.run") -> int:
+    """Run one command; ``program`` is what the records name before ``argv``."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    record_command(argv, program)  # every record and table names the command and the code
     try:  # building the parser imports modules: Ctrl-C there ends cleanly too
         command = argv[0] if argv and argv[0] in COMMANDS else None  # else: all, for help
         args = build_parser(command).parse_args(argv)
@@ -108,11 +111,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.command in ("fit-image", "fit-scene"):
         result["compile_seconds"] = timer.seconds  # all compilation (or cache loads) in the run
     if args.command == "check" and "error" in result:  # the report, then the verdict: exit 2
-        print_result(args.command, result, as_json=args.json)
+        print_result(args.command, stamp(result), as_json=args.json)
         return fail(ValueError(result["error"]))
     warning = meaningless_score_warning(result)
     if warning:
         result["warning"] = warning
+    result = stamp(result)
     print_result(args.command, result, as_json=getattr(args, "json", False))
     if warning:
         print(warning, file=sys.stderr)

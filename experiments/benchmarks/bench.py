@@ -11,6 +11,7 @@ import jax
 import numpy as np
 import pandas as pd
 from experiments.progress import progress as progress_bar
+from experiments.provenance import first_line
 
 from vbgs.data.images import image_to_points, load_image
 from vbgs.inference import model
@@ -109,7 +110,7 @@ def write_table(rows: list[dict], out_dir: str | Path, name: str, *, command: st
         head.append("Rows with exact = False dropped splat-tile overlaps beyond the "
                     "rasterizer's tile capacity: their renders (and timings) are not exact.")
     table = frame.to_markdown(index=False, floatfmt=_floatfmt(frame))
-    write_text_atomic(md, "\n\n".join(head) + f"\n\n{table}\n")
+    write_text_atomic(md, "\n\n".join([first_line(), *head]) + f"\n\n{table}\n")
     return [csv, md]
 
 

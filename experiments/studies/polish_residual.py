@@ -24,6 +24,7 @@ import jax.numpy as jnp
 
 from experiments.learners import PolishLearner
 from experiments.cli.output import dumps
+from experiments.provenance import record_command, stamp
 from experiments.tasks.protocol import evaluate, stream_frames
 from experiments.tasks.scene_task import SceneTask, prepare_scene
 from vbgs.baseline import to_splats
@@ -87,11 +88,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
+    record_command(sys.argv[1:] if argv is None else list(argv), parser.prog)
     task = SceneTask(scene=args.scene, method="vbgs-polish", protocol="continual",
                      replay=args.replay, steps_per_frame=args.steps_per_frame,
                      n_val=args.val_views, size=args.size, components=args.components,
                      frames=args.frames, seed=args.seed)
-    print(dumps(run(task)))
+    print(dumps(stamp(run(task))))
     return 0
 
 

@@ -49,6 +49,7 @@ from experiments.tasks.protocol import (
     static_background,
     stream_frames,
 )
+from experiments.provenance import code_version, first_line
 from vbgs.data.streams import stream_order
 from vbgs.mapping import dotted_names, get_dotted, with_dotted
 
@@ -264,10 +265,11 @@ def write_tuning(rows: list[dict], out_dir: str | Path, name: str, command: str,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     frame = pd.DataFrame(rows)
-    header = [f"command: {command}", about, f"measured on: {machine()}"]
+    header = [f"command: {command}", f"code: {code_version()}", about,
+              f"measured on: {machine()}"]
     csv, md = out / f"{name}.csv", out / f"{name}.md"
     csv.write_text("".join(f"# {line}\n" for line in header) + frame.to_csv(index=False))
-    md.write_text(f"# Render settings tuned on validation views: {name}\n\n"
+    md.write_text(f"{first_line()}\n\n# Render settings tuned on validation views: {name}\n\n"
                   f"Command: `{command}`\n\n{about}\n\nMeasured on: {machine()}\n\n"
                   f"{frame.to_markdown(index=False, floatfmt='.4g')}\n")
     return [csv, md]

@@ -37,15 +37,16 @@ def scored_on_validation(n_val: int):
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    n_val = VAL_VIEWS
+    n_val, program = VAL_VIEWS, "python -m experiments.studies.val_probe"
     if argv[:1] == ["--val-views"]:
         n_val, argv = int(argv[1]), argv[2:]
+        program += f" --val-views {n_val}"
     if n_val < 1:
         raise ValueError(f"--val-views must be at least 1, got {n_val}")
     original = scene_task.load_task_scene
     scene_task.load_task_scene = scored_on_validation(n_val)
     try:
-        return run_main(argv)
+        return run_main(argv, program)
     finally:
         scene_task.load_task_scene = original
 

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from experiments.cli.output import dumps
+from experiments.provenance import stamp
 from experiments.sweep.config import SweepConfig
 from experiments.sweep.rules import apply_rules
 from vbgs.io_atomic import write_atomic, write_text_atomic
@@ -244,7 +245,7 @@ def store_record(out: Path, record: dict) -> dict:
         renders[name] = str(path.relative_to(out))
     if renders:
         record["renders"] = renders
-    text = dumps(jsonable(record), indent=1)
+    text = dumps(jsonable(stamp(record)), indent=1)
     write_text_atomic(cell_path(out, record["key"]), text)
     return record
 

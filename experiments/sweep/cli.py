@@ -99,6 +99,7 @@ def _metrics(record: dict) -> str:
 
 def _write_plan(out: Path, config, plan, version: str) -> None:
     from experiments.benchmarks.bench import machine
+    from experiments.provenance import stamp
     from vbgs.io_atomic import write_text_atomic
 
     doc = {"name": config.name, "description": config.description, "config": config.source,
@@ -107,7 +108,7 @@ def _write_plan(out: Path, config, plan, version: str) -> None:
                      for c in plan.cells],
            "skipped": [{"grid": s.grid, "settings": dict(s.settings), "reason": s.reason}
                        for s in plan.skipped]}
-    write_text_atomic(out / "plan.json", dumps(doc, indent=1))
+    write_text_atomic(out / "plan.json", dumps(stamp(doc), indent=1))
     write_text_atomic(out / "config.toml", Path(config.source).read_text())
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from experiments.provenance import first_line
 from experiments.sweep.cells import cell_path, load_record
 from experiments.sweep.cl_report import plot_cl_matrices, write_cl_matrix
 from experiments.sweep.plots import (
@@ -37,7 +38,7 @@ from vbgs.io_atomic import write_atomic, write_text_atomic
 # Grouping columns in this order first; any other varying setting follows.
 GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "order", "assign",
                "replay", "estep", "depth")
-METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("lpips", "LPIPS"), ("depth_l1", "depth L1"),
+METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("depth_l1", "depth L1"),
            ("forgetting_db", "forgetting (dB)"), ("cl_avg_final_psnr", "CL final PSNR (dB)"),
            ("cl_forgetting", "CL forgetting (dB)"), ("cl_backward_transfer", "CL BWT (dB)"),
            ("seconds", "fit s"),
@@ -185,7 +186,7 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
                  path: Path, unreadable: list[Path] = ()) -> Path:
     settings = setting_columns(records)
     ok = df[df.status == "ok"]
-    lines = [f"# Sweep results: {plan.get('name', Path(path).parent.name)}", ""]
+    lines = [first_line(), "", f"# Sweep results: {plan.get('name', Path(path).parent.name)}", ""]
     if plan.get("description"):
         lines += [plan["description"], ""]
     lines += [f"{len(df)} cells: {len(ok)} ok, {int((df.status != 'ok').sum())} failed; "
@@ -232,7 +233,8 @@ def write_tables(df: pd.DataFrame, records: list[dict], plan: dict, figures: dic
 
 def robustness_header(plan: dict) -> list[str]:
     """The lines above ``robustness.md``'s tables: what ran, where, and how to read it."""
-    lines = [f"# Robustness to depth noise and holes: {plan.get('name', '?')}", ""]
+    lines = [first_line(), "", f"# Robustness to depth noise and holes: {plan.get('name', '?')}",
+             ""]
     if plan.get("description"):
         lines += [plan["description"], ""]
     if plan.get("machine"):

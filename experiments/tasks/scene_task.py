@@ -277,13 +277,16 @@ def prepare_scene(task) -> tuple[Scene, dict]:
     """The task's scene with the depth of its simulated sensor on its training frames
     (exact: the scene's own), cut to what the learner's sensor model takes as surface,
     and the report. A task with a depth model gets its training depth as the frames
-    arrive (:func:`depth_arrivals`), not here. Test and validation views keep their
+    arrive (:func:`depth_arrivals`), not here; a simulated depth network's is cut there,
+    once made metric. Test and validation views keep their
     depth."""
     scene = load_task_scene(task)
     if task.depth_model:
         return scene, {}
     scene, report = simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,
                                             task.seed, task.sensor_holes)
+    if simulated_network(task):  # cut once made metric, as frames arrive (depth_arrivals)
+        return scene, report
     if task.simulate_sensor == "exact" and Path(task.scene).is_dir():  # a folder's own depth
         data = data_sensor(task.scene, task.format)
         report = {**report, "depth_sensor": data.sensor, "depth_sensor_level": data.level,
@@ -291,13 +294,28 @@ def prepare_scene(task) -> tuple[Scene, dict]:
     return learned_surface(scene, report, task.sensor, task.sensor_level)
 
 
+def simulated_network(task) -> bool:
+    """Whether the task's training depth is a simulated depth network's learned as one
+    (``simulate_sensor`` and ``sensor`` both ``mono``): its metric scale is then found
+    from the arrived frames (:class:`experiments.tasks.depth_swap.SimulatedNetwork`)."""
+    return task.simulate_sensor == "mono" and task.sensor == "mono" and not task.depth_model
+
+
 def depth_arrivals(task, scene: Scene, order, report: dict | None = None):
     """The stage the arriving training frames pass through: with a depth model, its
     metric depth (:class:`experiments.tasks.depth_swap.EstimatedDepth`, which aligns each
-    frame to the frames before it); without one, for a network's depth (``sensor
-    "mono"``) the same per-frame alignment alone
-    (:class:`experiments.tasks.sensor_swap.AlignedArrivals`, ``report`` the sensor report it
-    extends); otherwise None (the depth as it is: exact-depth runs are unchanged)."""
+    frame to the frames before it); for a simulated depth network, the same from its
+    output (:class:`experiments.tasks.depth_swap.SimulatedNetwork`: the metric scale found
+    from the arrived frames' views); for a folder's network depth (``sensor "mono"``)
+    the per-frame alignment alone (:class:`experiments.tasks.sensor_swap.AlignedArrivals`,
+    ``report`` the sensor report it extends); otherwise None (the depth as it is:
+    exact-depth runs are unchanged)."""
+    if simulated_network(task):
+        from depth.stream import StreamConfig
+        from experiments.tasks.depth_swap import SimulatedNetwork
+
+        return SimulatedNetwork(StreamConfig(seed=task.seed), seed=task.seed,
+                                positions=[int(i) for i in order])
     if not task.depth_model:
         if task.sensor == "mono":  # a network's depth: each frame aligned as it arrives
             from depth.perframe import FrameAlignConfig

@@ -24,8 +24,8 @@ def test_fit_scene_json_ply_png(tmp_path):
     for key in ("psnr", "ssim", "depth_l1", "seconds_per_frame", "peak_memory_mb",
                 "components_used", "early_psnr_when_seen", "early_psnr_at_end"):
         assert np.isfinite(r[key]), key
-    # measured 19.85 dB, SSIM 0.725, depth L1 0.161, 372 splats drawn (seed 0; 19.39 dB,
-    # 0.709, 0.086 with seed 1); a render of the background alone scores about 9 dB here
+    # measured 19.76 dB, SSIM 0.719, depth L1 0.159, 372 splats drawn (seed 0); a render
+    # of the background alone scores about 9 dB here
     assert r["psnr"] > 19.0 and r["ssim"] > 0.70 and r["depth_l1"] < 0.18
     assert 0 < r["components_used"] <= 600
     assert load_ply(ply).count == r["components_used"]
@@ -86,8 +86,8 @@ def test_fit_scene_non_square_frames_with_a_budget(capsys):
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert r["size"] == [48, 32]
     assert r["budget"] == {"points": 400, "weighted": False, "saturation": 0}
-    # measured 16.57 dB with 140 components drawn (16.81 with the points weighted)
-    assert r["psnr"] > 14.0 and 0 < r["components_used"] <= 200
+    # measured 16.56 dB with 140 components drawn
+    assert r["psnr"] > 15.6 and 0 < r["components_used"] <= 200
     with pytest.raises(SystemExit) as refused:  # argparse: exit status 2, the reason said
         main(["fit-scene", "--size", "640x", "--json"])
     assert refused.value.code == 2 and "WIDTHxHEIGHT" in capsys.readouterr().err

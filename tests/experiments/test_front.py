@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from experiments.provenance import is_stamped_markdown
 from experiments.studies.front import COLUMNS, mark_front, parse_counts, pareto
 from experiments.run import main
 
@@ -52,6 +53,7 @@ def test_front_on_a_tiny_scene(tmp_path, capsys):
     assert "front runs 0/5" in captured.err  # progress on stderr (its first line)
     files = json.loads(captured.out.strip().splitlines()[-1])["files"]
     assert str(out / "object.png") in files and (out / "object.png").stat().st_size > 10_000
+    assert is_stamped_markdown((out / "object.md").read_text())
     table = pd.read_csv(out / "object.csv")
     assert set(COLUMNS) | {"on_front"} <= set(table.columns)
     assert sorted(zip(table.method, table.protocol, table.replay, strict=True)) == sorted([

@@ -37,5 +37,7 @@ def test_command_scores_every_part_on_validation_views(capsys):
                  "--val-views", "2", "--steps-per-frame", "2"]) == 0
     record = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     scores = record["scores"]
+    assert record["command"].startswith("python -m experiments.studies.polish_residual --scene object")
     assert record["val_views"] == 2 and len(scores) == 12
-    assert all(len(s["view_psnr"]) == 2 and s["psnr"] > 8 for s in scores.values())
+    # measured 18.40 dB (VBGS's splats alone) to 18.68 (the whole polish)
+    assert all(len(s["view_psnr"]) == 2 and s["psnr"] > 17.4 for s in scores.values())

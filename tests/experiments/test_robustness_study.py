@@ -7,6 +7,7 @@ import json
 import pandas as pd
 import pytest
 
+from experiments.provenance import is_stamped_markdown
 from experiments.run import main
 from experiments.sweep.config import load_config
 from experiments.sweep.robustness import condition, plot_robustness, robustness_table
@@ -67,6 +68,7 @@ def test_a_tiny_study_end_to_end(tmp_path, capsys):
     png = (out / "robustness.png").read_bytes()
     assert png.startswith(b"\x89PNG") and len(png) > 20_000
     table = (out / "robustness.md").read_text()
+    assert is_stamped_markdown(table)
     for column in ("noise 0", "noise 4", "random 10 %", "PSNR change"):
         assert column in table
     psnr = cells.set_index(["sensor_level", "sensor_holes"])["psnr"]

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from experiments.provenance import is_stamped_json, is_stamped_markdown
 from experiments.run import main
 from experiments.sweep.cells import failed_record, store_record
 from experiments.sweep.tasks import TASKS
@@ -58,6 +59,10 @@ def test_local_backend_two_workers_end_to_end(tmp_path):
         assert len({r["cpus"] for r in rows}) == 2 and all(" " not in r["cpus"] for r in rows)
     tables = (out / "tables.md").read_text()
     assert "PSNR (dB)" in tables and "astronaut" in tables and "± " in tables
+    assert is_stamped_markdown(tables) and "experiments.run sweep --config" in tables
+    assert is_stamped_json(json.loads((out / "plan.json").read_text()))
+    cells = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    assert len(cells) == 4 and all(is_stamped_json(c) for c in cells)
     for name in FIGURES:
         assert (out / name).stat().st_size > 5_000, name
     assert len(list((out / "renders").glob("*.png"))) == 8  # render + target per cell

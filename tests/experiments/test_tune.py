@@ -8,6 +8,7 @@ import pytest
 
 import experiments.studies.tune as tune_module
 from experiments.learners import VbgsLearner
+from experiments.provenance import is_stamped_markdown
 from experiments.tasks.protocol import evaluate_validation, stream_frames
 from experiments.run import main
 from experiments.tasks.scene_task import SceneTask, load_task_scene
@@ -173,6 +174,7 @@ def test_tune_command_writes_its_table_headed_by_the_command(tmp_path, capsys):
     assert sorted(table["splat_scale"]) == [0.7, 1.0] and (table["opacity"] == 0.5).all()
     assert table["val_psnr"].is_monotonic_decreasing and table["val_psnr"].gt(8).all()
     assert "Command: `python -m experiments.run tune" in md.read_text()
+    assert is_stamped_markdown(md.read_text())
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 # Candidates per point by default: enough that the truncated responsibilities match
 # the dense ones to within rendering precision for splat-sized components.
 # Fewer draw better with exact depth (validation views, fit-scene's defaults,
-# `python -m experiments.val_probe fit-scene --scene S --candidates C`), object / room /
+# `python -m experiments.studies.val_probe fit-scene --scene S --candidates C`), object / room /
 # walk at C = 4, 8, 12, 16: 26.72 / 23.07 / 21.52, 26.74 / 22.86 / 21.68, 26.60 / 22.77 /
 # 21.67, 26.58 / 22.67 / 21.59 dB (means 23.77, 23.76, 23.68, 23.61), seconds a frame
 # 10-20% fewer at 8; the 640x480 room at N = 80000 (2 validation views) 23.10 / 23.06 /

@@ -20,7 +20,7 @@ through 48 points of a curved surface lies inside it, and the point slid onto it
 off the surface by up to the clip (``SEED_SIGMAS``) at oblique views; the quadric
 follows the curvature, and on a surface without noise leaves the point where it is
 (``c0 = 0``). Object, 128 px / 20k / 60 frames, validation views (``python -m
-experiments.val_probe fit-scene --scene object --simulate-sensor exact --sensor kinect``):
+experiments.studies.val_probe fit-scene --scene object --simulate-sensor exact --sensor kinect``):
 exact depth learned as a Kinect's, plane 24.51 dB, plane without the slide 25.68,
 quadric 26.23 (exact model: 26.58); Kinect depth (``--simulate-sensor kinect``): plane
 24.50, quadric 24.47; room, Kinect depth: plane 22.13, quadric 22.23.

@@ -32,7 +32,7 @@ window at its native resolution; frames kept at a fraction of it (each pixel sev
 native ones) are nearer the independent case.
 
 Measured (object, 128 px / 20k / 60 frames, the Kinect's noise, its holes and 2 % random
-holes, 8 validation views, ``python -m experiments.val_probe --val-views 8 fit-scene
+holes, 8 validation views, ``python -m experiments.studies.val_probe --val-views 8 fit-scene
 --scene object --simulate-sensor kinect --sensor kinect``; exact depth 26.43 dB): no
 smoothing 24.60 dB; a radius of 2 with the noise left at the reading's 24.98, at half
 of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noise)

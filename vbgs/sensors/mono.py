@@ -26,6 +26,16 @@ range such networks' relative errors are reported in, not a fit to one network:
 
 There are no holes. Level 0 returns the filled true depth.
 
+That depth is at the sequence's true metric scale: one alignment for the whole sequence,
+known exactly, is an oracle that a user's RGB-only stream does not have. A network's own
+output knows no metre (affine-invariant networks are trained up to a scale and shift of
+their inverse depth), so what a stream is handed is :func:`network_output`: the depth
+above as inverse depth in a unit and with an offset of the network's own
+(:func:`network_units`, drawn per run). The stream must find the metric scale from the
+frames that have arrived, with their poses, as it does for a real network's output
+(``depth.stream``: the first frames' multi-view consistency, then each frame aligned to
+the frames before it); that is the path ``--simulate-sensor mono --sensor mono`` takes.
+
 What a learner takes as surface (:meth:`Mono.surface`) is less: the far field
 (:func:`vbgs.sensors.far_field.far_field`: the sky and empty background a network gives
 depth to) and the depth edges of the depth map as given
@@ -58,6 +68,26 @@ BLEED_PX = 2.0  # px smeared across depth edges at level 1
 # through): measured 2.7 % against 4.2 % on the object and 3.2 % against 4.8 % on the
 # room (64 px, 20 frames, RMS of log(d / d_true) over the surface pixels).
 ALIGNED_SHARE = 0.7
+UNIT_SPAN = (0.1, 10.0)  # the network's unit of inverse depth: log-uniform in this span
+OFFSET_SPAN = (0.0, 1.0)  # its offset, in its units times one inverse metre
+
+
+def network_units(rng: np.random.Generator) -> tuple[float, float]:
+    """A network's unit and offset of inverse depth (``UNIT_SPAN``, ``OFFSET_SPAN``):
+    nothing of them is known to whoever reads its output."""
+    unit = float(np.exp(rng.uniform(*np.log(UNIT_SPAN))))
+    return unit, unit * float(rng.uniform(*OFFSET_SPAN))
+
+
+def network_output(depth: np.ndarray, unit: float, offset: float) -> np.ndarray:
+    """What a network outputs for simulated depth ``depth [h, w]`` (positive on every
+    pixel, :meth:`Mono.simulate`): ``unit / depth + offset`` (float64), inverse depth in
+    its own unit; ``1 / d = (p - offset) / unit`` is what an alignment must find."""
+    depth = np.asarray(depth, np.float64)
+    if not np.all(depth > 0):
+        raise ValueError("a network's output needs depth on every pixel (mono's simulate "
+                         "gives it); this depth has pixels without")
+    return unit / depth + offset
 
 
 def fill_missing(depth: np.ndarray, factor: float = FAR_FACTOR) -> np.ndarray:

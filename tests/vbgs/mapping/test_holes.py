@@ -25,8 +25,54 @@ def plane_and_box():
 
 def test_rings_are_nearest_first():
     rings = ring_offsets(2)
-    assert [len(r) for r in rings] == [4, 4, 4]  # 1, sqrt 2, 2 px
+    assert [sorted(r) for r in rings] == [
+        [(-1, 0), (0, -1), (0, 1), (1, 0)],  # 1 px
+        [(-1, -1), (-1, 1), (1, -1), (1, 1)],  # sqrt 2
+        [(-2, 0), (0, -2), (0, 2), (2, 0)],  # 2 px
+    ]
+    for radius in (1, 2, 3, 4):
+        distances = [{dy * dy + dx * dx for dy, dx in ring} for ring in ring_offsets(radius)]
+        assert all(len(d) == 1 for d in distances)  # one distance a ring
+        flat = [d.pop() for d in distances]
+        assert flat == sorted(set(flat)) and flat[-1] <= radius * radius  # nearest first
     assert ring_offsets(0) == []
+
+
+def one_hole_behind_an_edge(colours: dict, depths: dict):
+    """A grey plane about 4 m away, a red box at 2 m on its left (columns 0-3: the
+    nearer surface the hole lies behind), and around the hole at (6, 5) the neighbours
+    ``depths`` (0: none) with ``colours`` (grey plus that much in every channel)."""
+    depth = np.full((12, 12), 4.0, np.float32)
+    rgb = np.full((12, 12, 3), 0.4, np.float32)
+    depth[:, :4], rgb[:, :4] = 2.0, [0.8, 0.1, 0.1]
+    depth[6, 5] = 0.0
+    for (y, x), z in depths.items():
+        depth[y, x] = z
+        if z > 0:  # the pixel beyond it: the same flat surface
+            depth[y + (y - 6), x + (x - 5)] = z
+    for (y, x), c in colours.items():
+        rgb[y, x] += c
+    return depth, rgb
+
+
+def test_a_hole_takes_the_nearest_ring_then_the_closest_colour_within_it():
+    """Nearest first: a neighbour 1 px away whose colour is within the tolerance wins
+    over a diagonal one of the hole's very colour; within a ring, the closest colour."""
+    empty = np.zeros((12, 12), bool)
+    side, diagonal = {(5, 5): 0.0, (7, 5): 0.0, (6, 4): 0.0}, {(5, 4): 0.0, (7, 4): 0.0}
+    depth, rgb = one_hole_behind_an_edge(
+        {(6, 6): 0.1}, {**side, **diagonal, (6, 6): 4.01, (5, 6): 4.02, (7, 6): 4.02})
+    filled = fill_holes(depth, rgb, empty, FOCAL, radius=2)
+    assert filled[6, 5] == pytest.approx(4.01)  # the side neighbour, not the diagonals
+    depth, rgb = one_hole_behind_an_edge(
+        {(6, 6): 0.1, (5, 5): 0.05, (7, 5): 0.12},
+        {**diagonal, (6, 4): 0.0, (6, 6): 4.01, (5, 5): 4.03, (7, 5): 4.02})
+    filled = fill_holes(depth, rgb, empty, FOCAL, radius=2)
+    assert filled[6, 5] == pytest.approx(4.03)  # of the three at 1 px, the closest colour
+    depth, rgb = one_hole_behind_an_edge(  # the side neighbour's colour beyond the tolerance
+        {(6, 6): 0.2}, {**side, **diagonal, (6, 6): 4.01, (5, 6): 4.02, (7, 6): 4.02})
+    filled = fill_holes(depth, rgb, empty, FOCAL, radius=2)
+    assert filled[6, 5] == pytest.approx(4.02)  # then the next ring
 
 
 def test_the_far_side_of_an_edge_is_filled_with_its_plane_and_the_rim_is_not():

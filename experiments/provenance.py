@@ -1,0 +1,88 @@
+"""Which code and which command made a results file.
+
+Every JSON record a command prints or writes carries ``code_version`` and ``command``
+(:func:`stamp`), and every markdown table it writes starts with one line naming both
+(:func:`first_line`). ``code_version`` is the short commit of the checkout the code runs
+from, with ``+dirty`` when tracked code (``vbgs``, ``depth``, ``experiments``,
+``pyproject.toml``) differs from that commit or holds files not yet committed, and
+``unknown`` outside a git checkout. ``command`` is the command line as run: what
+``experiments.run.main`` was given (:func:`record_command`), else the process's own
+``sys.argv``.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CODE_PATHS = ("vbgs", "depth", "experiments", "pyproject.toml")
+UNKNOWN = "unknown"
+
+_command: str | None = None
+
+
+@functools.cache
+def code_version(root: str | Path = ROOT) -> str:
+    """``git rev-parse --short HEAD`` of ``root``, ``+dirty`` when its code differs from
+    that commit; ``unknown`` when ``root`` is not a git checkout (or git is missing)."""
+    def git(*args):
+        return subprocess.run(["git", "-C", str(root), *args], capture_output=True,
+                              text=True, timeout=30, check=True).stdout.strip()
+
+    try:
+        head = git("rev-parse", "--short", "HEAD")
+        changed = git("status", "--porcelain", "--", *CODE_PATHS)
+    except (OSError, subprocess.SubprocessError):
+        return UNKNOWN
+    return head + ("+dirty" if changed else "")
+
+
+def record_command(argv: list[str], program: str = "python -m experiments.run") -> None:
+    """Remember the command line being run: ``program`` followed by ``argv``."""
+    global _command
+    _command = " ".join([program, shlex.join(argv)]) if argv else program
+    code_version()  # read now, as the code starts: a commit made while it runs is not its
+
+
+def command() -> str:
+    """The command line as run (:func:`record_command`; else this process's argv, a
+    module run with ``-m`` named as such)."""
+    if _command is not None:
+        return _command
+    first = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
+    if first is not None and first.suffix == ".py" and ROOT in first.resolve().parents:
+        module = ".".join(first.resolve().relative_to(ROOT).with_suffix("").parts)
+        return " ".join(["python -m " + module, shlex.join(sys.argv[1:])]).strip()
+    if sys.argv and sys.argv[0] == "-c":
+        return " ".join(["python -c ...", shlex.join(sys.argv[1:])]).strip()
+    return shlex.join(sys.argv) if sys.argv else UNKNOWN
+
+
+def stamp(record: dict) -> dict:
+    """``record`` with ``code_version`` and ``command`` (the record's own kept first)."""
+    return {**record, "code_version": record.get("code_version", code_version()),
+            "command": record.get("command", command())}
+
+
+def first_line() -> str:
+    """The line a markdown table starts with: the command and the code version."""
+    return f"Made by `{command()}` at code `{code_version()}`."
+
+
+FIRST_LINE = re.compile(r"^Made by `(?P<command>[^`]+)` at code `(?P<version>[^`]+)`\.$")
+
+
+def is_stamped_json(record) -> bool:
+    """Whether a JSON record names a code version and a command."""
+    return (isinstance(record, dict) and bool(record.get("code_version"))
+            and bool(record.get("command")))
+
+
+def is_stamped_markdown(text: str) -> bool:
+    """Whether a markdown file's first line names a command and a code version."""
+    return FIRST_LINE.match(text.split("\n", 1)[0]) is not None
