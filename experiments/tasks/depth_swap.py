@@ -118,3 +118,35 @@ class SimulatedNetwork(StreamedDepth):
 
     def predict(self, frame: Frame) -> np.ndarray:
         return network_output(frame.depth, self.unit, self.offset)
+
+
+def simulated_network(task) -> bool:
+    """Whether the task's training depth is a simulated depth network's learned as one
+    (``simulate_sensor`` and ``sensor`` both ``mono``): its metric scale is then found
+    from the arrived frames (:class:`SimulatedNetwork`)."""
+    return task.simulate_sensor == "mono" and task.sensor == "mono" and not task.depth_model
+
+
+def depth_arrivals(task, scene, order, report: dict | None = None):
+    """The stage the arriving training frames pass through: with a depth model, its
+    metric depth (:class:`experiments.tasks.depth_swap.EstimatedDepth`, which aligns each
+    frame to the frames before it); for a simulated depth network, the same from its
+    output (:class:`experiments.tasks.depth_swap.SimulatedNetwork`: the metric scale found
+    from the arrived frames' views); for a folder's network depth (``sensor "mono"``)
+    the per-frame alignment alone (:class:`experiments.tasks.sensor_swap.AlignedArrivals`,
+    ``report`` the sensor report it extends); otherwise None (the depth as it is:
+    exact-depth runs are unchanged)."""
+    if simulated_network(task):
+        return SimulatedNetwork(StreamConfig(seed=task.seed), seed=task.seed,
+                                positions=[int(i) for i in order])
+    if not task.depth_model:
+        if task.sensor == "mono":  # a network's depth: each frame aligned as it arrives
+            from depth.perframe import FrameAlignConfig
+            from experiments.tasks.sensor_swap import AlignedArrivals
+
+            return AlignedArrivals(FrameAlignConfig(), report)
+        return None
+    config = StreamConfig(kind=task.depth_kind, method=task.depth_align,
+                          reference=task.depth_reference, seed=task.seed)
+    return EstimatedDepth(task.depth_model, config, preset=task.depth_preset,
+                          positions=[int(i) for i in order])

@@ -22,6 +22,7 @@ from experiments.tasks.check import (
     within_trained_span,
 )
 from experiments.tasks.continual import check_segments
+from experiments.tasks.depth_swap import depth_arrivals, simulated_network
 from experiments.tasks.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.learners.gradient_learner import DEFAULT_CONFIG as BASELINE_CONFIG
@@ -277,8 +278,8 @@ def prepare_scene(task) -> tuple[Scene, dict]:
     """The task's scene with the depth of its simulated sensor on its training frames
     (exact: the scene's own), cut to what the learner's sensor model takes as surface,
     and the report. A task with a depth model gets its training depth as the frames
-    arrive (:func:`depth_arrivals`), not here; a simulated depth network's is cut there,
-    once made metric. Test and validation views keep their
+    arrive (:func:`experiments.tasks.depth_swap.depth_arrivals`), not here; a simulated
+    depth network's is cut there, once made metric. Test and validation views keep their
     depth."""
     scene = load_task_scene(task)
     if task.depth_model:
@@ -292,44 +293,6 @@ def prepare_scene(task) -> tuple[Scene, dict]:
         report = {**report, "depth_sensor": data.sensor, "depth_sensor_level": data.level,
                   **data.measured}  # a record's holes and error: over the frames written
     return learned_surface(scene, report, task.sensor, task.sensor_level)
-
-
-def simulated_network(task) -> bool:
-    """Whether the task's training depth is a simulated depth network's learned as one
-    (``simulate_sensor`` and ``sensor`` both ``mono``): its metric scale is then found
-    from the arrived frames (:class:`experiments.tasks.depth_swap.SimulatedNetwork`)."""
-    return task.simulate_sensor == "mono" and task.sensor == "mono" and not task.depth_model
-
-
-def depth_arrivals(task, scene: Scene, order, report: dict | None = None):
-    """The stage the arriving training frames pass through: with a depth model, its
-    metric depth (:class:`experiments.tasks.depth_swap.EstimatedDepth`, which aligns each
-    frame to the frames before it); for a simulated depth network, the same from its
-    output (:class:`experiments.tasks.depth_swap.SimulatedNetwork`: the metric scale found
-    from the arrived frames' views); for a folder's network depth (``sensor "mono"``)
-    the per-frame alignment alone (:class:`experiments.tasks.sensor_swap.AlignedArrivals`,
-    ``report`` the sensor report it extends); otherwise None (the depth as it is:
-    exact-depth runs are unchanged)."""
-    if simulated_network(task):
-        from depth.stream import StreamConfig
-        from experiments.tasks.depth_swap import SimulatedNetwork
-
-        return SimulatedNetwork(StreamConfig(seed=task.seed), seed=task.seed,
-                                positions=[int(i) for i in order])
-    if not task.depth_model:
-        if task.sensor == "mono":  # a network's depth: each frame aligned as it arrives
-            from depth.perframe import FrameAlignConfig
-            from experiments.tasks.sensor_swap import AlignedArrivals
-
-            return AlignedArrivals(FrameAlignConfig(), report)
-        return None
-    from depth.stream import StreamConfig
-    from experiments.tasks.depth_swap import EstimatedDepth
-
-    config = StreamConfig(kind=task.depth_kind, method=task.depth_align,
-                          reference=task.depth_reference, seed=task.seed)
-    return EstimatedDepth(task.depth_model, config, preset=task.depth_preset,
-                          positions=[int(i) for i in order])
 
 
 def warn_rgb_only_tests(scene: Scene) -> bool:

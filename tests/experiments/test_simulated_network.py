@@ -6,7 +6,8 @@ import pytest
 
 from depth.stream import StreamConfig
 from experiments.tasks.depth_swap import SimulatedNetwork
-from experiments.tasks.scene_task import SceneTask, depth_arrivals, prepare_scene
+from experiments.tasks.depth_swap import depth_arrivals
+from experiments.tasks.scene_task import SceneTask, prepare_scene
 from vbgs.sensors.mono import network_output
 
 TASK = dict(scene="room", components=600, frames=20, n_test=1, size=32,
