@@ -15,7 +15,7 @@ import numpy as np
 
 from vbgs.data.changing import changed_pixels
 from vbgs.data.scene import Scene
-from vbgs.render.metrics import psnr
+from vbgs.render.metrics import psnr, psnr_of_mse
 
 FIELDS = ("change_frames", "psnr_first_state", "psnr_changed", "psnr_unchanged",
           "changed_share")
@@ -40,7 +40,4 @@ def change_scores(scene: Scene, renders: list[np.ndarray]) -> dict:
 
 def _pooled(squared: np.ndarray) -> float | None:
     """PSNR of pooled per-pixel squared errors (None: no such pixel)."""
-    if squared.size == 0:
-        return None
-    mse = float(squared.mean())
-    return float("inf") if mse == 0 else float(10 * np.log10(1.0 / mse))
+    return None if squared.size == 0 else psnr_of_mse(float(squared.mean()))

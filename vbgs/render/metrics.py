@@ -28,7 +28,11 @@ def _mse(a, b):
 def psnr(a, b, data_range: float = 1.0) -> float:
     """``10 log10(data_range^2 / MSE)`` in dB; identical images give ``inf``."""
     a, b = _pair(a, b)
-    mse = float(_mse(a, b))  # compiled: one executable, not one per eager operation
+    return psnr_of_mse(float(_mse(a, b)), data_range)  # compiled: one executable
+
+
+def psnr_of_mse(mse: float, data_range: float = 1.0) -> float:
+    """``10 log10(data_range^2 / mse)`` in dB for a mean squared error; 0 gives ``inf``."""
     return float("inf") if mse == 0 else float(10 * np.log10(data_range**2 / mse))
 
 
