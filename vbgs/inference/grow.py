@@ -112,9 +112,13 @@ class GrowInfo(NamedTuple):
     slots: np.ndarray  # [n_new] the slots filled (the rows of the prior that changed)
 
 
+# A slot whose concentration exceeds this holds a component (empty slots have EMPTY_ALPHA).
+ACTIVE_ALPHA = 10 * EMPTY_ALPHA
+
+
 def is_active(prior: Mixture) -> np.ndarray:
     """``[k]`` bool: slots holding a component (not empty)."""
-    return np.asarray(prior.alpha) > 10 * EMPTY_ALPHA
+    return np.asarray(prior.alpha) > ACTIVE_ALPHA
 
 
 def mean_spacing(prior: Mixture) -> float:

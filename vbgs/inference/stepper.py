@@ -42,14 +42,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import digamma
 
-from vbgs.inference import candidates, expfam, grid, model, projective
+from vbgs.inference import candidates, expfam, grid, grow, model, projective
 from vbgs.inference.model import Assign, EStep, Info, Mixture, PriorConfig, State
 
 Search = Literal["auto", "grid", "kdtree", "projective"]
 SEARCHES = ("auto", "grid", "kdtree", "projective")
-# A slot whose concentration is below this holds no component (vbgs.inference.grow's
-# empty slots have 1e-6): the projective search leaves it out.
-ACTIVE_ALPHA = 1e-5
 
 
 class StepInfo(NamedTuple):
@@ -360,7 +357,7 @@ class Stepper:
             self.tiling = self.tiling._replace(width=int(camera.width),
                                                height=int(camera.height))
         v = projective.view(camera, self._origin, x.dtype)
-        active = q.alpha > ACTIVE_ALPHA
+        active = q.alpha > grow.ACTIVE_ALPHA  # grow.is_active on the device: empty slots out
         cand, d2 = projective.search(q.space.mean, active, v, x, w, self.tiling)
         reaching = self.reach is not None or reach is not None
         limit = np.inf if not reaching else (

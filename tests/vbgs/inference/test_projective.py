@@ -39,7 +39,8 @@ def _search(state, frame, x, n_candidates=C, shortlist=0):
     tiling = projective.plan(frame.camera, state.rule.cell, depth, n_candidates)
     tiling = tiling._replace(shortlist=shortlist or tiling.shortlist)
     v = projective.view(frame.camera, prior.origin)
-    cand, d2 = projective.search(prior.space.mean, prior.alpha > 1e-5, v, jnp.asarray(x),
+    cand, d2 = projective.search(prior.space.mean, prior.alpha > grow.ACTIVE_ALPHA, v,
+                                 jnp.asarray(x),
                                  jnp.ones(len(x), jnp.float32), tiling)
     return np.asarray(cand), np.asarray(d2)
 
