@@ -130,35 +130,48 @@ def plan(camera, spacing: float, depth: float, n_candidates: int,
                   int(list_length), int(n_candidates), SHORTLIST * int(n_candidates))
 
 
-def _tiles(v: View, x: jnp.ndarray, tiling: Tiling) -> tuple[jnp.ndarray, jnp.ndarray,
-                                                             jnp.ndarray, jnp.ndarray]:
-    """Tile coordinates ``(tx, ty) [n]`` (with the spare border: 0 and the last are outside
-    the image), camera depth ``z [n]`` and whether the point is in front of the camera
-    and within the tiled area, of centred positions ``x [n, 3]``."""
+class Projected(NamedTuple):
+    """Centred positions seen from a :class:`View`: pixel ``u, v [n]``, camera depth
+    ``z [n]`` (1 behind the camera, where ``front`` is False)."""
+
+    u: jnp.ndarray
+    v: jnp.ndarray
+    z: jnp.ndarray
+    front: jnp.ndarray
+
+
+def project(v: View, x: jnp.ndarray) -> Projected:
+    """:class:`Projected` of centred positions ``x [n, 3]``."""
     p = x @ v.rot.T + v.shift  # [n, 3] camera frame (three products of 3 terms: exact enough)
-    z = p[:, 2]
-    front = z > 0
-    safe = jnp.where(front, z, 1.0)
-    u = v.intrinsics[0] * p[:, 0] / safe + v.intrinsics[2]
-    w = v.intrinsics[1] * p[:, 1] / safe + v.intrinsics[3]
-    tx = jnp.floor(u / tiling.tile).astype(jnp.int32) + 1
-    ty = jnp.floor(w / tiling.tile).astype(jnp.int32) + 1
-    inside = front & (tx >= 0) & (tx < tiling.tiles_x) & (ty >= 0) & (ty < tiling.tiles_y)
-    return tx, ty, z, inside
+    front = p[:, 2] > 0
+    z = jnp.where(front, p[:, 2], 1.0)
+    return Projected(v.intrinsics[0] * p[:, 0] / z + v.intrinsics[2],
+                     v.intrinsics[1] * p[:, 1] / z + v.intrinsics[3], z, front)
 
 
-def tile_lists(means: jnp.ndarray, active: jnp.ndarray, v: View, tiling: Tiling
+def _tiles(seen: Projected, tiling: Tiling) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """Tile coordinates ``(tx, ty) [n]`` (with the spare border: 0 and the last are outside
+    the image) and whether each position is in front of the camera and within the tiled
+    area."""
+    tx = jnp.floor(seen.u / tiling.tile).astype(jnp.int32) + 1
+    ty = jnp.floor(seen.v / tiling.tile).astype(jnp.int32) + 1
+    inside = seen.front & (tx >= 0) & (tx < tiling.tiles_x) & (ty >= 0) \
+        & (ty < tiling.tiles_y)
+    return tx, ty, inside
+
+
+def tile_lists(seen: Projected, active: jnp.ndarray, tiling: Tiling
                ) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Each tile's components, nearest along the ray first: ids ``[tiles, L]`` (int32) and
-    ``count [tiles]`` (how many of the ``L`` entries are real). ``means [k, 3]`` centred,
-    ``active [k]`` bool."""
-    k = means.shape[0]
+    ``count [tiles]`` (how many of the ``L`` entries are real). ``seen``: the ``k``
+    component means projected (:func:`project`), ``active [k]`` bool."""
+    k = seen.z.shape[0]
     n_tiles = tiling.tiles_x * tiling.tiles_y
-    tx, ty, z, inside = _tiles(v, means, tiling)
+    tx, ty, inside = _tiles(seen, tiling)
     keep = inside & active
     tile = jnp.where(keep, ty * tiling.tiles_x + tx, n_tiles)  # n_tiles: not listed
     # one sort by (tile, depth): each tile's components contiguous, nearest first
-    sorted_tile, _, order = jax.lax.sort((tile, jnp.where(keep, z, jnp.inf),
+    sorted_tile, _, order = jax.lax.sort((tile, jnp.where(keep, seen.z, jnp.inf),
                                           jnp.arange(k, dtype=jnp.int32)), num_keys=2)
     count = jnp.zeros(n_tiles + 1, jnp.int32).at[tile].add(1)[:n_tiles]
     start = jnp.cumsum(count) - count
@@ -182,7 +195,9 @@ def point_tiles(x: jnp.ndarray, w: jnp.ndarray, v: View, tiling: Tiling
     """Each point's tile ``[n]`` (points outside the tiled area, or of weight 0, in the
     spare border, whose lists are empty), and each tile's nearest, mean and farthest
     measured depth ``[tiles, 3]`` (+inf where it holds no point)."""
-    tx, ty, z, inside = _tiles(v, x, tiling)
+    seen = project(v, x)
+    z = seen.z
+    tx, ty, inside = _tiles(seen, tiling)
     n_tiles = tiling.tiles_x * tiling.tiles_y
     held = inside & (w > 0)
     tile = jnp.where(held, ty * tiling.tiles_x + tx, 0)
@@ -194,26 +209,22 @@ def point_tiles(x: jnp.ndarray, w: jnp.ndarray, v: View, tiling: Tiling
     return tile, jnp.stack([near, mean, jnp.where(count > 0, far, jnp.inf)], -1)
 
 
-def tile_candidates(pool: jnp.ndarray, means: jnp.ndarray, v: View, depths: jnp.ndarray,
+def tile_candidates(pool: jnp.ndarray, seen: Projected, fx, fy, depths: jnp.ndarray,
                     tiling: Tiling) -> jnp.ndarray:
     """Each tile's ``C`` candidates ``[tiles, C]`` (-1 where its pool held fewer): the
     pooled components nearest to the tile's measured points, the distance of a component
     to the tile being its distance across the image to the tile's box (pixels times its
     depth over the focal length) and along the ray to the nearest of the tile's nearest,
     mean and farthest measured depth ``depths [tiles, 3]`` (a tile across a depth edge
-    keeps components of both surfaces; one on a slanted surface, of its middle too)."""
+    keeps components of both surfaces; one on a slanted surface, of its middle too).
+    ``seen``: the component means projected, ``fx``, ``fy`` the focal lengths."""
     tx = jnp.arange(tiling.tiles_x)
     ty = jnp.arange(tiling.tiles_y)
     cu = ((tx - 1 + 0.5) * tiling.tile)[None, :].repeat(tiling.tiles_y, 0).reshape(-1)
     cv = ((ty - 1 + 0.5) * tiling.tile)[:, None].repeat(tiling.tiles_x, 1).reshape(-1)
-    p = means @ v.rot.T + v.shift  # [k, 3]
-    z = jnp.maximum(p[:, 2], 1e-30)
-    fx, fy, px, py = v.intrinsics
     half = 0.5 * tiling.tile
-    ids = jnp.maximum(pool, 0)
-    pz = z[ids]  # [tiles, 9 L]
-    pu = fx * p[ids, 0] / pz + px
-    pv = fy * p[ids, 1] / pz + py
+    ids = jnp.maximum(pool, 0)  # every listed component is in front: its z is its depth
+    pz, pu, pv = seen.z[ids], seen.u[ids], seen.v[ids]  # [tiles, 9 L]
     # across the image: how far the projected mean lies outside the tile, in world units
     # at the component's depth; along the ray: how far it lies outside the points' range
     gap_u = jnp.maximum(jnp.abs(pu - cu[:, None]) - half, 0.0) * pz / fx
@@ -248,8 +259,10 @@ def search(means: jnp.ndarray, active: jnp.ndarray, v: View, x: jnp.ndarray, w: 
     fewer) and squared distance to its nearest candidate ``[n]``; the points ``x [n, 3]``
     (weights ``w [n]``, 0: padding) and the means ``[k, 3]`` both centred on the model's
     origin."""
-    lists, count = tile_lists(means, active, v, tiling)
+    seen = project(v, means)  # once a frame: binning and ranking read the same pixels
+    lists, count = tile_lists(seen, active, tiling)
     pool = neighbourhoods(lists, count, tiling)
     tile, depths = point_tiles(x, w, v, tiling)
-    cand = tile_candidates(pool, means, v, depths, tiling)[tile]
+    cand = tile_candidates(pool, seen, v.intrinsics[0], v.intrinsics[1], depths,
+                           tiling)[tile]
     return nearest(means, x, cand, tiling.n_candidates)
