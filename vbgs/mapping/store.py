@@ -92,20 +92,14 @@ def _pack(value, name: str, arrays: dict) -> dict:
     if isinstance(value, jax.Array) and jnp.issubdtype(value.dtype, jax.dtypes.prng_key):
         arrays[name] = np.asarray(jax.random.key_data(value))
         return {"key": name, "impl": str(jax.random.key_impl(value))}
-    if isinstance(value, tuple) and hasattr(value, "_fields"):
+    fields = _record_fields(value)
+    if fields is not None:
         cls = type(value)
         if not cls.__module__.startswith("vbgs."):
             raise TypeError(f"cannot save a {cls.__module__}.{cls.__qualname__} in a map")
         return {"type": f"{cls.__module__}:{cls.__qualname__}",
                 "fields": {f: _pack(getattr(value, f), f"{name}.{f}", arrays)
-                           for f in value._fields}}
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        cls = type(value)  # a frozen settings record of this package (the prior's config)
-        if not cls.__module__.startswith("vbgs."):
-            raise TypeError(f"cannot save a {cls.__module__}.{cls.__qualname__} in a map")
-        return {"type": f"{cls.__module__}:{cls.__qualname__}",
-                "fields": {f.name: _pack(getattr(value, f.name), f"{name}.{f.name}", arrays)
-                           for f in dataclasses.fields(value)}}
+                           for f in fields}}
     if isinstance(value, tuple | list):
         return {"list": [_pack(v, f"{name}.{i}", arrays) for i, v in enumerate(value)]}
     if isinstance(value, str):
@@ -118,6 +112,16 @@ def _pack(value, name: str, arrays: dict) -> dict:
             value, int | np.integer) else "float"
         return {"value": value.item() if hasattr(value, "item") else value, "kind": kind}
     raise TypeError(f"cannot save a {type(value).__name__} in a map ({name})")
+
+
+def _record_fields(value) -> tuple[str, ...] | None:
+    """The field names of a record (a NamedTuple, or a frozen dataclass such as the
+    prior's config), rebuilt by keyword; None for anything else."""
+    if isinstance(value, tuple) and hasattr(value, "_fields"):
+        return value._fields
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return tuple(f.name for f in dataclasses.fields(value))
+    return None
 
 
 def _unpack(node: dict, arrays: dict):
