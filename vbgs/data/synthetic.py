@@ -438,10 +438,13 @@ def render_views(name: str, poses, size=128, seed: int = 0, samples: int = SAMPL
                  ) -> list[Frame]:
     """Frames of synthetic scene ``name`` seen from the given camera-to-world ``poses``
     (``samples`` rays per pixel side, see :data:`SAMPLES`)."""
-    fov, background = {"object": (OBJECT_FOV_X, OBJECT_BACKGROUND),
-                       "room": (ROOM_FOV_X, (0.0, 0.0, 0.0)),
-                       "walk": (WALK_FOV_X, WALK_SKY)}[name.removesuffix("-change")]
+    fov, background = _VIEWING[name.removesuffix("-change")]
     return _frames(scene_primitives(name, seed), poses, size, fov, background, samples)
+
+
+# Each scene's horizontal field of view and the colour of rays that hit nothing.
+_VIEWING = {"object": (OBJECT_FOV_X, OBJECT_BACKGROUND), "room": (ROOM_FOV_X, (0.0, 0.0, 0.0)),
+            "walk": (WALK_FOV_X, WALK_SKY)}
 
 
 def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
@@ -452,11 +455,11 @@ def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed
     views before it."""
     if base not in ("object", "room"):
         raise ValueError(f"no changing version of {base!r}: use object or room")
-    primitives, poses, val_poses, fov, background = {
-        "object": (object_primitives, object_poses, object_val_poses, OBJECT_FOV_X,
-                   OBJECT_BACKGROUND),
-        "room": (room_primitives, room_poses, room_val_poses, ROOM_FOV_X, (0.0, 0.0, 0.0)),
+    primitives, poses, val_poses = {
+        "object": (object_primitives, object_poses, object_val_poses),
+        "room": (room_primitives, room_poses, room_val_poses),
     }[base]
+    fov, background = _VIEWING[base]
 
     def frames(prims, at):
         return _frames(prims, at, size, fov, background, samples)
