@@ -62,6 +62,7 @@ class VbgsLearner:
         if task.resume_map:
             self.state = mapping.load(task.resume_map, self.config)
             self.skip = self.state.n_frames
+        self.learned = 0  # frames this run has learned
         self.stage_seconds: dict[str, float] = {}  # summed over the steady frames timed
         self.timed_frames = 0
         self.info: mapping.MapInfo | None = None  # the last frame's, for diagnose
@@ -95,11 +96,13 @@ class VbgsLearner:
         """Refuses settings the mapping config refuses, before any work."""
         task_config(task)
 
-    def learn(self, frame: Frame, background=None) -> None:
+    def learn(self, frame: Frame, background=None) -> bool:
+        """Learn the frame (False: skipped, learned before the map was saved)."""
         if self.skip:  # learned before the map was saved: the stream resumes after it
             self.skip -= 1
-            return
-        steady = self.state.n_frames >= COMPILE_FRAMES  # as seconds_per_frame counts
+            return False
+        steady = self.learned >= COMPILE_FRAMES  # as seconds_per_frame counts this run's
+        self.learned += 1
         with stages.timing() if self.task.stage_times else nullcontext({}) as seconds:
             self.state, self.info = mapping.update(self.state, frame, self.config, background)
         for name, value in seconds.items() if steady else ():
@@ -111,6 +114,7 @@ class VbgsLearner:
         if self.auto_scale:
             self.arrived = self.arrived.add(frame)
             self.background = background
+        return True
 
     def splats(self, drop_unused: bool = False) -> Splats:
         splats = mapping.splats(self.state, self.config, drop_unused)

@@ -75,7 +75,9 @@ class Learner(Protocol):
     replay_bytes: int  # bytes of frames it holds for replay (0: none)
     blur: float  # px², the pixel filter its splats are rendered with (vbgs.render.raster.rasterize)
 
-    def learn(self, frame: Frame, background: np.ndarray) -> None: ...
+    def learn(self, frame: Frame, background: np.ndarray) -> bool | None:
+        """Learn the frame; False when it was learned before (a map resumed from a
+        file skips those, and they are not timed)."""
 
     def splats(self, drop_unused: bool = False) -> Splats: ...
 
@@ -245,9 +247,9 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
     for step, frame, background in stream_frames(task, scene, order, progress=progress,
                                                  arrive=arrive):
         t0, c0 = time.perf_counter(), compile_seconds()
-        learner.learn(frame, background)
-        frame_seconds.append(time.perf_counter() - t0)
-        compiling += compile_seconds() - c0
+        if learner.learn(frame, background) is not False:  # False: learned before a resume
+            frame_seconds.append(time.perf_counter() - t0)
+            compiling += compile_seconds() - c0
         diagnose(learner, frame)
         cl_views = segments.views_at(step) if segments else []
         if step in checkpoints or cl_views:
@@ -268,7 +270,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
     return SceneResult(
         settings=task_settings(task), psnr=final.psnr, ssim=final.ssim,
         depth_l1=final.depth_l1, seconds=float(np.sum(frame_seconds)),
-        seconds_per_frame=float(np.mean(steady)), peak_memory_mb=peak_memory_mb(),
+        # no frame learned here (a map resumed after every frame): no time to report
+        seconds_per_frame=float(np.mean(steady)) if steady else float("nan"), peak_memory_mb=peak_memory_mb(),
         components_used=used, replay_bytes=int(learner.replay_bytes), early_views=early_idx,
         early_psnr_when_seen=curve[0][1], early_psnr_at_end=curve[-1][1],
         forgetting_curve=curve, dropped=final.dropped, background_rgb=background.tolist(),
