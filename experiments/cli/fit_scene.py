@@ -156,11 +156,6 @@ def run(args) -> dict:
     check_output_file(args.save, "--save", ".png")
     check_output_file(args.ply, "--ply", ".ply")
     check_output_file(args.save_map, "--save-map", ".npz")
-    for flag, value in (("--save-map", args.save_map), ("--resume-map", args.resume_map),
-                        ("--stage-times", args.stage_times), ("--search", args.search != "kdtree")):
-        if value and args.method != "vbgs":
-            raise ValueError(f"{flag} is a setting of --method vbgs's map; --method "
-                             f"{args.method} has none: drop {flag}")
     if args.resume_map and not Path(args.resume_map).is_file():
         raise ValueError(f"--resume-map {args.resume_map}: no such file (write one with "
                          f"--save-map)")

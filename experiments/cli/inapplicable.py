@@ -43,6 +43,9 @@ _SENSOR_LEVEL = ("sensor_level", "--sensor-level", _noisy_sensor,
                  "exact) or learned under (--sensor exact, this scene's own); give "
                  "--simulate-sensor or --sensor kinect|realsense|mono with it, or drop it")
 
+_VBGS_MAP = ("is a setting of --method vbgs's map; the gradient baseline and vbgs-polish "
+             "keep none: drop it")
+
 RULES = {
     "fit-scene": (
         ("replay", "--replay", lambda a: a.method in _STEPPED,
@@ -80,6 +83,9 @@ RULES = {
         ("drift", "--drift", lambda a: a.poses == "odometry",
          "sets the error of the simulated odometry of --poses odometry; with --poses "
          "given or track there is none"),
+        *((dest, flag, lambda a: a.method == "vbgs", _VBGS_MAP)
+          for dest, flag in (("search", "--search"), ("save_map", "--save-map"),
+                             ("resume_map", "--resume-map"), ("stage_times", "--stage-times"))),
         _SENSOR_LEVEL,
     ),
     "tune": (_SENSOR_LEVEL,),
