@@ -33,7 +33,7 @@ def test_projective_search_learns_the_scene(capsys):
     assert main([*TINY, "--search", "projective"]) == 0
     r = _record(capsys)
     assert r["search"] == "projective"
-    # measured 19.80 dB (the KD-tree's 19.76 at these settings)
+    # measured 19.82 dB (the KD-tree's 19.76 at these settings)
     assert r["psnr"] > 19.3 and r["points_unlearned"] < 0.01
 
 
