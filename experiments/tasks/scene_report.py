@@ -18,11 +18,19 @@ UNLEARNED_WARNING = 0.01
 def warn_unlearned(share: float, task) -> None:
     """Say on stderr, in words, when a stream left part of its points unlearned (its
     budget of components spent before new ground arrived): the picture then misses it."""
-    if share > UNLEARNED_WARNING:
-        print(f"warning: {share:.1%} of the training points were not learned: all "
-              f"{task.components} components were spent before the stream reached that "
-              f"ground, so the renders miss it; give more --components (the JSON's "
-              f"points_unlearned says how much)", file=sys.stderr)
+    if share <= UNLEARNED_WARNING:
+        return
+    if task.search == "projective":  # its own cause comes first
+        print(f"warning: {share:.1%} of the training points were not learned: the "
+              f"projective search listed no component near them (a tile is a fixed number "
+              f"of pixels, so frames spanning a wide range of depths lose points), so the "
+              f"renders miss them; --search kdtree lists the nearest components wherever "
+              f"they lie (the JSON's points_unlearned says how much)", file=sys.stderr)
+        return
+    print(f"warning: {share:.1%} of the training points were not learned: all "
+          f"{task.components} components were spent before the stream reached that "
+          f"ground, so the renders miss it; give more --components (the JSON's "
+          f"points_unlearned says how much)", file=sys.stderr)
 
 
 def warn_capped(details: dict, task) -> None:

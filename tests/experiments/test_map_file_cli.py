@@ -46,3 +46,15 @@ def test_projective_search_learns_the_scene(capsys):
 def test_map_flags_refuse_what_they_cannot_do(argv, message, capsys):
     assert main([*TINY, *argv]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("search, cause", [
+    ("kdtree", "components were spent"), ("projective", "projective search listed no component")])
+def test_the_unlearned_warning_names_the_search_s_own_cause(search, cause, capsys):
+    from experiments.tasks.scene_report import warn_unlearned
+    from experiments.tasks.scene_task import SceneTask
+
+    warn_unlearned(0.095, SceneTask(search=search))
+    assert cause in capsys.readouterr().err
+    warn_unlearned(0.001, SceneTask(search=search))  # under the threshold: nothing said
+    assert capsys.readouterr().err == ""
