@@ -51,6 +51,10 @@ def add(sub):
     add_frames(p)
     add_test_views(p)
     add_scene_size(p)
+    p.add_argument("--from-frame", type=int, default=0, metavar="N",
+                   help="learn the stream from training frame N on: a fresh map of what "
+                        "those frames show (after a changing scene's last change, its world "
+                        "as it is now)")
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
                         "a random offset (vbgs.mapping.budget; 0: all)")
@@ -132,7 +136,8 @@ def run(args) -> dict:
                                 ("splat_blur", args.splat_blur),
                                 ("polish_anchor", args.anchor)) if v is not None}
     task = SceneTask(scene=args.scene, format=args.format, method=args.method,
-                     components=args.components, frames=args.frames, n_test=args.test_views,
+                     components=args.components, frames=args.frames,
+                     from_frame=args.from_frame, n_test=args.test_views,
                      size=args.size, order=args.order, assign=args.assign, estep=args.estep,
                      candidates=args.candidates, search=args.search, init=args.init,
                      seed=args.seed,

@@ -58,6 +58,7 @@ from experiments.tasks.settings import (
 )
 from vbgs.baseline import TrainConfig
 from vbgs.components import parse_components
+from vbgs.data.changing import from_frame
 from vbgs.data.doctor import refuse_bad_cameras
 from vbgs.data.formats import detect_format, load_scene
 from vbgs.data.scene import Scene, parse_size
@@ -81,6 +82,7 @@ class SceneTask:
     method: str = METHOD.default
     components: int | str = 20000  # K, or "auto" / "auto:MAX" (vbgs.components)
     frames: int = 60
+    from_frame: int = 0  # the stream learned from this training frame on (a fresh map)
     n_test: int = 8
     n_val: int = 4  # validation views (tuning only: never scored by the protocol)
     size: int | tuple[int, int] = 128  # a square side, or (width, height): parse_size
@@ -172,6 +174,8 @@ class SceneTask:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if not isinstance(self.from_frame, int) or not 0 <= self.from_frame < self.frames:
+            raise ValueError(f"from_frame must be 0 to {self.frames - 1}, got {self.from_frame!r}")
         if not isinstance(self.n_val, int) or self.n_val < 0:
             raise ValueError(f"n_val must be a non-negative integer, got {self.n_val!r}")
         for name, choice in (("method", METHOD), ("protocol", PROTOCOL), ("order", ORDER),
@@ -281,7 +285,7 @@ def prepare_scene(task) -> tuple[Scene, dict]:
     arrive (:func:`experiments.tasks.depth_swap.depth_arrivals`), not here; a simulated
     depth network's is cut there, once made metric. Test and validation views keep their
     depth."""
-    scene = load_task_scene(task)
+    scene = from_frame(load_task_scene(task), task.from_frame)
     if task.depth_model:
         return scene, {}
     scene, report = simulate_training_depth(scene, task.simulate_sensor, task.sensor_level,

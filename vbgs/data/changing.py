@@ -56,3 +56,14 @@ def changed_pixels(first: Frame, final: Frame) -> np.ndarray:
     d0, d1 = np.asarray(first.depth, np.float64), np.asarray(final.depth, np.float64)
     depth = np.abs(d1 - d0) > DEPTH_CHANGE * np.maximum(np.maximum(d0, d1), 1e-30)
     return colour | depth
+
+
+def from_frame(scene: Scene, first: int) -> Scene:
+    """``scene`` streamed from training frame ``first`` on: a fresh map of what those
+    frames show (after a changing scene's last change, the world as it is now); its change
+    frames counted from there, those before it dropped."""
+    if not 0 <= first < len(scene.train):
+        raise ValueError(f"from_frame must lie within the {len(scene.train)} training "
+                         f"frames (0 to {len(scene.train) - 1}), got {first}")
+    return scene._replace(train=scene.train[first:],
+                          changes=tuple(c - first for c in scene.changes if c > first))

@@ -19,6 +19,7 @@ from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AU
                              parse_components)
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
+from vbgs.mapping import change
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
@@ -150,16 +151,23 @@ class EvidenceConfig:
     """Opacity from the rays that hit or pass each component (:mod:`vbgs.render.opacity`).
 
     pass_sigmas: an observed depth within this many sigma (camera z) is a hit;
-    prior_hits, prior_passes: the Beta prior's pseudo-counts of rays.
+    prior_hits, prior_passes: the Beta prior's pseudo-counts of rays;
+    forget_after: a growing map forgets a component its frames saw through this many
+        times in a row with none hitting it (:mod:`vbgs.mapping.change`; 0: never).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
     prior_hits: float = opacity.PRIOR_HITS
     prior_passes: float = opacity.PRIOR_PASSES
+    forget_after: int = change.FORGET_AFTER
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):
             _positive("evidence", name, getattr(self, name))
+        if not isinstance(self.forget_after, int) or isinstance(self.forget_after, bool) \
+                or self.forget_after < 0:
+            raise ValueError(f"evidence.forget_after must be a whole number of frames >= 0 "
+                             f"(0: never forget), got {self.forget_after!r}")
 
 
 @dataclass(frozen=True)

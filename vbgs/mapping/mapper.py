@@ -94,6 +94,7 @@ from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
 from vbgs.components import AUTO_BUCKET
 import vbgs.mapping.saturation as saturation
+from vbgs.mapping import change
 import vbgs.mapping.splits as splits
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
@@ -125,6 +126,8 @@ class MapState(NamedTuple):
     seen: saturation.Seen | None = None  # points learned per cell (budget.saturation)
     colours: splits.CellColours | None = None  # colours shown per refinement cell (auto)
     n_skipped: int = 0  # valid points skipped as already explained (budget.saturation)
+    doubt: change.Doubt | None = None  # frames in a row each component was seen through
+    n_forgotten: int = 0  # components forgotten as gone (vbgs.mapping.change)
 
     @property
     def points_unlearned(self) -> float:
@@ -264,17 +267,42 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
                                     else info.before)
         variance = depth_variance(geometry[0], frame.camera, sensor.model, level) \
             if sensor.noisy else None
-        evidence = opacity.observe(state.evidence, *geometry, frame.camera, frame.depth,
-                                   pass_sigmas=config.evidence.pass_sigmas,
-                                   sensor_var=variance,
-                                   empty=empty)
-        state = state._replace(evidence=evidence)
+        seen = opacity.frame_evidence(*geometry, frame.camera, frame.depth,
+                                      pass_sigmas=config.evidence.pass_sigmas,
+                                      sensor_var=variance, empty=empty)
+        state = _forget(state._replace(evidence=opacity.Evidence(
+            state.evidence.hits + seen.hits, state.evidence.passes + seen.passes)),
+            seen, state.evidence, config)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
                                     frame.rgb, 0.0 if background is None else background,
                                     blur=config.render.splat_blur)
         state = state._replace(colour=colour)
     return state
+
+
+def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Evidence,
+            config: Config) -> MapState:
+    """A growing map's components that its frames have now seen through
+    ``evidence.forget_after`` times in a row forgotten (:mod:`vbgs.mapping.change`):
+    ``seen`` the frame's evidence, ``before`` the evidence before it."""
+    after = config.evidence.forget_after
+    if not state.growing or after <= 0:
+        return state
+    prior = state.mixture.prior
+    doubt = change.observe(change.no_doubt(prior.n_components) if state.doubt is None
+                           else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA)
+    slots = change.gone(doubt, after)
+    if len(slots) == 0:
+        return state._replace(doubt=doubt)
+    empty = grow.empty_prior(prior.n_components, prior.origin, state.rule.cell, config.prior,
+                             prior.alpha.dtype)
+    state = state._replace(mixture=change.emptied(state.mixture, slots, empty),
+                           evidence=change.cleared(state.evidence, slots),
+                           colour=change.cleared(state.colour, slots),
+                           doubt=change.cleared(doubt, slots),
+                           n_forgotten=state.n_forgotten + len(slots))
+    return _sync_stepper(state, slots, config)
 
 
 def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footprint=None,
@@ -509,7 +537,9 @@ def _merged(state: MapState, pairs: np.ndarray, config: Config) -> MapState:
                              prior.alpha.dtype)
     return state._replace(mixture=merge.merge(mixture, pairs, empty),
                           evidence=merge.merge_rows(state.evidence, pairs),
-                          colour=merge.merge_rows(state.colour, pairs))
+                          colour=merge.merge_rows(state.colour, pairs),
+                          doubt=None if state.doubt is None else change.cleared(
+                              state.doubt, pairs.reshape(-1)))
 
 
 def _auto_room(state: MapState, xyz, ray, levels, config: Config
@@ -558,7 +588,8 @@ def _widened(state: MapState, wanted: int, config: Config) -> MapState:
     return state._replace(
         mixture=capacity.widen(state.mixture, k, state.rule.cell, config.prior),
         evidence=capacity.widen_rows(state.evidence, k),
-        colour=capacity.widen_rows(state.colour, k))
+        colour=capacity.widen_rows(state.colour, k),
+        doubt=None if state.doubt is None else capacity.widen_rows(state.doubt, k))
 
 
 def _split_levels(state: MapState, xyz, rgb, footprint, config: Config

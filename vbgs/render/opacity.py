@@ -53,6 +53,11 @@ N_SAMPLES = 5  # footprint pixels read per component and frame: centre, +-1 sigm
 # result would be re-made for a few hundredths.
 PRIOR_HITS = 1.0
 PRIOR_PASSES = 1.0
+# A component is seen through in a frame when its samples, taken at least this many
+# pixels from its centre, all passed: a footprint under a pixel would otherwise be one
+# pixel's word, and a pixel's grid puts a thin edge's or a silhouette's own components
+# beside the surface they were seeded on (vbgs.mapping.change).
+THROUGH_PIXELS = 1.5
 
 
 class Evidence(NamedTuple):
@@ -74,9 +79,27 @@ def expected_opacity(evidence: Evidence, prior_hits: float = PRIOR_HITS,
     return hits / (hits + prior_passes + evidence.passes)
 
 
+class FrameEvidence(NamedTuple):
+    """One frame's evidence about each component: its rays, and what its centre ray saw."""
+
+    hits: jax.Array  # [k] rays that hit it
+    passes: jax.Array  # [k] rays that passed through it
+    seen_through: jax.Array  # [k] bool: every sample ray, each at least THROUGH_PIXELS
+    #                          from the centre, passed through it (vbgs.mapping.change)
+
+
 def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
             pass_sigmas: float = PASS_SIGMAS, sensor_var=None, empty=None) -> Evidence:
-    """Add one frame's evidence for components with world ``means [k, 3]`` and
+    """``evidence`` with one frame's hits and passes added (:func:`frame_evidence`, whose
+    arguments it takes)."""
+    frame = frame_evidence(means, covs, camera, depth, pass_sigmas=pass_sigmas,
+                           sensor_var=sensor_var, empty=empty)
+    return Evidence(evidence.hits + frame.hits, evidence.passes + frame.passes)
+
+
+def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = PASS_SIGMAS,
+                   sensor_var=None, empty=None) -> FrameEvidence:
+    """One frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
     (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
 
@@ -90,18 +113,18 @@ def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
     k = np.shape(means)[0]
     sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
     empty = empty_pixels(depth) if empty is None else empty
-    hits, passes = _frame_counts(
+    return FrameEvidence(*_frame_counts(
         jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32), jnp.asarray(empty),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
-    )
-    return Evidence(evidence.hits + hits, evidence.passes + passes)
+    ))
 
 
 @jax.jit
 def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, pose, depth):
-    """Hits and passes ``[k]`` of one frame (module docstring)."""
+    """Hits and passes ``[k]`` of one frame (module docstring), and whether it was seen
+    through ``[k]``: the five samples taken at least ``THROUGH_PIXELS`` apart all passed."""
     height, width = depth.shape
     k = means.shape[0]
     splats = Splats(means, covs, jnp.zeros((k, 3)), jnp.ones(k))
@@ -114,23 +137,31 @@ def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, p
     area = jnp.where(ellipse, 2.0 * jnp.pi / jnp.sqrt(det_conic), 0.0)  # [k] ∫ exp(-½ dᵀ Σ'⁻¹ d) dd
     sigma_u = jnp.sqrt(jnp.where(ellipse, c, 1.0) / det_conic)  # sqrt of Σ' diagonal
     sigma_v = jnp.sqrt(jnp.where(ellipse, a, 1.0) / det_conic)
-    zero = jnp.zeros(k)
-    offsets = jnp.stack([jnp.stack([zero, zero], -1), jnp.stack([sigma_u, zero], -1),
-                         jnp.stack([-sigma_u, zero], -1), jnp.stack([zero, sigma_v], -1),
-                         jnp.stack([zero, -sigma_v], -1)])  # [N_SAMPLES, k, 2]
-    uv = proj.uv[None] + offsets
-    col, row = jnp.floor(uv[..., 0]).astype(jnp.int32), jnp.floor(uv[..., 1]).astype(jnp.int32)
-    inside = (col >= 0) & (col < width) & (row >= 0) & (row < height) & ellipse[None]
-    row, col = jnp.clip(row, 0, height - 1), jnp.clip(col, 0, width - 1)
-    observed = depth[row, col]  # [s, k]
-    has_depth = jnp.isfinite(observed) & (observed > 0)
-    shows_nothing = empty[row, col]
     axis_z = pose[:3, 2]  # camera z axis in world coordinates
     sigma_z = jnp.sqrt(jnp.maximum(jnp.einsum("i,kij,j->k", axis_z, covs, axis_z), 0.0)
                        + sensor_var)
     near_side = proj.depth - pass_sigmas * sigma_z
     far_side = proj.depth + pass_sigmas * sigma_z
-    hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
-    passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > far_side)))
+
+    def sample(du, dv):  # the centre and du, dv [k] pixels either side: hit, passed [s, k]
+        zero = jnp.zeros(k)
+        offsets = jnp.stack([jnp.stack([zero, zero], -1), jnp.stack([du, zero], -1),
+                             jnp.stack([-du, zero], -1), jnp.stack([zero, dv], -1),
+                             jnp.stack([zero, -dv], -1)])  # [N_SAMPLES, k, 2]
+        uv = proj.uv[None] + offsets
+        col = jnp.floor(uv[..., 0]).astype(jnp.int32)
+        row = jnp.floor(uv[..., 1]).astype(jnp.int32)
+        inside = (col >= 0) & (col < width) & (row >= 0) & (row < height) & ellipse[None]
+        row, col = jnp.clip(row, 0, height - 1), jnp.clip(col, 0, width - 1)
+        observed = depth[row, col]  # [s, k]
+        has_depth = jnp.isfinite(observed) & (observed > 0)
+        shows_nothing = empty[row, col]
+        hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
+        passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > far_side)))
+        return hit, passed
+
+    hit, passed = sample(sigma_u, sigma_v)
     per_sample = area / N_SAMPLES
-    return hit.sum(0) * per_sample, passed.sum(0) * per_sample
+    wide = jnp.float32(THROUGH_PIXELS)
+    _, through = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide))
+    return hit.sum(0) * per_sample, passed.sum(0) * per_sample, through.all(0)

@@ -1,0 +1,127 @@
+"""A world that changes: components whose surface has gone are found from the frames'
+own depth and forgotten, so that growth re-learns the place as it now is.
+
+**The evidence.** Each frame's opacity evidence (:func:`vbgs.render.opacity.frame_evidence`)
+already reads, per component, its depth map along a few rays through the component's
+footprint, with the hit band widened by the sensor's noise. A component is **seen
+through** in a frame when the ray through its mean and four rays at least
+``THROUGH_PIXELS`` pixels either side of it (in u and in v) all end beyond its far side
+(or show nothing): free space where the map holds a surface. A removed object's
+components are seen through from every view that looks at the place; a surface that
+is still there is hit. A frame that hits a component, with any of its rays, shows it
+there; a frame in which it is occluded or out of view says nothing.
+
+**The test, per component and in closed form.** Two hypotheses, *still there* and
+*gone*. Under *gone* every frame that looks is a see-through; under *still there* a
+see-through is the rare misreading of a pixel grid (a thin pole that one frame's pixels
+miss, a silhouette's own component beside its edge), with some small probability
+``epsilon`` per frame, and a hit resets the question. After ``n`` consecutive
+see-throughs with no hit the log odds of *gone* against *still there* have grown by
+``n log(1/epsilon)``; the prior odds of a change are small, so the decision is a count:
+``n >= forget_after`` frames in a row (``EvidenceConfig.forget_after``; 0: never). A
+component that was never hit (``MIN_HITS`` rays) is not a surface the map learned and
+is left to the opacity evidence.
+
+The count is the one choice. It is set to the fewest frames at which no static stream
+of the synthetic scenes (object, room, walk: 60 frames each, exact depth) forgets a
+single component, with one frame to spare: see-throughs of a static world came at most
+four frames in a row (on the walk's thin lamp posts and tree crowns at 20 m, a pixel
+wide at 128 px); object and room at most one. Below that, a static stream is no
+longer what it is with forgetting off, to the bit.
+
+**Forgetting.** A gone component's slot is emptied, the way a merge empties the slot it
+frees: prior row back to an empty slot's, its statistics, opacity evidence and colour
+sums zeroed. Its learned statistics are not discounted (a forgetting factor or a power
+prior would keep drawing a fading ghost of the object, and would touch components the
+frame never contradicted); the place is new ground again, and the next frame that shows
+what now stands there grows components for it. Only components a frame saw through are
+touched: everything the world kept is left to the bit.
+
+It reads a growing map (``init`` without a prior): a fixed reference has no empty slot
+to return a component to, so under a given prior nothing is forgotten, and a stream of
+a fixed reference still equals one batch.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from vbgs.inference import model
+from vbgs.inference.model import Mixture
+from vbgs.render.opacity import Evidence, FrameEvidence
+
+# Frames in a row seen through, no frame hitting it, after which a component is gone
+# (module docstring: static streams of object, room and walk forget nothing).
+FORGET_AFTER = 5
+# Rays that must have hit a component before it can be judged gone (a surface learned).
+MIN_HITS = 5.0
+
+_m_step = jax.jit(model.m_step)
+
+
+class Doubt(NamedTuple):
+    """Per component, the frames in a row it was seen through since a frame hit it."""
+
+    frames: jax.Array  # [k] int32
+
+
+def no_doubt(k: int) -> Doubt:
+    """Before any frame: no component doubted."""
+    return Doubt(jnp.zeros(k, jnp.int32))
+
+
+@jax.jit
+def _counted(frames, hits, seen_through, judged):
+    return jnp.where(seen_through & judged, frames + 1, jnp.where(hits > 0, 0, frames))
+
+
+def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active) -> Doubt:
+    """``doubt`` after one frame's evidence ``frame``: a see-through of an ``active [k]``
+    component hit ``MIN_HITS`` rays or more before (``evidence``, the counts before the
+    frame) adds one, a hit resets the count, a frame without either keeps it."""
+    judged = jnp.asarray(active) & (evidence.hits >= MIN_HITS)
+    return Doubt(_counted(doubt.frames, frame.hits, frame.seen_through, judged))
+
+
+def gone(doubt: Doubt, forget_after: int) -> np.ndarray:
+    """``[m]`` the components seen through ``forget_after`` frames in a row (none when 0)."""
+    if forget_after <= 0:
+        return np.zeros(0, np.int64)
+    return np.flatnonzero(np.asarray(doubt.frames) >= forget_after)
+
+
+def emptied(state: model.State, slots: np.ndarray, empty: Mixture) -> model.State:
+    """``state`` with the components ``slots [m]`` emptied: their prior rows taken from
+    ``empty`` (a prior of empty slots, :func:`vbgs.inference.grow.empty_prior`), their
+    statistics zeroed, the posterior the M-step of the two."""
+    if len(slots) == 0:
+        return state
+    prior = jax.tree_util.tree_map(lambda p, e: _rows(p, e, slots), state.prior._replace(
+        origin=None), empty._replace(origin=None))._replace(origin=state.prior.origin)
+    stats = cleared(state.stats, slots)
+    return state._replace(prior=prior, posterior=_m_step(prior, stats), stats=stats)
+
+
+def cleared(sums, slots: np.ndarray):
+    """Per-component sums (a NamedTuple of ``[k, ...]`` arrays or None) with the rows
+    ``slots`` zeroed."""
+    def one(x):
+        if x is None:
+            return None
+        out = np.array(x)
+        out[slots] = 0
+        return jax.device_put(out)
+
+    return type(sums)(*(one(x) for x in sums))
+
+
+def _rows(field, source, slots: np.ndarray):
+    """``field`` with its rows ``slots`` taken from ``source`` (on the host, as growth
+    puts rows: a device scatter would compile once per number of slots)."""
+    out = np.array(field)
+    out[slots] = np.asarray(source)[slots]
+    return jax.device_put(out)
