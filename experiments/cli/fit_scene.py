@@ -37,6 +37,7 @@ from experiments.tasks.settings import (
     splat_scale_arg,
 )
 from vbgs.components import AUTO_MAX_COMPONENTS, components_arg
+from vbgs.mapping.change import FORGET_AFTER
 
 
 def add(sub):
@@ -55,6 +56,10 @@ def add(sub):
                    help="learn the stream from training frame N on: a fresh map of what "
                         "those frames show (after a changing scene's last change, its world "
                         "as it is now)")
+    p.add_argument("--forget-after", type=int, default=None, metavar="N",
+                   help="VBGS forgets a component its frames have seen through N times in a "
+                        "row, none hitting it: what the world no longer holds (default: "
+                        "%d; 0: never)" % FORGET_AFTER)
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
                         "a random offset (vbgs.mapping.budget; 0: all)")
@@ -130,7 +135,7 @@ def add(sub):
 def run(args) -> dict:
     from experiments.tasks.scene_report import save_views
     from experiments.tasks.scene_task import SceneTask, run_scene
-    from vbgs.mapping import BudgetConfig
+    from vbgs.mapping import BudgetConfig, EvidenceConfig
 
     render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale),
                                 ("splat_blur", args.splat_blur),
@@ -154,6 +159,8 @@ def run(args) -> dict:
                                                                saturation=args.budget_saturation),
                      save_map=args.save_map, resume_map=args.resume_map,
                      stage_times=args.stage_times, **calibration(args),
+                     **({} if args.forget_after is None else
+                        {"evidence": EvidenceConfig(forget_after=args.forget_after)}),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "

@@ -85,7 +85,8 @@ RULES = {
          "given or track there is none"),
         *((dest, flag, lambda a: a.method == "vbgs", _VBGS_MAP)
           for dest, flag in (("search", "--search"), ("save_map", "--save-map"),
-                             ("resume_map", "--resume-map"), ("stage_times", "--stage-times"))),
+                             ("resume_map", "--resume-map"), ("stage_times", "--stage-times"),
+                             ("forget_after", "--forget-after"))),
         _SENSOR_LEVEL,
     ),
     "tune": (_SENSOR_LEVEL,),
