@@ -149,6 +149,8 @@ class VbgsLearner:
                                                      strict=True)))
         if self.state.growing and self.config.estep == "sparse":
             extra["points_unlearned"] = self.state.points_unlearned
+        if self.state.growing:  # seen through frames in a row: gone (vbgs.mapping.change)
+            extra["components_forgotten"] = self.state.n_forgotten
         if self.config.budget.saturation:  # valid points skipped as already explained
             seen = self.state.n_points + self.state.n_skipped
             extra["points_skipped"] = self.state.n_skipped / max(seen, 1)
