@@ -19,7 +19,7 @@ from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AU
                              parse_components)
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
-from vbgs.mapping import change
+from vbgs.mapping.change import FORGET_AFTER
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
@@ -159,7 +159,7 @@ class EvidenceConfig:
     pass_sigmas: float = opacity.PASS_SIGMAS
     prior_hits: float = opacity.PRIOR_HITS
     prior_passes: float = opacity.PRIOR_PASSES
-    forget_after: int = change.FORGET_AFTER
+    forget_after: int = FORGET_AFTER
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):

@@ -94,7 +94,7 @@ from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
 from vbgs.components import AUTO_BUCKET
 import vbgs.mapping.saturation as saturation
-from vbgs.mapping import change
+import vbgs.mapping.change as change
 import vbgs.mapping.splits as splits
 from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
