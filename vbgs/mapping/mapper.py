@@ -267,9 +267,10 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
                                     else info.before)
         variance = depth_variance(geometry[0], frame.camera, sensor.model, level) \
             if sensor.noisy else None
-        seen = opacity.frame_evidence(*geometry, frame.camera, frame.depth,
-                                      pass_sigmas=config.evidence.pass_sigmas,
-                                      sensor_var=variance, empty=empty)
+        seen = opacity.frame_evidence(  # a sensor's missing pixel is no free space
+            *geometry, frame.camera, frame.depth, pass_sigmas=config.evidence.pass_sigmas,
+            sensor_var=variance, empty=empty,
+            through_empty=None if empty is None else np.zeros_like(empty))
         state = _forget(state._replace(evidence=opacity.Evidence(
             state.evidence.hits + seen.hits, state.evidence.passes + seen.passes)),
             seen, state.evidence, config)

@@ -98,7 +98,7 @@ def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
 
 
 def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = PASS_SIGMAS,
-                   sensor_var=None, empty=None) -> FrameEvidence:
+                   sensor_var=None, empty=None, through_empty=None) -> FrameEvidence:
     """One frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
     (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
@@ -109,12 +109,17 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     ``empty [h, w]`` bool marks the pixels known to show nothing (sky, background):
     a pixel without depth counts as a pass there only. Elsewhere it is a hole in the
     measurement, which proves nothing (it must not lower opacity). Without ``empty``
-    every pixel without depth is empty (exact depth: nothing else is missing)."""
+    every pixel without depth is empty (exact depth: nothing else is missing).
+    ``through_empty [h, w]``: the pixels without depth the see-through test takes as
+    free space (None: ``empty``; a sensor's missing pixels, out of its range, say
+    nothing about what stands there)."""
     k = np.shape(means)[0]
     sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
     empty = empty_pixels(depth) if empty is None else empty
+    through_empty = empty if through_empty is None else through_empty
     return FrameEvidence(*_frame_counts(
-        jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32), jnp.asarray(empty),
+        jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
+        jnp.asarray(empty), jnp.asarray(through_empty),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
@@ -122,7 +127,8 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
 
 
 @jax.jit
-def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, pose, depth):
+def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, means, covs, fx, fy, cx, cy,
+                  pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring), and whether it was seen
     through ``[k]``: the five samples taken at least ``THROUGH_PIXELS`` apart all passed."""
     height, width = depth.shape
@@ -143,7 +149,7 @@ def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, p
     near_side = proj.depth - pass_sigmas * sigma_z
     far_side = proj.depth + pass_sigmas * sigma_z
 
-    def sample(du, dv):  # the centre and du, dv [k] pixels either side: hit, passed [s, k]
+    def sample(du, dv, empty):  # the centre and du, dv [k] px either side: hit, passed
         zero = jnp.zeros(k)
         offsets = jnp.stack([jnp.stack([zero, zero], -1), jnp.stack([du, zero], -1),
                              jnp.stack([-du, zero], -1), jnp.stack([zero, dv], -1),
@@ -160,8 +166,9 @@ def _frame_counts(pass_sigmas, sensor_var, empty, means, covs, fx, fy, cx, cy, p
         passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > far_side)))
         return hit, passed
 
-    hit, passed = sample(sigma_u, sigma_v)
+    hit, passed = sample(sigma_u, sigma_v, empty)
     per_sample = area / N_SAMPLES
     wide = jnp.float32(THROUGH_PIXELS)
-    _, through = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide))
+    _, through = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
+                        through_empty)
     return hit.sum(0) * per_sample, passed.sum(0) * per_sample, through.all(0)
