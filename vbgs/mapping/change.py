@@ -30,9 +30,10 @@ The count is the one choice, and a constraint rather than a tuned figure: the fe
 frames at which the static streams forget (almost) nothing. See-throughs of a static
 world come in runs on the synthetic walk (its thin lamp posts and tree crowns at 20 m,
 a pixel wide at 128 px; object and room at most one frame, exact depth, 60 frames
-each). At six, object and room streams, exact or
-under the Kinect, are what they are with forgetting off, to the bit; the walk forgets
-three components (seven frames: two; ``results/changing/static/``). Each frame of delay
+each). At six the object and room streams with exact
+depth, and the room under the Kinect, are what they are with forgetting off, to the bit;
+the object under the Kinect forgets one component and the walk three (seven frames:
+two; ``results/changing/static/``). Each frame of delay
 costs a changed world about 0.1 dB on validation views (``results/tuning/forget/``),
 so the count is no higher.
 
