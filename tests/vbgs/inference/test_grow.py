@@ -278,3 +278,28 @@ def test_calibrate_with_coarse_ground_gives_the_first_batch_its_share():
     assert abs(n - 2000) <= 40  # the count moves in steps
     flat = grow.calibrate(near, 5000, 500, footprint=np.full(4000, 0.016), coarse=5)
     assert flat.cell == grow.calibrate(near, 5000, 500).cell
+
+
+def test_shortfall_counts_only_when_the_empty_slots_may_not_suffice():
+    """While the empty slots alone take a batch's most (rule.max_new) the shortfall is a
+    bound <= 0, not counted; below that it is the count: new ground less the empty slots."""
+    pts = lattice(16)  # 16 cells of 4 x 4 points
+    rule = grow.calibrate(pts, 20, 16, rate=0.5)  # at most 10 new a batch
+    state = grow.start_empty(pts, 20, rule.cell)
+    assert grow.shortfall(state, pts, rule) == rule.max_new - 20 < 0  # a bound
+    for n, key in ((128, 0), (192, 1)):  # 8 cells, then 4 more
+        state, _ = grow.grow(state, pts[:n], colours(pts[:n]), rule, key=jax.random.key(key))
+    empty = int((~grow.is_active(state.prior)).sum())
+    assert empty == 8 < rule.max_new  # now counted: 4 cells of new ground left
+    assert grow.shortfall(state, pts, rule) == 4 - empty
+
+
+def test_empty_prior_is_kept_and_equal_to_a_fresh_one():
+    origin = np.float32([0.5, -1.0, 2.0])
+    first = grow.empty_prior(32, origin, 0.1)
+    assert grow.empty_prior(32, origin.copy(), 0.1) is first  # kept
+    fresh = grow._empty_prior(32, origin, 0.1, model.PriorConfig(), np.dtype(np.float32))
+    for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(fresh), strict=True):
+        assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+    other = grow.empty_prior(32, origin + 1, 0.1)
+    assert other is not first and not np.array_equal(other.origin, first.origin)
