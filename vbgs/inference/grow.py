@@ -37,7 +37,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.inference import quadric
+from vbgs.inference import cells, quadric
+from vbgs.inference.cells import cell_index, cell_keys  # noqa: F401  (grow's names before)
 from vbgs.inference.model import (
     Mixture,
     PriorConfig,
@@ -133,11 +134,6 @@ def mean_spacing(prior: Mixture) -> float:
     return float(np.median(dist[:, 1])) or 1.0
 
 
-def cell_index(x: np.ndarray, cell: float) -> np.ndarray:
-    """Integer cell coordinates ``[n, d]`` of centred positions ``x [n, d]``."""
-    return np.floor(np.asarray(x, np.float64) / cell).astype(np.int64)
-
-
 def covered_area(xyz) -> float:
     """The area the points ``xyz [n, d]`` cover: ``n s^2`` with ``s`` the median distance
     from a point to its nearest neighbour (each point owns an ``s x s`` patch: exact for
@@ -179,9 +175,27 @@ def empty_prior(n_components: int, origin, cell: float, config: PriorConfig = Pr
     """A prior of ``n_components`` empty slots about ``origin [d]`` at cell length
     ``cell`` (the prior strengths a filled slot takes). The means are summed on the
     host (the same float32 sum as on the device) and arrays are put, not converted:
-    every eager ``jnp`` conversion or op is one more executable a fresh process loads."""
+    every eager ``jnp`` conversion or op is one more executable a fresh process loads.
+    The last few are kept (a stream merging every frame asks for the same one: 18 ms at
+    100k slots); a prior's arrays are immutable, so the same one is handed out again."""
     dtype = np.dtype(dtype)
     origin = np.asarray(origin, dtype)
+    key = (n_components, origin.tobytes(), dtype.str, float(cell), config)
+    if key not in _EMPTY_PRIORS:
+        if len(_EMPTY_PRIORS) >= EMPTY_PRIORS_KEPT:
+            del _EMPTY_PRIORS[next(iter(_EMPTY_PRIORS))]
+        _EMPTY_PRIORS[key] = _empty_prior(n_components, origin, cell, config, dtype)
+    return _EMPTY_PRIORS[key]
+
+
+# The empty priors empty_prior keeps, oldest first (a stream uses one per capacity).
+EMPTY_PRIORS_KEPT = 4
+_EMPTY_PRIORS: dict = {}
+
+
+def _empty_prior(n_components: int, origin: np.ndarray, cell: float, config: PriorConfig,
+                 dtype: np.dtype) -> Mixture:
+    """:func:`empty_prior`, made."""
     d = origin.shape[0]
     offset = np.zeros((n_components, d))
     offset[:, :] = EMPTY_DISTANCE_CELLS * cell
@@ -363,20 +377,6 @@ def host_rng(key: jax.Array) -> np.random.Generator:
     return np.random.default_rng(np.asarray(jax.random.key_data(key)).ravel().tolist())
 
 
-def cell_keys(cells: np.ndarray) -> np.ndarray:
-    """``[n]`` int64 keys of the rows of integer cell coordinates ``cells [n, d]``, equal
-    exactly where the rows are: the rows packed into one int64 each when their box allows
-    (a 1-D sort is far faster than one over rows), else labels of the distinct rows."""
-    lo = cells.min(0)
-    span = cells.max(0) - lo + 1
-    if np.prod(span.astype(np.float64)) >= 2.0**62:  # too wide to pack: unique over rows
-        return np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
-    key = cells[:, 0] - lo[0]
-    for j in range(1, cells.shape[1]):  # C order, as np.ravel_multi_index
-        key = key * span[j] + (cells[:, j] - lo[j])
-    return key
-
-
 def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
           quota: int, ray: np.ndarray | None = None) -> np.ndarray:
     """Up to ``quota`` points of ``x [n, d]`` (indices), one per cell of side ``cell``
@@ -387,17 +387,12 @@ def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
     too: noise scatters a surface's points into the cells before and behind it along
     the rays, and a component there already explains them (the budget is not spent on
     the noise)."""
-    if quota <= 0:
+    if quota <= 0 or len(x) == 0:
         return np.zeros(0, np.int64)
-    n = len(x)
     shifted = [x] if ray is None else [x, x - NOISE_SIGMAS * ray, x + NOISE_SIGMAS * ray]
-    keys = cell_keys(cell_index(np.concatenate([taken, *shifted]), cell))
-    held = np.sort(keys[: len(taken)])  # the cells holding a component, sorted
-    point_keys = keys[len(taken):].reshape(len(shifted), n)
-    empty = np.ones(n, bool)
-    if len(held):
-        at = np.minimum(np.searchsorted(held, point_keys), len(held) - 1)
-        empty = ~(held[at] == point_keys).any(0)
+    (taken_keys, *point_keys), size = cells.box_keys([taken, *shifted], cell)
+    point_keys = np.stack(point_keys)  # [shifts, n]
+    empty = ~cells.held(taken_keys, point_keys, size).any(0)
     poor = order[empty[order]]  # points in empty cells, in random order
     _, first = np.unique(point_keys[0][poor], return_index=True)  # one point per cell
     return poor[np.sort(first)][:quota]
@@ -494,7 +489,12 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
     when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it). With
     ``earns [n, levels]`` (:func:`vbgs.mapping.splits.earned_levels`) the refinement those
     points seed counts too (as :func:`select` counts it with every slot free, in the
-    points' own order)."""
+    points' own order). Nothing is counted while the empty slots alone take the most a
+    batch may add (``rule.max_new``, which bounds what it wants): the shortfall is then
+    at most ``rule.max_new - empty slots <= 0``, and that bound is returned."""
+    n_empty = int((~is_active(state.prior)).sum())
+    if n_empty >= rule.max_new:
+        return rule.max_new - n_empty
     x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray)
     if earns is None:
         wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
@@ -509,7 +509,7 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
                          order[earns[:, level]], quota, ray)
             chosen = np.concatenate([chosen, more])
         wanted = len(chosen)
-    return wanted - int((~active).sum())
+    return wanted - n_empty
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
@@ -531,7 +531,7 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
     seeds = x[chosen]
     fine = earns is not None and bool(split.any())  # auto's splits: their own cells
     if prior.dim == 3 and (config.surface_thickness != 1.0 or coarse or fine) and len(x) >= 3:
-        s = float(prior.space.scale[slots[0], 0, 0])  # an empty slot's scale is s I
+        s = float(np.asarray(prior.space.scale)[slots[0], 0, 0])  # an empty slot's: s I
         if coarse:  # a component on a coarse cell of side cell 2^j: variance 4^j times
             s = s * 4.0 ** levels[chosen]
         if fine:  # a split in a cell of side cell / 2^l: variance 4^-l times

@@ -141,7 +141,13 @@ def choose_pairs(posterior: Mixture, counts: np.ndarray, active: np.ndarray, n: 
     if len(pairs) == 0:
         return pairs
     cost = merge_costs(posterior, counts, pairs, colour_noise)
-    return _disjoint(pairs, np.argsort(cost, kind="stable"), posterior.n_components, n)
+    return cheapest_disjoint(pairs, cost, posterior.n_components, n)
+
+
+def cheapest_disjoint(pairs: np.ndarray, cost: np.ndarray, k: int, n: int) -> np.ndarray:
+    """Up to ``n`` disjoint pairs of ``pairs [p, 2]`` (slots of ``k``), cheapest ``cost
+    [p]`` first (ties in the pairs' order)."""
+    return _disjoint(pairs, np.argsort(cost, kind="stable"), k, n)
 
 
 def neighbour_pairs(posterior: Mixture, active: np.ndarray,

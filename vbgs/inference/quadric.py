@@ -41,6 +41,9 @@ import numpy as np
 
 # Below this many neighbours the quadratic terms are left out (a plane: 3 coefficients).
 QUADRIC_MIN_POINTS = 10
+# The ridge of the quadric's normal equations, a share of their trace (least_squares):
+# far below any term a patch can tell, enough to keep a term it cannot tell at 0.
+RIDGE = 1e-12
 
 
 def neighbour_index(x: np.ndarray, chosen: np.ndarray, neighbours: int) -> np.ndarray:
@@ -81,18 +84,31 @@ def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
     patch = x[idx]  # [m, k, 3]
     k = patch.shape[1]
     axes = patch_axes(patch, None if ray is None else np.asarray(ray, np.float64)[idx])
-    rel = np.einsum("mki,mij->mkj", patch - x[chosen][:, None], axes)  # [m, k, 3]: h, a, b
+    rel = np.matmul(patch - x[chosen][:, None], axes)  # [m, k, 3]: h, a, b
     h, a, b = rel[..., 0], rel[..., 1], rel[..., 2]
     scale = np.sqrt(np.maximum((a * a + b * b).mean(1, keepdims=True), 1e-300))
     a, b = a / scale, b / scale  # unit spread: the normal equations stay conditioned
     terms = [np.ones_like(a), a, b]
     if k >= QUADRIC_MIN_POINTS:
         terms += [a * a, a * b, b * b]
-    design = np.stack(terms, -1)  # [m, k, p]
-    coef = np.einsum("mpk,mk->mp", np.linalg.pinv(design), h)
+    coef = least_squares(np.stack(terms, -1), h)  # [m, p]
     normal = (axes[:, :, 0] - (coef[:, 1, None] * axes[:, :, 1]
                                + coef[:, 2, None] * axes[:, :, 2]) / scale)
     return normal, coef[:, 0]
+
+
+def least_squares(design: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """``[m, p]``: for each patch the coefficients ``c`` that minimise ``|design c - h|^2``
+    (``design [m, k, p]``, ``h [m, k]``), by the normal equations with a ridge of
+    :data:`RIDGE` of their trace: a term the patch cannot tell (no spread along an axis)
+    gets 0, as the pseudo-inverse's minimum norm gives it. The design's columns have unit
+    spread (:func:`quadric_patches`), so the equations are well conditioned; the batched
+    SVD of the pseudo-inverse took ten times as long (0.16 s for 6600 patches of 48
+    points) for coefficients equal to 2e-9 of their size."""
+    dt = design.transpose(0, 2, 1)
+    gram = np.matmul(dt, design)  # [m, p, p]
+    ridge = RIDGE * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(gram.shape[-1])
+    return np.linalg.solve(gram + ridge, np.matmul(dt, h[..., None]))[..., 0]
 
 
 def ray_steps(normal: np.ndarray, height: np.ndarray, ray: np.ndarray) -> np.ndarray:

@@ -88,7 +88,7 @@ import jax
 import numpy as np
 
 from vbgs.data.scene import Frame
-from vbgs.inference import capacity, expfam, grow, merge, model
+from vbgs.inference import capacity, expfam, grow, kept_pairs, merge, model
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
@@ -512,7 +512,9 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
                ) -> tuple[MapState, np.ndarray]:
     """Free slots by merging (:mod:`vbgs.inference.merge`) when the frame shows more new
     ground than the empty slots can take (``growth.merge``); the state with the pairs
-    merged (statistics, opacity evidence and colour sums alike) and the slots changed."""
+    merged (statistics, opacity evidence and colour sums alike) and the slots changed.
+    The pairs are the merge's own choice, redone only where components changed since the
+    last merge (:mod:`vbgs.inference.kept_pairs`)."""
     mixture, rule = state.mixture, state.rule
     none = np.zeros(0, np.int64)
     if not config.growth.merge:
@@ -523,8 +525,8 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
     prior = mixture.prior
     counts = np.asarray(mixture.stats.count, np.float64)
     n_pairs = max(short, int(config.growth.merge_ahead * prior.n_components))
-    pairs = merge.choose_pairs(mixture.posterior, counts, grow.is_active(prior), n_pairs,
-                               config.prior.colour_noise)
+    pairs = kept_pairs.choose_pairs(mixture.posterior, counts, grow.is_active(prior), n_pairs,
+                                    config.prior.colour_noise)
     return _merged(state, pairs, config), pairs.reshape(-1)
 
 

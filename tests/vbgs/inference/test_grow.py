@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from vbgs.data.images import load_image
-from vbgs.inference import grow, model
+from vbgs.inference import cells, grow, model
 
 
 def lattice(n: int, offset=(0.0, 0.0)) -> np.ndarray:
@@ -125,39 +125,39 @@ def test_empty_slots_take_no_responsibility(estep):
 
 def test_cell_keys_equal_exactly_for_equal_cells_packed_or_not():
     rng = np.random.default_rng(0)
-    cells = rng.integers(-3, 4, (500, 3))
-    got = grow.cell_keys(cells)
-    want = np.unique(cells, axis=0, return_inverse=True)[1].reshape(-1)
+    rows = rng.integers(-3, 4, (500, 3))
+    got = cells.cell_keys(rows)
+    want = np.unique(rows, axis=0, return_inverse=True)[1].reshape(-1)
     # a bijection between the keys and the rows: same cell <=> same key
     assert len(set(zip(got, want, strict=False))) == len(set(got)) == len(set(want))
-    lo = cells.min(0)  # packed: np.ravel_multi_index over the box
-    assert np.array_equal(got, np.ravel_multi_index(tuple((cells - lo).T),
-                                                    tuple(cells.max(0) - lo + 1)))
-    wide = cells.copy()
+    lo = rows.min(0)  # packed: np.ravel_multi_index over the box
+    assert np.array_equal(got, np.ravel_multi_index(tuple((rows - lo).T),
+                                                    tuple(rows.max(0) - lo + 1)))
+    wide = rows.copy()
     wide[:, 0] *= 2**40  # a box too wide to pack into one int64: unique over rows
     wide[:, 1] *= 2**30
-    again = grow.cell_keys(wide)
+    again = cells.cell_keys(wide)
     assert len(set(zip(again, want, strict=False))) == len(set(again)) == len(set(want))
 
 
 @pytest.mark.parametrize("noisy", [False, True])
 def test_pick_takes_the_first_point_of_each_cell_no_component_holds(noisy):
-    """_pick (sorted keys and a binary search) against the rule written out with a set."""
+    """_pick (packed keys, a table or a binary search) against the rule written out with a set."""
     rng = np.random.default_rng(1)
     x = rng.uniform(-2.0, 2.0, (3000, 3))
     taken = rng.uniform(-3.0, 3.0, (400, 3))
     ray = rng.normal(0.0, 0.05, (3000, 3)) if noisy else None
     order = rng.permutation(len(x))
     got = grow._pick(x, taken, 0.5, order, 10**6, ray)
-    held = {tuple(c) for c in grow.cell_index(taken, 0.5)}
+    held = {tuple(c) for c in cells.cell_index(taken, 0.5)}
     shifted = [x] if ray is None else [x, x - grow.NOISE_SIGMAS * ray,
                                        x + grow.NOISE_SIGMAS * ray]
-    cells = [grow.cell_index(s, 0.5) for s in shifted]
+    point_cells = [cells.cell_index(s, 0.5) for s in shifted]
     want, seen = [], set()
     for i in order:
-        if any(tuple(c[i]) in held for c in cells) or tuple(cells[0][i]) in seen:
+        if any(tuple(c[i]) in held for c in point_cells) or tuple(point_cells[0][i]) in seen:
             continue
-        seen.add(tuple(cells[0][i]))
+        seen.add(tuple(point_cells[0][i]))
         want.append(i)
     assert 50 < len(want) < len(x) and np.array_equal(got, want)
     assert np.array_equal(grow._pick(x, taken, 0.5, order, 7, ray), want[:7])
@@ -278,3 +278,28 @@ def test_calibrate_with_coarse_ground_gives_the_first_batch_its_share():
     assert abs(n - 2000) <= 40  # the count moves in steps
     flat = grow.calibrate(near, 5000, 500, footprint=np.full(4000, 0.016), coarse=5)
     assert flat.cell == grow.calibrate(near, 5000, 500).cell
+
+
+def test_shortfall_counts_only_when_the_empty_slots_may_not_suffice():
+    """While the empty slots alone take a batch's most (rule.max_new) the shortfall is a
+    bound <= 0, not counted; below that it is the count: new ground less the empty slots."""
+    pts = lattice(16)  # 16 cells of 4 x 4 points
+    rule = grow.calibrate(pts, 20, 16, rate=0.5)  # at most 10 new a batch
+    state = grow.start_empty(pts, 20, rule.cell)
+    assert grow.shortfall(state, pts, rule) == rule.max_new - 20 < 0  # a bound
+    for n, key in ((128, 0), (192, 1)):  # 8 cells, then 4 more
+        state, _ = grow.grow(state, pts[:n], colours(pts[:n]), rule, key=jax.random.key(key))
+    empty = int((~grow.is_active(state.prior)).sum())
+    assert empty == 8 < rule.max_new  # now counted: 4 cells of new ground left
+    assert grow.shortfall(state, pts, rule) == 4 - empty
+
+
+def test_empty_prior_is_kept_and_equal_to_a_fresh_one():
+    origin = np.float32([0.5, -1.0, 2.0])
+    first = grow.empty_prior(32, origin, 0.1)
+    assert grow.empty_prior(32, origin.copy(), 0.1) is first  # kept
+    fresh = grow._empty_prior(32, origin, 0.1, model.PriorConfig(), np.dtype(np.float32))
+    for a, b in zip(jax.tree.leaves(first), jax.tree.leaves(fresh), strict=True):
+        assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+    other = grow.empty_prior(32, origin + 1, 0.1)
+    assert other is not first and not np.array_equal(other.origin, first.origin)

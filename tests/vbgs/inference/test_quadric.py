@@ -63,3 +63,20 @@ def test_exact_points_under_a_noise_model_stay_on_a_sphere():
     chosen = np.arange(0, len(pts), 53)
     _, seeds = grow.seeds_on_patches(pts, chosen, ray)
     assert np.abs(np.linalg.norm(seeds, axis=1) - 0.3).max() < 1e-5
+
+
+def test_least_squares_is_the_pseudo_inverse_s_solution():
+    """The normal equations with their tiny ridge against pinv: the same coefficients on
+    patches that tell every term, and 0 (pinv's minimum norm) for a term a patch cannot
+    tell (all its points on a line: no spread along b)."""
+    rng = np.random.default_rng(4)
+    a, b = rng.normal(size=(2, 50, 48))
+    design = np.stack([np.ones_like(a), a, b, a * a, a * b, b * b], -1)
+    h = rng.normal(size=(50, 48))
+    want = np.einsum("mpk,mk->mp", np.linalg.pinv(design), h)
+    np.testing.assert_allclose(quadric.least_squares(design, h), want, rtol=1e-8, atol=1e-10)
+    line = np.stack([np.ones_like(a), a, 0 * b, a * a, 0 * b, 0 * b], -1)
+    got = quadric.least_squares(line, h)
+    want = np.einsum("mpk,mk->mp", np.linalg.pinv(line), h)
+    np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-10)
+    assert not got[:, [2, 4, 5]].any()
