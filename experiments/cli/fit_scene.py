@@ -37,7 +37,6 @@ from experiments.tasks.settings import (
     splat_scale_arg,
 )
 from vbgs.components import AUTO_MAX_COMPONENTS, components_arg
-from vbgs.mapping.change import FORGET_AFTER
 
 
 def add(sub):
@@ -59,7 +58,7 @@ def add(sub):
     p.add_argument("--forget-after", type=int, default=None, metavar="N",
                    help="VBGS forgets a component its frames have seen through N times in a "
                         "row, none hitting it: what the world no longer holds (default: "
-                        "%d; 0: never)" % FORGET_AFTER)
+                        "the map's evidence.forget_after; 0: never)")
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
                         "a random offset (vbgs.mapping.budget; 0: all)")

@@ -15,7 +15,8 @@ from experiments.sweep.config import SETTINGS
 RENAMED = {"test_views": "n_test", "val_views": "n_val", "image": "image", "scene": "scene"}
 NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "reassign", "opacity",
                    "splat_scale", "splat_blur", "view", "methods", "anchor",
-                   "budget_points", "budget_saturation"}  # the nested budget.points, .saturation
+                   "budget_points", "budget_saturation",  # the nested budget.points, .saturation
+                   "forget_after"}  # the nested evidence.forget_after (None: its default)
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:
