@@ -42,7 +42,9 @@ from vbgs.render.splats import Splats
 # A surface within 4 sigma (camera z) of the component is a hit. Chosen on validation
 # views: results/tuning/pass (python -m experiments.run tune --scene object room walk
 # --grid evidence.pass_sigmas=1,2,3,4,6 --out results/tuning/pass): the best mean over
-# the three scenes (results/tuning/pass/mean.md; 3 to 6 lie close together).
+# the three scenes (results/tuning/pass/mean.md; 3 to 6 lie close together). Re-made at
+# the code of today's tracking table (the same command and table): 4 is still the best
+# mean, 6 tied with it and 3 0.02 dB under.
 PASS_SIGMAS = 4.0
 N_SAMPLES = 5  # footprint pixels read per component and frame: centre, +-1 sigma in u and v
 # Beta(1, 1): a uniform prior on opacity. A prior leaning to opaque (a component born
