@@ -78,7 +78,8 @@ FACTORS = (4, 2, 1)
 # Re-checked on validation trajectories (seed 1; rule: the lowest summed ATE of the nine
 # tracked streams, results/tuning/tracking/tracking.md, python -m experiments.tune_tracking):
 # (10, 8, 6) sums 4% lower, from the walk's streams, and is worse on the object under a
-# Kinect and on the room; a mixed gain at more CPU a frame, so (6, 4, 3) is kept.
+# Kinect and on the room with exact depth; a mixed gain at more CPU a frame, so (6, 4, 3)
+# is kept.
 ITERATIONS = (6, 4, 3)
 # Cauchy scale c in units of each term's robust scale.
 ROBUST = 2.5
