@@ -61,8 +61,9 @@ VARIANTS = {
                             "(default 2048, 6)", lambda: _after_direct(1024, 4)),
     "direct.iterations=10,8,6": ("vbgs.tracking.direct.ITERATIONS (default 6, 4, 3)",
                                  lambda: _direct_iterations((10, 8, 6))),
-    "direct.floor_d=1e-3": ("vbgs.tracking.direct.FLOOR_D (default 3e-3)",
-                            lambda: _floor_d(1e-3)),
+    "direct.floor_d=0.0043": ("vbgs.tracking.direct.FLOOR_D, a share of the median inverse "
+                              "depth (default 0.013; 0.0043 is 1e-3 per unit on the walk)",
+                              lambda: _floor_d(0.0043)),
     "degeneracy.ratio=3e-3": ("vbgs.tracking.degeneracy.RATIO (default 1e-2)",
                               lambda: _ratio(3e-3)),
 }

@@ -144,8 +144,9 @@ def _ranges(numbers: list[int]) -> str:
 # summed ATE over the tracking study's nine tracked streams on validation trajectories
 # (seed 1, never the reported seed 0; results/tuning/tracking/tracking.md, made by
 # python -m experiments.tune_tracking): 2048 points and 6 steps were better on every
-# stream than 1024 and 4. The cost bound's figures (results/tracking/cost/) were
-# measured with 1024 points and 4 steps, some 2.7 ms of CPU a frame less on the object.
+# stream than 1024 and 4, and were again when the table was re-made at the code that made
+# the tracking table (results/tracking/). The cost bound (results/tracking/cost/) is
+# measured at these settings.
 AFTER_DIRECT = dict(levels=(2048,), inflate=(0.0,), passes=(1,), iterations=6)
 
 
