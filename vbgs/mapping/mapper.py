@@ -271,9 +271,8 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
             *geometry, frame.camera, frame.depth, pass_sigmas=config.evidence.pass_sigmas,
             sensor_var=variance, empty=empty,
             through_empty=None if empty is None else np.zeros_like(empty))
-        state = _forget(state._replace(evidence=opacity.Evidence(
-            state.evidence.hits + seen.hits, state.evidence.passes + seen.passes)),
-            seen, state.evidence, config)
+        state = _forget(state._replace(evidence=opacity.added(state.evidence, seen)),
+                        seen, state.evidence, config)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
                                     frame.rgb, 0.0 if background is None else background,

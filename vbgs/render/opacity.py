@@ -83,7 +83,8 @@ def expected_opacity(evidence: Evidence, prior_hits: float = PRIOR_HITS,
 
 
 class FrameEvidence(NamedTuple):
-    """One frame's evidence about each component: its rays, and what its centre ray saw."""
+    """One frame's evidence about each component: the rays that hit it and passed it, and
+    whether the frame saw through it."""
 
     hits: jax.Array  # [k] rays that hit it
     passes: jax.Array  # [k] rays that passed through it
@@ -95,8 +96,12 @@ def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
             pass_sigmas: float = PASS_SIGMAS, sensor_var=None, empty=None) -> Evidence:
     """``evidence`` with one frame's hits and passes added (:func:`frame_evidence`, whose
     arguments it takes)."""
-    frame = frame_evidence(means, covs, camera, depth, pass_sigmas=pass_sigmas,
-                           sensor_var=sensor_var, empty=empty)
+    return added(evidence, frame_evidence(means, covs, camera, depth, pass_sigmas=pass_sigmas,
+                                          sensor_var=sensor_var, empty=empty))
+
+
+def added(evidence: Evidence, frame: FrameEvidence) -> Evidence:
+    """``evidence`` with one frame's hits and passes added (the counts are additive)."""
     return Evidence(evidence.hits + frame.hits, evidence.passes + frame.passes)
 
 
