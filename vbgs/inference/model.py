@@ -451,8 +451,8 @@ def e_step(q: Mixture, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray, colour_no
 
 def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
                 colour_noise: float, chunk: int, cand: jnp.ndarray | None = None,
-                ray: jnp.ndarray | None = None, partial_lists: bool = False
-                ) -> tuple[Stats, jnp.ndarray]:
+                ray: jnp.ndarray | None = None, partial_lists: bool = False,
+                n_valid: jnp.ndarray | None = None) -> tuple[Stats, jnp.ndarray]:
     """:func:`e_step` given the assigning model's precomputed terms: feature weights
     ``[k, F]`` (:func:`log_joint_weights`) for the dense E-step, :class:`Terms` with
     ``cand [n, C]`` for the sparse one.
@@ -470,6 +470,11 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
     points differ by from the measured ones: ``Stats.sum_noise = sum r (x x^T - E[y
     y^T | x])`` and ``Stats.sum_shift = sum r (x - E[y | x])`` (the M-step's
     :func:`vbgs.inference.expfam.niw_posterior`).
+
+    ``n_valid`` (a traced int scalar): the batch's real points are its first ``n_valid``,
+    the rest padding (weight 0); chunks of padding alone are skipped, not computed (a
+    stream pads its frames to a size that only grows, so a frame may carry a third of
+    padding), and their entries of the returned ``lse`` are 0.
     """
     n, d = x.shape
     if ray is not None and cand is None:
@@ -516,8 +521,17 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
     acc0 = jnp.zeros((n_rows, d * d + d + 4), x.dtype)
     if ray is not None:
         acc0 = (acc0, jnp.zeros((n_rows, d * d + d), x.dtype))
-    acc, lse = jax.lax.scan(one_chunk, acc0, (shape(x), shape(c), shape(w), shape(cand),
-                                              shape(ray)))
+    chunks = (shape(x), shape(c), shape(w), shape(cand), shape(ray))
+    if n_valid is None:
+        acc, lse = jax.lax.scan(one_chunk, acc0, chunks)
+    else:  # chunks wholly past the batch's n_valid points are padding: skipped
+        def live_chunk(acc, batch):
+            start, batch = batch
+            return jax.lax.cond(start < n_valid, one_chunk,
+                                lambda a, _: (a, jnp.zeros(chunk, x.dtype)), acc, batch)
+
+        starts = jnp.arange(0, n, chunk, dtype=jnp.int32)
+        acc, lse = jax.lax.scan(live_chunk, acc0, (starts, chunks))
     if ray is not None:
         acc = jnp.concatenate(acc, -1)
     return moments_to_stats(acc, d), lse.reshape(-1)

@@ -142,9 +142,11 @@ def row_blocks(rows) -> list[np.ndarray]:
 
 
 @partial(jax.jit, static_argnames=("config",))
-def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, ray=None):
+def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, ray=None,
+          n_valid=None):
     """One batch: candidates (prior, sparse), E-step, statistics, M-step and ELBO.
-    x ``[n, d]`` centred, c ``[n, 3]``, w ``[n]`` (0 for padding)."""
+    x ``[n, d]`` centred, c ``[n, 3]``, w ``[n]`` (0 for padding); the batch's real points
+    are the first ``n_valid`` (a traced scalar: chunks of padding alone are skipped)."""
     if config.assign == "prior":
         reference, kl = fixed.reference, fixed.kl
         if config.grid is not None:
@@ -155,7 +157,7 @@ def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, 
         kl = model.kl(q, state.prior, config.colour_noise)
     batch, lse = model.e_step_with(reference, x, c, w, config.colour_noise, config.chunk,
                                    cand if config.estep == "sparse" else None, ray,
-                                   config.partial_lists)
+                                   config.partial_lists, n_valid)
     stats = expfam.add_stats(state.stats, batch)
     elbo = jnp.sum(lse * w) - kl
     # the prior is reattached by the caller (see model._update: passing an input through
@@ -335,7 +337,8 @@ class Stepper:
         if ray is not None and self.estep != "sparse":
             raise ValueError("measurement noise (ray) needs the sparse E-step: estep='sparse'")
         rays = model.padded_rays(ray, xyz.shape[0], size, x.dtype)
-        posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config, rays)
+        posterior, stats, info = _step(state, x, c, w, self.fixed, cand, config, rays,
+                                       np.int32(xyz.shape[0]))
         if learned is not None and not isinstance(learned, np.ndarray):
             learned = np.asarray(learned)[:xyz.shape[0]]  # after the step is dispatched
         return state._replace(posterior=posterior, stats=stats), StepInfo(*info, learned)
