@@ -107,28 +107,44 @@ def candidate_latent(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
 
 def _logits(x, c, terms, cand, colour_noise, ray):
     """The logits ``[n, C]`` and, with ``ray``, ``a`` and ``q`` ``[n, C]`` (else None)."""
-    d = x.shape[1]
+    return scores(x, c, gathered(terms, cand), colour_noise, ray)
+
+
+def gathered(terms, cand: jnp.ndarray) -> list[jnp.ndarray]:
+    """The terms of the candidates ``cand [..., C]``: one array shaped as ``cand`` per
+    row of ``mean [d], prec [d * d], colour_mean [3], const`` (the order
+    :func:`scores` reads).
+
+    One gather per row, each a contiguous plane: gathered as one ``[rows, n, C]``
+    block, XLA:CPU lays it out row-minor and every use in the fused arithmetic reads it
+    strided (4x slower with a ray: 0.49 against 0.12 s at 262k points x 16)."""
+    d = terms.mean.shape[1]
     k = terms.mean.shape[0]
     table = jnp.concatenate([terms.mean.T, terms.prec.reshape(k, d * d).T,
                              terms.colour_mean.T, terms.const[None]], 0)  # [d + d*d + 4, k]
-    # one gather per row, each a contiguous [n, C] plane: gathered as one [rows, n, C]
-    # block, XLA:CPU lays it out row-minor and every use in the fused arithmetic reads
-    # it strided (4x slower with a ray, 0.49 against 0.12 s at 262k points x 16)
-    g = [row[cand] for row in table]  # rows x [n, C]
-    diff = [x[:, i, None] - g[i] for i in range(d)]  # d x [n, C]
+    return [row[cand] for row in table]
+
+
+def scores(x, c, g, colour_noise, ray=None):
+    """:func:`_logits` from the candidates' :func:`gathered` terms ``g``: points ``x [...,
+    d]``, ``c [..., 3]``, ``ray [..., d]`` and terms that broadcast against them with a
+    trailing candidate axis (``[n, C]`` for points ``[n, d]``; ``[T, 1, C]`` for a
+    frame's tiles of points ``[T, P, d]`` that share their candidates)."""
+    d = x.shape[-1]
+    diff = [x[..., i, None] - g[i] for i in range(d)]  # d x [..., C]
     maha = 0.0
     for i in range(d):
         for j in range(i, d):
             p_ij = g[d + i * d + j]
             maha = maha + (1.0 if i == j else 2.0) * p_ij * diff[i] * diff[j]
     base = d + d * d
-    colour = sum((c[:, i, None] - g[base + i]) ** 2 for i in range(3))
+    colour = sum((c[..., i, None] - g[base + i]) ** 2 for i in range(3))
     logits = g[base + 3] - 0.5 * maha - 0.5 * colour / colour_noise**2
     if ray is None:
         return logits, None, None
-    u = [ray[:, i, None] for i in range(d)]  # d x [n, 1]
-    pu = [sum(g[d + i * d + j] * u[j] for j in range(d)) for i in range(d)]  # P_k u: d x [n, C]
-    q = sum(u[i] * pu[i] for i in range(d))  # [n, C]
+    u = [ray[..., i, None] for i in range(d)]  # d x [..., 1]
+    pu = [sum(g[d + i * d + j] * u[j] for j in range(d)) for i in range(d)]  # P_k u
+    q = sum(u[i] * pu[i] for i in range(d))  # [..., C]
     a = sum(pu[i] * diff[i] for i in range(d))
     return logits + 0.5 * a**2 / (1.0 + q) - 0.5 * jnp.log1p(q), a, q
 

@@ -42,7 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import digamma
 
-from vbgs.inference import candidates, expfam, grid, grow, model, projective
+from vbgs.inference import candidates, expfam, frame_tiles, grid, grow, model, projective
 from vbgs.inference.model import Assign, EStep, Info, Mixture, PriorConfig, State
 
 Search = Literal["auto", "grid", "kdtree", "projective"]
@@ -141,20 +141,25 @@ def row_blocks(rows) -> list[np.ndarray]:
     return [np.concatenate([b, np.full(ROW_BLOCK - len(b), b[0], np.int32)]) for b in blocks]
 
 
+def _assigning(state: State, fixed: Fixed | None, config: StepConfig):
+    """The assigning model's E-step terms and its KL to the prior (0 under prior
+    assignment, where both were built once)."""
+    if config.assign == "prior":
+        return fixed.reference, fixed.kl
+    q = state.posterior
+    return (_reference(q, config.estep, config.colour_noise),
+            model.kl(q, state.prior, config.colour_noise))
+
+
 @partial(jax.jit, static_argnames=("config",))
 def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, ray=None,
           n_valid=None):
     """One batch: candidates (prior, sparse), E-step, statistics, M-step and ELBO.
     x ``[n, d]`` centred, c ``[n, 3]``, w ``[n]`` (0 for padding); the batch's real points
     are the first ``n_valid`` (a traced scalar: chunks of padding alone are skipped)."""
-    if config.assign == "prior":
-        reference, kl = fixed.reference, fixed.kl
-        if config.grid is not None:
-            cand = grid.search(fixed.lists, state.prior.space.mean, x, w, config.grid)
-    else:
-        q = state.posterior
-        reference = _reference(q, config.estep, config.colour_noise)
-        kl = model.kl(q, state.prior, config.colour_noise)
+    reference, kl = _assigning(state, fixed, config)
+    if config.grid is not None:
+        cand = grid.search(fixed.lists, state.prior.space.mean, x, w, config.grid)
     batch, lse = model.e_step_with(reference, x, c, w, config.colour_noise, config.chunk,
                                    cand if config.estep == "sparse" else None, ray,
                                    config.partial_lists, n_valid)
@@ -163,6 +168,39 @@ def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, 
     # the prior is reattached by the caller (see model._update: passing an input through
     # next to the ELBO reduction made XLA:CPU hang)
     return model.m_step(state.prior, stats), stats, Info(elbo, lse)
+
+
+@partial(jax.jit, static_argnames=("config", "tiling"))
+def _tile_step(state: State, x, c, w, pixel, fixed: Fixed | None, config: StepConfig,
+               tiling: projective.Tiling, v: projective.View, limit, ray=None):
+    """:func:`_step` for a frame's points, one a pixel (``pixel [n]`` their flat pixel
+    indices, -1: padding), by the projective search's tiles
+    (:mod:`vbgs.inference.frame_tiles`): each tile's candidates found and its points scored
+    against them at once. ``limit [n]``: each point's reach (inf: none). Returns
+    :func:`_step`'s outputs and which points were learned (within reach of a
+    candidate), ``[n]`` bool."""
+    reference, kl = _assigning(state, fixed, config)
+    q = state.prior if config.assign == "prior" else state.posterior
+    where = frame_tiles.layout(pixel, tiling)
+    xg, cg, wg, limit = (frame_tiles.gridded(a, where) for a in (x, c, w, limit))
+    seen = projective.project(v, q.space.mean)
+    lists, count = projective.tile_lists(seen, q.alpha > grow.ACTIVE_ALPHA, tiling)
+    pool = projective.neighbourhoods(lists, count, tiling)
+    depth = projective.project(v, xg.reshape(-1, 3)).z.reshape(wg.shape)
+    n_tiles = tiling.tiles_x * tiling.tiles_y
+    cand = projective.tile_candidates(pool, seen, v.intrinsics[0], v.intrinsics[1],
+                                      frame_tiles.tile_depths(depth, wg)[:n_tiles], tiling)
+    cand = jnp.pad(cand, ((0, where.tiles - n_tiles), (0, 0)), constant_values=-1)
+    d2 = frame_tiles.nearest_distance(q.space.mean, xg, cand)
+    within = jnp.isfinite(d2) & (d2 <= limit * limit)  # none listed: not learned
+    wg = jnp.where(within, wg, 0.0)
+    rays = None if ray is None else frame_tiles.gridded(ray, where)
+    batch, lse = frame_tiles.e_step(reference, xg, cg, wg, cand, config.colour_noise, rays)
+    stats = expfam.add_stats(state.stats, batch)
+    elbo = jnp.sum(lse * wg) - kl
+    info = Info(elbo, frame_tiles.pointwise(lse, where))
+    return (model.m_step(state.prior, stats), stats, info,
+            frame_tiles.pointwise(within, where))
 
 
 class Stepper:
@@ -304,7 +342,7 @@ class Stepper:
         return model.chunk_size(size, self.n_candidates * (d * d + d + 4))
 
     def __call__(self, state: State, xyz, rgb, ray=None, reach=None, weight=None,
-                 camera=None) -> tuple[State, StepInfo]:
+                 camera=None, pixel=None) -> tuple[State, StepInfo]:
         """Learn the batch ``xyz [n, d]``, ``rgb [n, 3]``; ``ray [n, d]``: measured
         points' noise along their rays (sparse E-step; :func:`vbgs.inference.model.update`);
         ``reach [n]``: each point's own reach, in place of the stepper's (a point seen
@@ -312,7 +350,9 @@ class Stepper:
         each point's weight in the statistics (a thinned frame's, :mod:`vbgs.mapping.budget`;
         None: 1); ``camera``: the frame the points were measured in
         (:class:`vbgs.render.camera.Camera`), which the projective search reads (without
-        one it searches a KD-tree over the means)."""
+        one it searches a KD-tree over the means); ``pixel [n]``: with a camera, the flat
+        (row-major) pixel each point was seen at, one point a pixel: the projective search
+        then learns the frame by its tiles (:mod:`vbgs.inference.frame_tiles`)."""
         xyz, rgb = model.check_points_host(xyz, rgb)
         if xyz.shape[1] != self.prior.dim:
             raise ValueError(f"points are {xyz.shape[1]}-D but the model is {self.prior.dim}-D")
@@ -321,6 +361,8 @@ class Stepper:
         if weight is not None:
             w[:xyz.shape[0]] = weight
         cand, learned, partial_lists = None, None, False
+        if self.search == "projective" and camera is not None and pixel is not None:
+            return self._by_tiles(state, x, c, w, xyz.shape[0], ray, reach, camera, pixel)
         if self.search == "projective" and camera is not None:
             cand, w, learned = self._project(state, x, w, xyz.shape[0], reach, camera)
             partial_lists = True
@@ -343,14 +385,34 @@ class Stepper:
             learned = np.asarray(learned)[:xyz.shape[0]]  # after the step is dispatched
         return state._replace(posterior=posterior, stats=stats), StepInfo(*info, learned)
 
-    def _project(self, state: State, x: np.ndarray, w: np.ndarray, n: int, reach,
-                 camera) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray | None]:
-        """The projective search (:mod:`vbgs.inference.projective`) of the padded centred
-        points ``x [size, 3]`` seen by ``camera``: candidates ``[size, C]``, the weights
-        with points beyond reach (or with no component listed near them) at 0, and which
-        points are within reach (``[size]`` on the device; None without a reach). The
-        tiling is fixed by the first frame (its median depth)."""
-        q = self.prior if self.assign == "prior" else state.posterior
+    def _by_tiles(self, state: State, x, c, w, n: int, ray, reach, camera, pixel
+                  ) -> tuple[State, StepInfo]:
+        """:meth:`__call__` for a frame's points with their pixels: :func:`_tile_step`."""
+        pixel = np.asarray(pixel).reshape(-1)
+        if pixel.shape[0] != n or (n and (pixel.min() < 0 or
+                                          pixel.max() >= camera.width * camera.height)):
+            raise ValueError(f"pixel must give each of the {n} points its flat pixel index "
+                             f"in the {camera.width} x {camera.height} frame")
+        size = len(x)
+        self._fix_tiling(x, n, camera)
+        flat = np.full(size, -1, np.int32)
+        flat[:n] = pixel
+        limit = np.full(size, np.inf, x.dtype)
+        if reach is not None or self.reach is not None:
+            limit[:n] = self.reach if reach is None else np.asarray(reach, x.dtype)
+        config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
+                            None, True)
+        rays = model.padded_rays(ray, n, size, x.dtype)
+        posterior, stats, info, within = _tile_step(
+            state, x, c, w, flat, self.fixed, config, self.tiling,
+            projective.view(camera, self._origin, x.dtype), limit, rays)
+        learned = np.asarray(within)[:n] if (reach is not None or self.reach is not None) \
+            else None
+        return state._replace(posterior=posterior, stats=stats), StepInfo(*info, learned)
+
+    def _fix_tiling(self, x: np.ndarray, n: int, camera) -> None:
+        """The projective tiling, fixed by the first frame (its median depth) and
+        following the frame's size."""
         if self.tiling is None:
             rot_t, shift = projective.world_to_camera(camera, self._origin)
             depth = np.asarray(x[:n], np.float64) @ rot_t[2] + shift[2]
@@ -359,6 +421,16 @@ class Stepper:
         elif (self.tiling.width, self.tiling.height) != (camera.width, camera.height):
             self.tiling = self.tiling._replace(width=int(camera.width),
                                                height=int(camera.height))
+
+    def _project(self, state: State, x: np.ndarray, w: np.ndarray, n: int, reach,
+                 camera) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray | None]:
+        """The projective search (:mod:`vbgs.inference.projective`) of the padded centred
+        points ``x [size, 3]`` seen by ``camera``: candidates ``[size, C]``, the weights
+        with points beyond reach (or with no component listed near them) at 0, and which
+        points are within reach (``[size]`` on the device; None without a reach). The
+        tiling is fixed by the first frame (its median depth)."""
+        q = self.prior if self.assign == "prior" else state.posterior
+        self._fix_tiling(x, n, camera)
         v = projective.view(camera, self._origin, x.dtype)
         active = q.alpha > grow.ACTIVE_ALPHA  # grow.is_active on the device: empty slots out
         cand, d2 = projective.search(q.space.mean, active, v, x, w, self.tiling)
