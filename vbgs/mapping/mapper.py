@@ -104,7 +104,7 @@ from vbgs.mapping.measurement import depth_sigmas, depth_variance, point_footpri
 from vbgs.mapping.stages import stage
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
-from vbgs.render.camera import unproject
+from vbgs.render.camera import unproject, valid_depth
 from vbgs.render.splats import Splats, drawn, from_posterior, mixture_geometry
 
 
@@ -204,7 +204,8 @@ def update(state: MapState, frame: Frame, config: Config,
     with stage("prepare"):
         state, p = _prepare(state, frame, config, background)
     state, info = update_points(state, p.xyz, p.rgb, config, ray=p.ray,
-                                footprint=p.footprint, weight=p.weight, camera=frame.camera)
+                                footprint=p.footprint, weight=p.weight, camera=frame.camera,
+                                pixel=p.pixel)
     with stage("evidence") as done:
         state = _observe(state, info, p, config, background)
         done(state.evidence, state.colour)
@@ -230,15 +231,18 @@ def _prepare(state: MapState, frame: Frame, config: Config, background):
             frame.depth, frame.rgb, empty, focal, g.hole_radius, g.hole_colour_tol))
     state, depth, weight = _within_budget(state, measured, config)
     xyz, rgb = unproject(frame.camera, frame.rgb, depth)
+    pixel = np.flatnonzero(valid_depth(depth))  # each point's pixel, in unproject's order
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
     ray = point_rays(frame.camera, depth, sensor.model, level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
     state, kept, keys = _unexplained(state, xyz, footprint, config)
     if kept is not None:
-        xyz, rgb, ray, footprint, weight, keys = (
-            None if a is None else a[kept] for a in (xyz, rgb, ray, footprint, weight, keys))
-    return state, _Prepared(xyz, rgb, ray, footprint, weight, keys, frame, empty, level)
+        xyz, rgb, ray, footprint, weight, keys, pixel = (
+            None if a is None else a[kept]
+            for a in (xyz, rgb, ray, footprint, weight, keys, pixel))
+    return state, _Prepared(xyz, rgb, ray, footprint, weight, keys, pixel, frame, empty,
+                            level)
 
 
 class _Prepared(NamedTuple):
@@ -250,6 +254,7 @@ class _Prepared(NamedTuple):
     footprint: np.ndarray | None  # [n] their pixel footprints (a growing map)
     weight: np.ndarray | None  # [n] a thinned frame's weights
     keys: np.ndarray | None  # [n] their cells (budget.saturation)
+    pixel: np.ndarray  # [n] the flat (row-major) pixel each was seen at
     frame: Frame  # its depth averaged (a white-noise sensor)
     empty: np.ndarray | None  # [h, w] pixels that show nothing (a measured sensor)
     level: float  # the sensor's noise level after the averaging
@@ -306,7 +311,7 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
 
 
 def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footprint=None,
-                  weight=None, camera=None) -> tuple[MapState, MapInfo]:
+                  weight=None, camera=None, pixel=None) -> tuple[MapState, MapInfo]:
     """Learn one arriving batch of points ``xyz [n, d]``, ``rgb [n, 3]`` (d = 3 for a
     scene, 2 for an image's pixels): the one stream loop's step, which :func:`update`
     takes every frame through after unprojection (steps 2 and 3 of the module
@@ -320,7 +325,9 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
     ``ray [n, 3]``: measured points' noise along their rays; ``footprint [n]``: their
     pixel footprints (far ground grows coarse cells); ``weight [n]``: each point's weight
     in the statistics (a thinned frame's; None: 1); ``camera``: the frame's camera, which
-    the projective candidate search reads (``config.search``); all from a frame
+    the projective candidate search reads (``config.search``); ``pixel [n]``: the flat
+    pixel of the camera's frame each point was seen at (one a pixel), with which that
+    search learns the frame by its tiles (:mod:`vbgs.inference.frame_tiles`); all from a frame
     (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.mapping.budget`), None for bare points."""
     if len(xyz) == 0:
         raise ValueError("the batch has no points: nothing to learn")
@@ -329,7 +336,7 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
         done(state.mixture)
     with stage("search+step") as done:
         state, before, elbo, learned = _learn(state, slots, xyz, rgb, config, ray, footprint,
-                                              weight, camera)
+                                              weight, camera, pixel)
         done(state.mixture)
     n = len(xyz)
     if learned is not None:  # points beyond reach were left out
@@ -340,8 +347,8 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
     return state, MapInfo(elbo, n, len(xyz), len(slots), before, xyz, rgb)
 
 
-def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, weight, camera
-           ) -> tuple[MapState, model.Mixture, jax.Array, np.ndarray | None]:
+def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, weight, camera,
+           pixel=None) -> tuple[MapState, model.Mixture, jax.Array, np.ndarray | None]:
     """:func:`update_points`' step 3: the batch learned once, by the compiled stepper
     (its terms brought up to the grown ``slots`` first) or under ``config.slow_path``
     by :func:`_learn_slowly`. Returns the state, the posterior the batch was learned
@@ -355,7 +362,7 @@ def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, wei
     if levels is not None and state.stepper.reach is not None:
         reach = state.stepper.reach * 2.0**levels
     before = state.mixture.posterior
-    mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight, camera)
+    mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight, camera, pixel)
     return state._replace(mixture=mixture), before, step.elbo, step.learned
 
 
