@@ -33,6 +33,29 @@ def warn_unlearned(share: float, task) -> None:
           f"points_unlearned says how much)", file=sys.stderr)
 
 
+def warn_all(details: dict, task, uncovered: float) -> None:
+    """Every warning of a finished scene run (:func:`warn_unlearned`,
+    :func:`warn_capped`, :func:`warn_forgotten`, :func:`warn_uncovered`)."""
+    warn_unlearned(details.get("points_unlearned", 0.0), task)
+    warn_capped(details, task)
+    warn_forgotten(details, task)
+    warn_uncovered(uncovered, details)
+
+
+def warn_forgotten(details: dict, task) -> None:
+    """Say on stderr when the map forgot components (:mod:`vbgs.mapping.change`): what the
+    renders no longer show, and why it may be wrong on a world that did not change."""
+    n = details.get("components_forgotten", 0)
+    if not n:
+        return
+    print(f"note: {n} components were forgotten: later frames saw through them "
+          f"{task.evidence.forget_after} frames in a row, so the map took what they showed "
+          f"as gone and grew what stands there now; on a world that did not change this "
+          f"removes thin structures the depth misses (posts, branches), and "
+          f"--forget-after 0 keeps everything (the JSON's components_forgotten)",
+          file=sys.stderr)
+
+
 def warn_capped(details: dict, task) -> None:
     """Say on stderr when ``components = "auto"`` reached its most components: from then
     on it merged the cheapest neighbours to make room, as a fixed K does."""

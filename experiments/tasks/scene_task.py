@@ -26,7 +26,7 @@ from experiments.tasks.depth_swap import depth_arrivals, simulated_network
 from experiments.tasks.init_schemes import oracle_start
 from experiments.learners import LEARNERS
 from experiments.learners.gradient_learner import DEFAULT_CONFIG as BASELINE_CONFIG
-from experiments.tasks.scene_report import warn_capped, warn_uncovered, warn_unlearned
+from experiments.tasks.scene_report import warn_all
 from experiments.tasks.protocol import (
     SceneResult,
     static_checkpoints,
@@ -376,9 +376,7 @@ class _SceneRun:
             depth_report = {**depth_report, **self.arrivals.report()}
         details = self.learner.details(result)
         if warn:
-            warn_unlearned(details.get("points_unlearned", 0.0), task)
-            warn_capped(details, task)
-            warn_uncovered(result.uncovered, details)
+            warn_all(details, task, result.uncovered)
         return replace(result, depth=depth_report, details=details,
                        depth_l1=None if self.rgb_only_tests else result.depth_l1,
                        settings={**result.settings, **what_ran(task, self.scene)})

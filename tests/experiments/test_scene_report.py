@@ -1,0 +1,24 @@
+"""experiments.tasks.scene_report: what a scene run says on stderr."""
+
+from experiments.tasks.scene_report import warn_all, warn_forgotten
+from experiments.tasks.scene_task import SceneTask
+
+
+def test_forgotten_components_are_said_with_the_count_and_the_way_back(capsys):
+    warn_forgotten({"components_forgotten": 7}, SceneTask())
+    err = capsys.readouterr().err
+    assert "7 components were forgotten" in err
+    assert f"{SceneTask().evidence.forget_after} frames in a row" in err
+    assert "--forget-after 0" in err
+    warn_forgotten({"components_forgotten": 0}, SceneTask())  # nothing forgotten: silent
+    warn_forgotten({}, SceneTask())  # a learner without a map: silent
+    assert capsys.readouterr().err == ""
+
+
+def test_all_warnings_of_a_clean_run_are_silent_and_of_a_poor_one_speak(capsys):
+    warn_all({"points_unlearned": 0.0, "components_forgotten": 0}, SceneTask(), 0.0)
+    assert capsys.readouterr().err == ""
+    warn_all({"points_unlearned": 0.2, "components_forgotten": 3}, SceneTask(), 0.5)
+    err = capsys.readouterr().err
+    assert "were not learned" in err and "3 components were forgotten" in err
+    assert "drawn as background" in err
