@@ -41,6 +41,8 @@ import numpy as np
 
 # Below this many neighbours the quadratic terms are left out (a plane: 3 coefficients).
 QUADRIC_MIN_POINTS = 10
+# Below this many the patch tells no plane: the point keeps its ray as normal, no step.
+PLANE_MIN_POINTS = 3
 # The ridge of the quadric's normal equations, a share of their trace (least_squares):
 # far below any term a patch can tell, enough to keep a term it cannot tell at 0.
 RIDGE = 1e-12
@@ -61,45 +63,69 @@ def patches(x: np.ndarray, chosen: np.ndarray, neighbours: int) -> np.ndarray:
     return np.asarray(x, np.float64)[neighbour_index(x, chosen, neighbours)]
 
 
-def patch_axes(patch: np.ndarray, noise: np.ndarray | None = None) -> np.ndarray:
+def patch_axes(patch: np.ndarray, noise: np.ndarray | None = None,
+               weight: np.ndarray | None = None) -> np.ndarray:
     """``[m, 3, 3]``: the principal axes of each patch ``[m, k, 3]`` (columns, by
     ascending spread: column 0 is the normal of the patch's plane, up to sign); with its
     points' noise along their rays, ``noise [m, k, 3]``, of the spread less the noise's
-    ``u u^T`` (oblique rays otherwise tilt a noisy plane's normal toward them)."""
-    centred = patch - patch.mean(1, keepdims=True)
-    cov = np.einsum("mki,mkj->mij", centred, centred) / patch.shape[1]
+    ``u u^T`` (oblique rays otherwise tilt a noisy plane's normal toward them).
+    ``weight [m, k]`` (0 or 1; None: all 1): a point of weight 0 counts for nothing (a
+    patch on the pixel grid, :mod:`vbgs.inference.pixel_patches`)."""
+    w = np.ones(patch.shape[:2]) if weight is None else np.asarray(weight, np.float64)
+    total = w.sum(1)[:, None, None]  # [m, 1, 1]; the point itself has weight 1
+    mean = (w[..., None] * patch).sum(1, keepdims=True) / total
+    centred = patch - mean
+    cov = np.einsum("mki,mkj->mij", w[..., None] * centred, centred) / total
     if noise is not None:
-        cov = cov - np.einsum("mki,mkj->mij", noise, noise) / patch.shape[1]
+        cov = cov - np.einsum("mki,mkj->mij", w[..., None] * noise, noise) / total
     return np.linalg.eigh(cov)[1]
 
 
 def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
-                    ray: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    ray: np.ndarray | None = None, *, index: np.ndarray | None = None,
+                    weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """For each point ``x[chosen]`` of ``x [n, 3]``: the unnormalised normal ``[m, 3]``
     of the quadric fitted to its ``neighbours`` nearest points of ``x`` (itself among
     them; module docstring) and the quadric's height ``c0 [m]`` above the point along
-    the patch's axis ``n0`` (the surface at the point's own tangent coordinates)."""
+    the patch's axis ``n0`` (the surface at the point's own tangent coordinates).
+
+    ``index [m, k]`` and ``weight [m, k]`` (0 or 1): a patch given instead of the nearest
+    points (the pixel grid's window, :func:`vbgs.inference.pixel_patches.window`); its
+    points of weight 0 count for nothing. A patch of fewer than
+    :data:`QUADRIC_MIN_POINTS` points fits a plane; of fewer than :data:`PLANE_MIN_POINTS`
+    its normal is the point's ``ray`` and its height 0 (the seed stays where it was
+    measured; without ``ray`` the normal is the patch's first axis, arbitrary)."""
     x = np.asarray(x, np.float64)
-    idx = neighbour_index(x, chosen, neighbours)
+    idx = neighbour_index(x, chosen, neighbours) if index is None else index
+    w = np.ones(idx.shape) if weight is None else np.asarray(weight, np.float64)
     patch = x[idx]  # [m, k, 3]
-    k = patch.shape[1]
-    axes = patch_axes(patch, None if ray is None else np.asarray(ray, np.float64)[idx])
+    axes = patch_axes(patch, None if ray is None else np.asarray(ray, np.float64)[idx], w)
     rel = np.matmul(patch - x[chosen][:, None], axes)  # [m, k, 3]: h, a, b
-    h, a, b = rel[..., 0], rel[..., 1], rel[..., 2]
-    scale = np.sqrt(np.maximum((a * a + b * b).mean(1, keepdims=True), 1e-300))
+    h, a, b = rel[..., 0] * w, rel[..., 1] * w, rel[..., 2] * w  # weight 0: no term
+    count = w.sum(1)  # [m]
+    scale = np.sqrt(np.maximum((a * a + b * b).sum(1, keepdims=True) / count[:, None],
+                               1e-300))
     a, b = a / scale, b / scale  # unit spread: the normal equations stay conditioned
-    terms = [np.ones_like(a), a, b]
-    if k >= QUADRIC_MIN_POINTS:
-        terms += [a * a, a * b, b * b]
+    terms = [w, a, b]
+    curved = count >= QUADRIC_MIN_POINTS  # [m]; a patch of too few points: a plane
+    if curved.any():
+        q = curved[:, None]  # a plane's quadratic columns are 0: least_squares gives 0
+        terms += [np.where(q, a * a, 0.0), np.where(q, a * b, 0.0), np.where(q, b * b, 0.0)]
     coef = least_squares(np.stack(terms, -1), h)  # [m, p]
     normal = (axes[:, :, 0] - (coef[:, 1, None] * axes[:, :, 1]
                                + coef[:, 2, None] * axes[:, :, 2]) / scale)
-    return normal, coef[:, 0]
+    height = coef[:, 0]
+    few = count < PLANE_MIN_POINTS
+    if ray is not None and few.any():
+        normal = np.where(few[:, None], np.asarray(ray, np.float64)[chosen], normal)
+        height = np.where(few, 0.0, height)
+    return normal, height
 
 
 def least_squares(design: np.ndarray, h: np.ndarray) -> np.ndarray:
     """``[m, p]``: for each patch the coefficients ``c`` that minimise ``|design c - h|^2``
-    (``design [m, k, p]``, ``h [m, k]``), by the normal equations with a ridge of
+    (``design [m, k, p]``, ``h [m, k]``; a masked point is a row of zeros in both, so it
+    counts for nothing), by the normal equations with a ridge of
     :data:`RIDGE` of their trace: a term the patch cannot tell (no spread along an axis)
     gets 0, as the pseudo-inverse's minimum norm gives it. The design's columns have unit
     spread (:func:`quadric_patches`), so the equations are well conditioned; the batched

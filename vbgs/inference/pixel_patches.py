@@ -1,0 +1,107 @@
+"""A frame's point's neighbours found on its pixel grid, not in a KD-tree.
+
+A frame's points come from a depth image, so the points nearest a point in 3-D are,
+on one surface, those of the pixels about its own pixel. Growth fits each seed's patch
+(:mod:`vbgs.inference.quadric`) to such neighbours; a KD-tree over the frame's points
+(:func:`vbgs.inference.quadric.neighbour_index`, the reference, which bare point batches
+still take) finds them by building a tree of all ~300k points of a 640 x 480 frame for a
+few thousand queries. Here they are read off an index image instead: ``[h, w]`` of point
+indices, -1 where the pixel has no point, gathered at once for all seeds (``[m, k]``).
+
+The window is the smallest disc of pixel offsets that holds the wanted count when full
+(:func:`disc`): 48 neighbours take the 49 offsets within 4 pixels, 12 take the 13 within
+2 (a 3 x 3 square and its four 2-pixel arms), as the KD-tree's nearest points lie on a
+surface seen head-on. On a thinned frame (``budget.points``: every s-th pixel) the
+offsets step by ``s``.
+
+A window's pixel takes no part when it has no point, or when its point lies farther from
+the seed in 3-D than the surface it would share with it allows: a window straddling a
+depth edge would mix a foreground and a background surface. The rule: a neighbour ``j``
+at pixel offset ``d_j`` (in pixels) is kept when
+
+    |x_j - x_s|^2 <= (FOOTPRINTS * f_s * s * |d_j|)^2 + NOISE_SIGMAS^2 (|u_s|^2 + |u_j|^2),
+
+``f_s`` the seed's pixel footprint (depth / focal length, world units), ``u`` the
+points' noise along their rays (0 for exact depth). On a surface tilted by ``theta`` from
+the view a neighbour lies about ``f_s |d_j| / cos(theta)`` away, so :data:`FOOTPRINTS` = 3
+keeps surfaces up to 70 degrees from head-on whole; a step in depth of more than some
+``3 f_s |d_j|`` (and a few sigma of the noise) is cut. What is left is a masked patch
+(``weight [m, k]``, 0 or 1), which the quadric code fits as it fits the KD-tree's (all
+weights 1). A window of fewer than ``quadric.PLANE_MIN_POINTS`` kept points (the seed
+alone on its surface: a speck, a thin rim) tells no plane: its seed stays at its
+measured point with a normal along its viewing ray (:func:`view_normals`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+# A neighbour lies on the seed's surface when it is within this many of the seed's pixel
+# footprints per pixel of offset (a surface up to arccos(1/3) = 70 degrees from head-on).
+FOOTPRINTS = 3.0
+# ... plus this many sigma of the two points' noise along their rays.
+NOISE_SIGMAS = 3.0
+
+
+class PixelGrid(NamedTuple):
+    """Where a frame's points lie on its pixel grid (what :func:`window` reads)."""
+
+    flat: np.ndarray  # [n] int: each point's pixel, row * width + col
+    shape: tuple[int, int]  # (height, width) of the image
+    step: int  # the lattice the points' pixels lie on (a thinned frame's stride; 1: all)
+    footprint: np.ndarray  # [n] each point's pixel footprint (depth / focal, world units)
+    eye: np.ndarray  # [3] the camera centre, in the points' coordinates
+
+
+def disc(wanted: int) -> np.ndarray:
+    """``[k, 2]`` int (row, col) offsets: the smallest disc of pixel offsets that holds at
+    least ``wanted`` pixels (offset 0 among them), nearest first."""
+    r = int(np.ceil(np.sqrt(wanted)))
+    span = np.arange(-r, r + 1)
+    off = np.stack(np.meshgrid(span, span, indexing="ij"), -1).reshape(-1, 2)
+    d2 = (off**2).sum(1)
+    order = np.argsort(d2, kind="stable")
+    cut = d2[order][min(wanted, len(order)) - 1]  # the wanted-th nearest's distance
+    return off[order][d2[order] <= cut]
+
+
+def index_image(grid: PixelGrid, pad: int) -> np.ndarray:
+    """``[h + 2 pad, w + 2 pad]`` int: each pixel's point (-1: none), padded by ``pad``
+    pixels of -1 so every window reads inside it."""
+    h, w = grid.shape
+    image = np.full((h + 2 * pad, w + 2 * pad), -1, np.int64)
+    image[grid.flat // w + pad, grid.flat % w + pad] = np.arange(len(grid.flat))
+    return image
+
+
+def window(x: np.ndarray, chosen: np.ndarray, grid: PixelGrid, wanted: int,
+           ray: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The patches of the points ``x[chosen]`` of ``x [n, 3]`` on the pixel grid: their
+    indices ``[m, k]`` into ``x`` (a masked slot holds the point itself) and weights
+    ``[m, k]`` (1: a point of the seed's surface; 0: no point, or one beyond the radius
+    of the module docstring). ``ray [n, 3]``: the points' noise along their rays."""
+    off = disc(wanted)  # [k, 2]
+    pad = grid.step * int(np.abs(off).max())
+    image = index_image(grid, pad)
+    w = grid.shape[1]
+    row, col = grid.flat[chosen] // w + pad, grid.flat[chosen] % w + pad  # [m]
+    idx = image[row[:, None] + grid.step * off[:, 0], col[:, None] + grid.step * off[:, 1]]
+    valid = idx >= 0  # [m, k]
+    idx = np.where(valid, idx, chosen[:, None])
+    gap = x[idx] - x[chosen][:, None]  # [m, k, 3]
+    reach = (FOOTPRINTS * grid.step * np.asarray(grid.footprint, np.float64)[chosen][:, None]
+             * np.sqrt((off**2).sum(1)))**2  # [m, k]
+    if ray is not None:
+        noise = (np.asarray(ray, np.float64)**2).sum(1)  # [n] |u|^2
+        reach = reach + NOISE_SIGMAS**2 * (noise[chosen][:, None] + noise[idx])
+    keep = valid & ((gap**2).sum(-1) <= reach)
+    return idx, keep.astype(np.float64)
+
+
+def view_normals(x: np.ndarray, chosen: np.ndarray, grid: PixelGrid) -> np.ndarray:
+    """``[m, 3]`` unit: the viewing rays of the points ``x[chosen]`` (from the camera
+    centre), the normal a seed takes whose window tells no plane."""
+    d = np.asarray(x, np.float64)[chosen] - np.asarray(grid.eye, np.float64)
+    return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
