@@ -89,6 +89,7 @@ import numpy as np
 
 from vbgs.data.scene import Frame
 from vbgs.inference import capacity, expfam, grow, kept_pairs, merge, model
+from vbgs.inference.pixel_patches import PixelGrid
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
@@ -104,7 +105,7 @@ from vbgs.mapping.measurement import depth_sigmas, depth_variance, point_footpri
 from vbgs.mapping.stages import stage
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
-from vbgs.render.camera import unproject
+from vbgs.render.camera import unproject, valid_depth
 from vbgs.render.splats import Splats, drawn, from_posterior, mixture_geometry
 
 
@@ -204,7 +205,8 @@ def update(state: MapState, frame: Frame, config: Config,
     with stage("prepare"):
         state, p = _prepare(state, frame, config, background)
     state, info = update_points(state, p.xyz, p.rgb, config, ray=p.ray,
-                                footprint=p.footprint, weight=p.weight, camera=frame.camera)
+                                footprint=p.footprint, weight=p.weight, camera=frame.camera,
+                                pixel=p.pixel)
     with stage("evidence") as done:
         state = _observe(state, info, p, config, background)
         done(state.evidence, state.colour)
@@ -234,11 +236,14 @@ def _prepare(state: MapState, frame: Frame, config: Config, background):
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
     ray = point_rays(frame.camera, depth, sensor.model, level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
+    pixel = np.flatnonzero(valid_depth(depth))  # in unproject's (raster) order
     state, kept, keys = _unexplained(state, xyz, footprint, config)
     if kept is not None:
-        xyz, rgb, ray, footprint, weight, keys = (
-            None if a is None else a[kept] for a in (xyz, rgb, ray, footprint, weight, keys))
-    return state, _Prepared(xyz, rgb, ray, footprint, weight, keys, frame, empty, level)
+        xyz, rgb, ray, footprint, weight, keys, pixel = (
+            None if a is None else a[kept]
+            for a in (xyz, rgb, ray, footprint, weight, keys, pixel))
+    return state, _Prepared(xyz, rgb, ray, footprint, weight, keys, pixel, frame, empty,
+                            level)
 
 
 class _Prepared(NamedTuple):
@@ -250,6 +255,7 @@ class _Prepared(NamedTuple):
     footprint: np.ndarray | None  # [n] their pixel footprints (a growing map)
     weight: np.ndarray | None  # [n] a thinned frame's weights
     keys: np.ndarray | None  # [n] their cells (budget.saturation)
+    pixel: np.ndarray | None  # [n] int their pixels, row * width + col (growth's patches)
     frame: Frame  # its depth averaged (a white-noise sensor)
     empty: np.ndarray | None  # [h, w] pixels that show nothing (a measured sensor)
     level: float  # the sensor's noise level after the averaging
@@ -306,7 +312,7 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
 
 
 def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footprint=None,
-                  weight=None, camera=None) -> tuple[MapState, MapInfo]:
+                  weight=None, camera=None, pixel=None) -> tuple[MapState, MapInfo]:
     """Learn one arriving batch of points ``xyz [n, d]``, ``rgb [n, 3]`` (d = 3 for a
     scene, 2 for an image's pixels): the one stream loop's step, which :func:`update`
     takes every frame through after unprojection (steps 2 and 3 of the module
@@ -320,12 +326,16 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
     ``ray [n, 3]``: measured points' noise along their rays; ``footprint [n]``: their
     pixel footprints (far ground grows coarse cells); ``weight [n]``: each point's weight
     in the statistics (a thinned frame's; None: 1); ``camera``: the frame's camera, which
-    the projective candidate search reads (``config.search``); all from a frame
-    (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.mapping.budget`), None for bare points."""
+    the projective candidate search reads (``config.search``); ``pixel [n]`` int: their
+    pixels in the camera's image (row * width + col), where growth finds a seed's
+    neighbours (:mod:`vbgs.inference.pixel_patches`; with ``camera`` and ``footprint``;
+    None: a KD-tree over the batch); all from a frame (:mod:`vbgs.mapping.measurement`,
+    :mod:`vbgs.mapping.budget`), None for bare points."""
     if len(xyz) == 0:
         raise ValueError("the batch has no points: nothing to learn")
     with stage("grow") as done:
-        state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
+        state, slots = grow_components(state, xyz, rgb, config, ray, footprint,
+                                       pixel_grid(pixel, camera, footprint, config))
         done(state.mixture)
     with stage("search+step") as done:
         state, before, elbo, learned = _learn(state, slots, xyz, rgb, config, ray, footprint,
@@ -422,13 +432,27 @@ def mapper(config: Config) -> Mapper:
     return Mapper(bound_init, bound_update, bound_splats, bound_update_points)
 
 
-def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None
-                    ) -> tuple[MapState, np.ndarray]:
+def pixel_grid(pixel, camera, footprint, config: Config) -> PixelGrid | None:
+    """A frame's points on its pixel grid (:mod:`vbgs.inference.pixel_patches`): their
+    pixels ``pixel [n]`` in the image of ``camera``, on the lattice of the frame's
+    budget (:func:`vbgs.mapping.budget.stride`), with their ``footprint [n]``; None
+    when any is missing (bare points)."""
+    if pixel is None or camera is None or footprint is None:
+        return None
+    w, h = int(camera.width), int(camera.height)
+    return PixelGrid(np.asarray(pixel), (h, w), stride(w, h, config.budget.points),
+                     np.asarray(footprint), np.asarray(camera.pose, np.float64)[:3, 3])
+
+
+def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None,
+                    pixel: PixelGrid | None = None) -> tuple[MapState, np.ndarray]:
     """Step 2 of :func:`update_points` alone: a growing map's new components for the points
     ``xyz [n, 3]``, ``rgb [n, 3]`` (new ground; none for a map with a fixed reference),
     and the slots they filled. The first call fixes the growth rule; ``ray [n, 3]``:
     the points' noise along their rays, ``footprint [n]`` their pixel footprints
-    (:mod:`vbgs.mapping.measurement`; far ground gets coarse cells)."""
+    (:mod:`vbgs.mapping.measurement`; far ground gets coarse cells); ``pixel``: the
+    points on the frame's pixel grid, where the seeds' patches are found
+    (:func:`pixel_grid`; None: a KD-tree over the batch)."""
     if not state.growing:
         return state, np.zeros(0, np.int64)
     mixture, rule = state.mixture, state.rule
@@ -453,7 +477,7 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     else:
         state, merged = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
-                              ray=ray, levels=levels, earns=earns)
+                              ray=ray, levels=levels, earns=earns, pixel=pixel)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
