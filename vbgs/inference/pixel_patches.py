@@ -8,10 +8,17 @@ still take) finds them by building a tree of all ~300k points of a 640 x 480 fra
 few thousand queries. Here they are read off an index image instead: ``[h, w]`` of point
 indices, -1 where the pixel has no point, gathered at once for all seeds (``[m, k]``).
 
-The window is the smallest disc of pixel offsets that holds the wanted count when full
-(:func:`disc`): 48 neighbours take the 49 offsets within 4 pixels, 12 take the 13 within
-2 (a 3 x 3 square and its four 2-pixel arms), as the KD-tree's nearest points lie on a
-surface seen head-on. On a thinned frame (``budget.points``: every s-th pixel) the
+The window is the smallest disc of pixel offsets that holds :data:`WINDOW_SHARE` times
+the wanted count (:func:`disc`): 48 neighbours look in the 121 pixels within 6.1 pixels,
+12 in the 37 within 3.2; of its points that pass the rule below, the wanted nearest in
+3-D are taken, as the KD-tree takes them. Why not the window that holds just the wanted
+count (49 pixels within 4 for 48): under a sensor's noise the 48 nearest points in 3-D
+spread wider than 4 pixels (a point's neighbours along its ray are far in depth), and
+their wider patch tells the normal better. Against the normals and points of the exact
+depth, on three object frames at 128 px under the Kinect's noise, the KD-tree's normals
+were 4.26 degrees off (median; mean 6.97), the 49-pixel window's 5.69 (9.05), the
+nearest 48 of 121 pixels 4.26 (6.98); its seeds 0.21 sigma off the surface as the
+KD-tree's, against 0.24. On a thinned frame (``budget.points``: every s-th pixel) the
 offsets step by ``s``.
 
 A window's pixel takes no part when it has no point, or when its point lies farther from
@@ -43,6 +50,9 @@ import numpy as np
 FOOTPRINTS = 3.0
 # ... plus this many sigma of the two points' noise along their rays.
 NOISE_SIGMAS = 3.0
+# The window holds this many times the wanted neighbours, the nearest of which in 3-D
+# are taken (module docstring: 1, the window of the wanted count, loses to the KD-tree).
+WINDOW_SHARE = 2.5
 
 
 class PixelGrid(NamedTuple):
@@ -81,8 +91,10 @@ def window(x: np.ndarray, chosen: np.ndarray, grid: PixelGrid, wanted: int,
     """The patches of the points ``x[chosen]`` of ``x [n, 3]`` on the pixel grid: their
     indices ``[m, k]`` into ``x`` (a masked slot holds the point itself) and weights
     ``[m, k]`` (1: a point of the seed's surface; 0: no point, or one beyond the radius
-    of the module docstring). ``ray [n, 3]``: the points' noise along their rays."""
-    off = disc(wanted)  # [k, 2]
+    of the module docstring), ``k = wanted`` nearest in 3-D of a disc of
+    :data:`WINDOW_SHARE` times as many pixels. ``ray [n, 3]``: the points' noise along
+    their rays."""
+    off = disc(max(wanted, int(np.ceil(WINDOW_SHARE * wanted))))  # [k, 2]
     pad = grid.step * int(np.abs(off).max())
     image = index_image(grid, pad)
     w = grid.shape[1]
@@ -90,14 +102,17 @@ def window(x: np.ndarray, chosen: np.ndarray, grid: PixelGrid, wanted: int,
     idx = image[row[:, None] + grid.step * off[:, 0], col[:, None] + grid.step * off[:, 1]]
     valid = idx >= 0  # [m, k]
     idx = np.where(valid, idx, chosen[:, None])
-    gap = x[idx] - x[chosen][:, None]  # [m, k, 3]
+    dist = ((x[idx] - x[chosen][:, None])**2).sum(-1)  # [m, k] squared
     reach = (FOOTPRINTS * grid.step * np.asarray(grid.footprint, np.float64)[chosen][:, None]
              * np.sqrt((off**2).sum(1)))**2  # [m, k]
     if ray is not None:
         noise = (np.asarray(ray, np.float64)**2).sum(1)  # [n] |u|^2
         reach = reach + NOISE_SIGMAS**2 * (noise[chosen][:, None] + noise[idx])
-    keep = valid & ((gap**2).sum(-1) <= reach)
-    return idx, keep.astype(np.float64)
+    keep = valid & (dist <= reach)
+    if wanted < len(off):  # the wanted nearest of the kept (the masked ones last)
+        near = np.argpartition(np.where(keep, dist, np.inf), wanted - 1, axis=1)[:, :wanted]
+        idx, keep = np.take_along_axis(idx, near, 1), np.take_along_axis(keep, near, 1)
+    return np.where(keep, idx, chosen[:, None]), keep.astype(np.float64)
 
 
 def view_normals(x: np.ndarray, chosen: np.ndarray, grid: PixelGrid) -> np.ndarray:

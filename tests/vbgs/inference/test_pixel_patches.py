@@ -59,6 +59,7 @@ TILT = np.array([np.sin(np.radians(50)), 0.0, -np.cos(np.radians(50))])  # 50 de
 
 def test_disc_holds_the_wanted_count_nearest_first():
     assert len(pixel_patches.disc(48)) == 49 and len(pixel_patches.disc(12)) == 13
+    assert len(pixel_patches.disc(120)) == 121 and len(pixel_patches.disc(30)) == 37
     off = pixel_patches.disc(48)
     assert (off[0] == 0).all() and np.abs(off).max() == 4
     d2 = (off**2).sum(1)
@@ -72,7 +73,7 @@ def test_a_tilted_plane_gives_the_kd_tree_s_normals_and_seeds():
     want = np.tile(TILT, (len(chosen), 1))
     kd = grow.local_normals(x, chosen)
     px = grow.local_normals(x, chosen, pixel=grid)
-    assert _angle(px, want).max() < 1e-6 and _angle(kd, want).max() < 1e-6
+    assert _angle(px, want).max() < 1e-4 and _angle(kd, want).max() < 1e-4
     # noisy depth (half a pixel footprint along each ray): seeds slid back onto the plane
     # as far as the KD-tree's, normals as near the plane's (both tilted by the noise)
     rng = np.random.default_rng(1)
@@ -122,9 +123,10 @@ def test_a_thinned_frame_steps_its_windows_by_the_stride():
     x, grid = _frame(depth, step=3)
     chosen = _inside(grid)[::17]
     idx, weight = pixel_patches.window(x, chosen, grid, 48)
-    assert (weight.sum(1) == 49).all()  # every slot of the window a point of the plane
+    assert (weight.sum(1) == 48).all()  # the wanted count, every one a point of the plane
+    assert (np.abs(grid.flat[idx] - grid.flat[chosen][:, None]) % 3 == 0).all()
     px = grow.local_normals(x, chosen, 48, pixel=grid)
-    assert _angle(px, np.tile(TILT, (len(chosen), 1))).max() < 1e-6
+    assert _angle(px, np.tile(TILT, (len(chosen), 1))).max() < 1e-4
 
 
 def _box_before_wall():
@@ -148,18 +150,41 @@ def test_a_seed_on_the_foreground_s_edge_takes_the_foreground_s_normal():
     assert (grid.flat[edge] % w == w // 2 - 1).all()
     for k in (12, 48):
         idx, weight = pixel_patches.window(x, edge, grid, k)
-        mixed = grid.flat[idx] % w >= w // 2  # the wall's pixels
-        assert mixed.any(1).all()  # each window straddles the edge ...
-        assert not (weight.astype(bool) & mixed).any()  # ... and keeps none of the wall
+        wall = grid.flat[idx] % w >= w // 2  # the wall's pixels
+        assert not (weight.astype(bool) & wall).any()  # none of the wall kept
         px = grow.local_normals(x, edge, k, pixel=grid)
         kd = grow.local_normals(x, edge, k)
-        assert _angle(px, np.tile(box_n, (len(edge), 1))).max() < 1e-6
-        assert _angle(kd, np.tile(box_n, (len(edge), 1))).max() < 1e-6
+        assert _angle(px, np.tile(box_n, (len(edge), 1))).max() < 1e-4
+        assert _angle(kd, np.tile(box_n, (len(edge), 1))).max() < 1e-4
     # the wall's first column, beside the box: the wall's normal (its points nearer the
     # camera in the window are the box's, far in 3-D)
     wall_edge = np.searchsorted(grid.flat, rows * w + w // 2)
     px = grow.local_normals(x, wall_edge, 48, pixel=grid)
-    assert _angle(px, np.tile(wall_n, (len(rows), 1))).max() < 1e-6
+    assert _angle(px, np.tile(wall_n, (len(rows), 1))).max() < 1e-4
+
+
+def test_a_thin_pole_before_a_wall_keeps_none_of_the_wall():
+    """A pole 3 pixels wide: its windows hold fewer of its points than wanted, and the
+    wall's points, nearest after them, are masked: the pole's own (tilted) normal."""
+    depth, wall_n, box_n = _box_before_wall()
+    h, w = depth.shape
+    pole = np.zeros_like(depth, bool)
+    pole[:, 40:43] = True
+    depth = np.where(pole, _plane_depth(h, w, box_n, -1.5), _plane_depth(h, w, wall_n, -3.0))
+    x, grid = _frame(depth)
+    rows = np.arange(10, h - 10, 5)
+    seeds = np.searchsorted(grid.flat, rows * w + 41)
+    for k in (12, 48):
+        idx, weight = pixel_patches.window(x, seeds, grid, k)
+        on_pole = pole.ravel()[grid.flat[idx]]
+        assert not (weight.astype(bool) & ~on_pole).any()
+        assert (weight.sum(1) == min(k, 39)).all()  # 13 rows of 3 within 6.1 pixels
+        px = grow.local_normals(x, seeds, k, pixel=grid)
+        assert _angle(px, np.tile(box_n, (len(seeds), 1))).max() < 1e-4
+        ray = 1e-3 * x / np.linalg.norm(x, axis=1, keepdims=True)  # a noise model
+        n, s = grow.seeds_on_patches(x, seeds, ray, k, pixel=grid)
+        assert _angle(n, np.tile(box_n, (len(seeds), 1))).max() < 1e-3
+        np.testing.assert_allclose(s, x[seeds], atol=1e-6)
 
 
 def test_a_window_of_too_few_points_keeps_the_measured_point_and_its_ray():
@@ -170,11 +195,11 @@ def test_a_window_of_too_few_points_keeps_the_measured_point_and_its_ray():
     x, grid = _frame(depth)
     speck = np.array([20 * 40 + 20, 20 * 40 + 21, 10 * 40 + 10])  # flat == index here
     _, weight = pixel_patches.window(x, speck, grid, 48)
-    np.testing.assert_array_equal(weight.sum(1), [2, 2, 49])
+    np.testing.assert_array_equal(weight.sum(1), [2, 2, 48])
     view = x[speck] / np.linalg.norm(x[speck], axis=1, keepdims=True)
     normal = grow.local_normals(x, speck, 48, pixel=grid)
     assert _angle(normal[:2], view[:2]).max() < 1e-9
-    assert _angle(normal[2:], np.array([[0.0, 0.0, 1.0]])).max() < 1e-6  # the wall's
+    assert _angle(normal[2:], np.array([[0.0, 0.0, 1.0]])).max() < 1e-4  # the wall's
     ray = 0.01 * x / np.linalg.norm(x, axis=1, keepdims=True)
     noisy = x + 0.5 * ray
     normal, seeds = grow.seeds_on_patches(noisy, speck, ray, pixel=grid)
