@@ -1,5 +1,13 @@
 """A measured point's local surface: a quadric fitted to its neighbours in the batch.
 
+The neighbours are a patch ``[m, k]`` of indices with a weight (0 or 1) each: a frame's
+points come with their pixels, and their patches are read off the frame's pixel grid,
+masked where a window holds no point or crosses a depth edge
+(:mod:`vbgs.inference.pixel_patches`); bare points take the ``k`` nearest in a KD-tree
+(:func:`neighbour_index`, all weights 1: the reference). One fit serves both; a masked
+point counts for nothing, a patch of fewer than :data:`QUADRIC_MIN_POINTS` fits a plane
+and one of fewer than :data:`PLANE_MIN_POINTS` leaves its point where it was measured.
+
 A grown component's prior is the reference that, under prior assignment, places every
 later point's latent surface point (:func:`vbgs.inference.candidates.candidate_latent`),
 so a measured (noisy) point is not seeded where it was measured but on the surface its
@@ -71,14 +79,32 @@ def patch_axes(patch: np.ndarray, noise: np.ndarray | None = None,
     ``u u^T`` (oblique rays otherwise tilt a noisy plane's normal toward them).
     ``weight [m, k]`` (0 or 1; None: all 1): a point of weight 0 counts for nothing (a
     patch on the pixel grid, :mod:`vbgs.inference.pixel_patches`)."""
-    w = np.ones(patch.shape[:2]) if weight is None else np.asarray(weight, np.float64)
-    total = w.sum(1)[:, None, None]  # [m, 1, 1]; the point itself has weight 1
-    mean = (w[..., None] * patch).sum(1, keepdims=True) / total
-    centred = patch - mean
-    cov = np.einsum("mki,mkj->mij", w[..., None] * centred, centred) / total
-    if noise is not None:
-        cov = cov - np.einsum("mki,mkj->mij", w[..., None] * noise, noise) / total
+    return _axes(list(np.moveaxis(patch, -1, 0)),
+                 None if noise is None else list(np.moveaxis(noise, -1, 0)), weight)
+
+
+def _axes(cols: list, noise: list | None, weight: np.ndarray | None) -> np.ndarray:
+    """:func:`patch_axes` of the patch's coordinates ``cols`` (``[m, k]`` each) and its
+    noise's (or None), one product of two coordinates at a time: an einsum over
+    ``[m, k, 3]`` took three times as long."""
+    w = np.ones(cols[0].shape) if weight is None else np.asarray(weight, np.float64)
+    total = w.sum(1)  # [m]; the point itself has weight 1
+    centred = [c - ((w * c).sum(1) / total)[:, None] for c in cols]
+    cov = np.empty((len(w), len(cols), len(cols)))
+    for i in range(len(cols)):
+        wc = w * centred[i]
+        for j in range(i, len(cols)):
+            v = (wc * centred[j]).sum(1)
+            if noise is not None:
+                v = v - (w * noise[i] * noise[j]).sum(1)
+            cov[:, i, j] = cov[:, j, i] = v / total
     return np.linalg.eigh(cov)[1]
+
+
+def _columns(a: np.ndarray) -> list:
+    """``[n, d]`` -> ``d`` contiguous float64 columns ``[n]`` (gathered faster)."""
+    a = np.asarray(a, np.float64)
+    return [np.ascontiguousarray(a[:, i]) for i in range(a.shape[1])]
 
 
 def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
@@ -98,10 +124,11 @@ def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
     x = np.asarray(x, np.float64)
     idx = neighbour_index(x, chosen, neighbours) if index is None else index
     w = np.ones(idx.shape) if weight is None else np.asarray(weight, np.float64)
-    patch = x[idx]  # [m, k, 3]
-    axes = patch_axes(patch, None if ray is None else np.asarray(ray, np.float64)[idx], w)
-    rel = np.matmul(patch - x[chosen][:, None], axes)  # [m, k, 3]: h, a, b
-    h, a, b = rel[..., 0] * w, rel[..., 1] * w, rel[..., 2] * w  # weight 0: no term
+    seed = x[chosen]  # [m, 3]
+    gap = [c[idx] - seed[:, i, None] for i, c in enumerate(_columns(x))]  # 3 x [m, k]
+    axes = _axes(gap, None if ray is None else [c[idx] for c in _columns(ray)], w)
+    # the patch in its axes' frame: h (along the normal n0), a, b
+    h, a, b = (w * sum(gap[i] * axes[:, i, c, None] for i in range(3)) for c in range(3))
     count = w.sum(1)  # [m]
     scale = np.sqrt(np.maximum((a * a + b * b).sum(1, keepdims=True) / count[:, None],
                                1e-300))
@@ -111,7 +138,7 @@ def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
     if curved.any():
         q = curved[:, None]  # a plane's quadratic columns are 0: least_squares gives 0
         terms += [np.where(q, a * a, 0.0), np.where(q, a * b, 0.0), np.where(q, b * b, 0.0)]
-    coef = least_squares(np.stack(terms, -1), h)  # [m, p]
+    coef = _solve(terms, h)  # [m, p]
     normal = (axes[:, :, 0] - (coef[:, 1, None] * axes[:, :, 1]
                                + coef[:, 2, None] * axes[:, :, 2]) / scale)
     height = coef[:, 0]
@@ -131,10 +158,22 @@ def least_squares(design: np.ndarray, h: np.ndarray) -> np.ndarray:
     spread (:func:`quadric_patches`), so the equations are well conditioned; the batched
     SVD of the pseudo-inverse took ten times as long (0.16 s for 6600 patches of 48
     points) for coefficients equal to 2e-9 of their size."""
-    dt = design.transpose(0, 2, 1)
-    gram = np.matmul(dt, design)  # [m, p, p]
-    ridge = RIDGE * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(gram.shape[-1])
-    return np.linalg.solve(gram + ridge, np.matmul(dt, h[..., None]))[..., 0]
+    return _solve([design[..., p] for p in range(design.shape[-1])], h)
+
+
+def _solve(terms: list, h: np.ndarray) -> np.ndarray:
+    """:func:`least_squares` of the design's columns ``terms`` (``[m, k]`` each), its
+    normal equations summed one pair of columns at a time (a batched product of
+    ``[m, p, k]`` and ``[m, k, p]``, with the stacking, took twice as long)."""
+    p = len(terms)
+    gram = np.empty((len(h), p, p))
+    rhs = np.empty((len(h), p, 1))
+    for i in range(p):
+        rhs[:, i, 0] = (terms[i] * h).sum(1)
+        for j in range(i, p):
+            gram[:, i, j] = gram[:, j, i] = (terms[i] * terms[j]).sum(1)
+    ridge = RIDGE * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(p)
+    return np.linalg.solve(gram + ridge, rhs)[..., 0]
 
 
 def ray_steps(normal: np.ndarray, height: np.ndarray, ray: np.ndarray) -> np.ndarray:
