@@ -89,16 +89,21 @@ def _axes(cols: list, noise: list | None, weight: np.ndarray | None) -> np.ndarr
     ``[m, k, 3]`` took three times as long."""
     w = np.ones(cols[0].shape) if weight is None else np.asarray(weight, np.float64)
     total = w.sum(1)  # [m]; the point itself has weight 1
-    centred = [c - ((w * c).sum(1) / total)[:, None] for c in cols]
+    centred = [c - (_dot(w, c) / total)[:, None] for c in cols]
     cov = np.empty((len(w), len(cols), len(cols)))
     for i in range(len(cols)):
         wc = w * centred[i]
+        wn = None if noise is None else w * noise[i]
         for j in range(i, len(cols)):
-            v = (wc * centred[j]).sum(1)
-            if noise is not None:
-                v = v - (w * noise[i] * noise[j]).sum(1)
+            v = _dot(wc, centred[j]) - (0.0 if noise is None else _dot(wn, noise[j]))
             cov[:, i, j] = cov[:, j, i] = v / total
     return np.linalg.eigh(cov)[1]
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``[m]``: each row's ``sum_k a b`` of ``a, b [m, k]`` (an einsum: no ``[m, k]``
+    product is made; four times as fast as its sum)."""
+    return np.einsum("mk,mk->m", a, b)
 
 
 def _columns(a: np.ndarray) -> list:
@@ -130,8 +135,7 @@ def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
     # the patch in its axes' frame: h (along the normal n0), a, b
     h, a, b = (w * sum(gap[i] * axes[:, i, c, None] for i in range(3)) for c in range(3))
     count = w.sum(1)  # [m]
-    scale = np.sqrt(np.maximum((a * a + b * b).sum(1, keepdims=True) / count[:, None],
-                               1e-300))
+    scale = np.sqrt(np.maximum((_dot(a, a) + _dot(b, b))[:, None] / count[:, None], 1e-300))
     a, b = a / scale, b / scale  # unit spread: the normal equations stay conditioned
     terms = [w, a, b]
     curved = count >= QUADRIC_MIN_POINTS  # [m]; a patch of too few points: a plane
@@ -169,9 +173,9 @@ def _solve(terms: list, h: np.ndarray) -> np.ndarray:
     gram = np.empty((len(h), p, p))
     rhs = np.empty((len(h), p, 1))
     for i in range(p):
-        rhs[:, i, 0] = (terms[i] * h).sum(1)
+        rhs[:, i, 0] = _dot(terms[i], h)
         for j in range(i, p):
-            gram[:, i, j] = gram[:, j, i] = (terms[i] * terms[j]).sum(1)
+            gram[:, i, j] = gram[:, j, i] = _dot(terms[i], terms[j])
     ridge = RIDGE * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(p)
     return np.linalg.solve(gram + ridge, rhs)[..., 0]
 
