@@ -31,7 +31,9 @@ RGB, z-depth):
    :mod:`vbgs.mapping.saturation`), which
    :func:`update_points` learns (2 and 3):
 2. a map started empty (``init`` without a ``prior``) grows components where the batch
-   shows ground the map has none for (:func:`vbgs.inference.grow.grow`); the first
+   shows ground the map has none for (:func:`vbgs.inference.grow.grow`; a frame's seeds
+   fit their patches to the points about their pixels, :mod:`vbgs.inference.pixel_patches`,
+   bare points to their nearest in a KD-tree); the first
    batch fixes the cell side with ``growth.first_frame_share`` of the capacity; a fixed
    reference under ``config.reseed`` instead moves its unused components onto the
    batch's worst-explained points (:mod:`vbgs.inference.reassign`);
