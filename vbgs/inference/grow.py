@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from vbgs.inference import cells, quadric
+from vbgs.inference import cells, pixel_patches, quadric
 from vbgs.inference.cells import cell_index, cell_keys  # noqa: F401  (grow's names before)
 from vbgs.inference.model import (
     Mixture,
@@ -223,21 +223,34 @@ def _empty_about(xyz, n_components: int, cell: float, config: PriorConfig) -> Mi
     return empty_prior(n_components, origin, cell, config, dtype)
 
 
-def local_normals(x: np.ndarray, chosen: np.ndarray,
-                  neighbours: int = NORMAL_NEIGHBOURS) -> np.ndarray:
+def local_normals(x: np.ndarray, chosen: np.ndarray, neighbours: int = NORMAL_NEIGHBOURS,
+                  pixel: pixel_patches.PixelGrid | None = None) -> np.ndarray:
     """Unit surface normals ``[m, 3]`` at the points ``x[chosen]`` of a batch ``x [n, 3]``:
     the eigenvector of the smallest eigenvalue of the covariance of each point's
     ``neighbours`` nearest batch points (local PCA; the sign is arbitrary, as a normal's
-    is in a covariance). Measured points take :func:`seeds_on_patches` instead."""
-    return quadric.patch_axes(quadric.patches(x, chosen, neighbours))[:, :, 0]
+    is in a covariance). With the frame's ``pixel`` grid the neighbours are those of a
+    window about the point's pixel (:mod:`vbgs.inference.pixel_patches`; a window that
+    tells no plane gives the viewing ray). Measured points take :func:`seeds_on_patches`
+    instead."""
+    if pixel is None:
+        return quadric.patch_axes(quadric.patches(x, chosen, neighbours))[:, :, 0]
+    idx, weight = pixel_patches.window(x, chosen, pixel, neighbours)
+    normal = quadric.patch_axes(np.asarray(x, np.float64)[idx], None, weight)[:, :, 0]
+    few = weight.sum(1) < quadric.PLANE_MIN_POINTS
+    return np.where(few[:, None], pixel_patches.view_normals(x, chosen, pixel), normal)
 
 
 def seeds_on_patches(x: np.ndarray, chosen: np.ndarray, ray: np.ndarray,
-                     neighbours: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     neighbours: int | None = None,
+                     pixel: pixel_patches.PixelGrid | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Measured points: the normals ``[m, 3]`` of the surfaces about ``x[chosen]`` and the
     seeds ``[m, 3]``, each chosen point slid along its ray ``u`` onto the quadric fitted
     to its ``neighbours`` nearest batch points (:mod:`vbgs.inference.quadric`), by at
-    most ``SEED_SIGMAS`` of its noise.
+    most ``SEED_SIGMAS`` of its noise. With the frame's ``pixel`` grid the neighbours are
+    those of a window about the point's pixel (:mod:`vbgs.inference.pixel_patches`); a
+    window that tells no plane leaves its seed at the measured point, its normal along
+    the ray.
 
     Why: a grown component's prior mean is the reference that, under prior assignment,
     places every later point's latent surface point (:func:`vbgs.inference.candidates.
@@ -245,7 +258,11 @@ def seeds_on_patches(x: np.ndarray, chosen: np.ndarray, ray: np.ndarray,
     (2.6 cm at 4 m for a Kinect), which the latent points then inherit as in-plane
     displacement at oblique views; the fitted surface averages ``neighbours`` points."""
     neighbours = NOISY_NORMAL_NEIGHBOURS if neighbours is None else neighbours
-    normal, height = quadric.quadric_patches(x, chosen, neighbours, ray)
+    idx = weight = None
+    if pixel is not None:
+        idx, weight = pixel_patches.window(x, chosen, pixel, neighbours, ray)
+    normal, height = quadric.quadric_patches(x, chosen, neighbours, ray, index=idx,
+                                             weight=weight)
     t = np.clip(quadric.ray_steps(normal, height, ray[chosen]), -SEED_SIGMAS, SEED_SIGMAS)
     unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     return unit, x[chosen] + t[:, None] * ray[chosen]
@@ -460,15 +477,18 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
-         config: PriorConfig = PriorConfig(), ray=None, levels=None, earns=None
-         ) -> tuple[State, GrowInfo]:
+         config: PriorConfig = PriorConfig(), ray=None, levels=None, earns=None,
+         pixel: pixel_patches.PixelGrid | None = None) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`);
     ``levels [n]``: the points' coarse levels (:func:`point_levels`); ``earns [n, levels]``:
-    the refinement levels each point may seed (:func:`vbgs.mapping.splits.earned_levels`)."""
+    the refinement levels each point may seed (:func:`vbgs.mapping.splits.earned_levels`);
+    ``pixel``: a frame's points on its pixel grid, where the seeds' patches are found
+    (:mod:`vbgs.inference.pixel_patches`; None: bare points, a KD-tree over the batch)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
-                               config=config, ray=ray, levels=levels, earns=earns)
+                               config=config, ray=ray, levels=levels, earns=earns,
+                               pixel=pixel)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
@@ -515,8 +535,8 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
-                 key: jax.Array, config: PriorConfig, ray=None, levels=None, earns=None
-                 ) -> tuple[Mixture, GrowInfo]:
+                 key: jax.Array, config: PriorConfig, ray=None, levels=None, earns=None,
+                 pixel: pixel_patches.PixelGrid | None = None) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     x, taken, active, ray = _about_origin(prior, posterior, xyz, ray)
@@ -538,10 +558,13 @@ def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
             s = s * 4.0 ** levels[chosen]
         if fine:  # a split in a cell of side cell / 2^l: variance 4^-l times
             s = s * 4.0 ** -split.astype(np.float64)
+        if pixel is not None:  # the camera centre about the grid's origin, as x is
+            pixel = pixel._replace(eye=np.asarray(pixel.eye, np.float64)
+                                   - np.asarray(prior.origin, np.float64))
         if ray is None:
-            normals = local_normals(x, chosen)
+            normals = local_normals(x, chosen, pixel=pixel)
         else:  # measured points: seeds on their patches' quadrics
-            normals, seeds = seeds_on_patches(x, chosen, ray)
+            normals, seeds = seeds_on_patches(x, chosen, ray, pixel=pixel)
         scales = surface_scales(s, normals, config.surface_thickness).astype(dtype)
     new_prior = _fill(prior, slots, seeds.astype(dtype),
                       np.asarray(rgb)[chosen].astype(dtype), float(config.alpha), scales)

@@ -31,7 +31,9 @@ RGB, z-depth):
    :mod:`vbgs.mapping.saturation`), which
    :func:`update_points` learns (2 and 3):
 2. a map started empty (``init`` without a ``prior``) grows components where the batch
-   shows ground the map has none for (:func:`vbgs.inference.grow.grow`); the first
+   shows ground the map has none for (:func:`vbgs.inference.grow.grow`; a frame's seeds
+   fit their patches to the points about their pixels, :mod:`vbgs.inference.pixel_patches`,
+   bare points to their nearest in a KD-tree); the first
    batch fixes the cell side with ``growth.first_frame_share`` of the capacity; a fixed
    reference under ``config.reseed`` instead moves its unused components onto the
    batch's worst-explained points (:mod:`vbgs.inference.reassign`);
@@ -89,6 +91,7 @@ import numpy as np
 
 from vbgs.data.scene import Frame
 from vbgs.inference import capacity, expfam, grow, kept_pairs, merge, model
+from vbgs.inference.pixel_patches import PixelGrid
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.reassign import reassign
 from vbgs.inference.stepper import Stepper
@@ -231,11 +234,11 @@ def _prepare(state: MapState, frame: Frame, config: Config, background):
             frame.depth, frame.rgb, empty, focal, g.hole_radius, g.hole_colour_tol))
     state, depth, weight = _within_budget(state, measured, config)
     xyz, rgb = unproject(frame.camera, frame.rgb, depth)
-    pixel = np.flatnonzero(valid_depth(depth))  # each point's pixel, in unproject's order
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
     ray = point_rays(frame.camera, depth, sensor.model, level) if sensor.noisy else None
     footprint = point_footprints(frame.camera, depth) if state.growing else None
+    pixel = np.flatnonzero(valid_depth(depth))  # in unproject's (raster) order
     state, kept, keys = _unexplained(state, xyz, footprint, config)
     if kept is not None:
         xyz, rgb, ray, footprint, weight, keys, pixel = (
@@ -254,7 +257,8 @@ class _Prepared(NamedTuple):
     footprint: np.ndarray | None  # [n] their pixel footprints (a growing map)
     weight: np.ndarray | None  # [n] a thinned frame's weights
     keys: np.ndarray | None  # [n] their cells (budget.saturation)
-    pixel: np.ndarray  # [n] the flat (row-major) pixel each was seen at
+    pixel: np.ndarray | None  # [n] int their pixels, row * width + col (growth's patches
+    # and the projective search's tiles)
     frame: Frame  # its depth averaged (a white-noise sensor)
     empty: np.ndarray | None  # [h, w] pixels that show nothing (a measured sensor)
     level: float  # the sensor's noise level after the averaging
@@ -325,14 +329,17 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
     ``ray [n, 3]``: measured points' noise along their rays; ``footprint [n]``: their
     pixel footprints (far ground grows coarse cells); ``weight [n]``: each point's weight
     in the statistics (a thinned frame's; None: 1); ``camera``: the frame's camera, which
-    the projective candidate search reads (``config.search``); ``pixel [n]``: the flat
-    pixel of the camera's frame each point was seen at (one a pixel), with which that
-    search learns the frame by its tiles (:mod:`vbgs.inference.frame_tiles`); all from a frame
+    the projective candidate search reads (``config.search``); ``pixel [n]`` int: their
+    pixels in the camera's image (row * width + col, one point a pixel), where growth
+    finds a seed's neighbours (:mod:`vbgs.inference.pixel_patches`; with ``camera`` and
+    ``footprint``; None: a KD-tree over the batch) and by which the projective search
+    learns the frame's tiles (:mod:`vbgs.inference.frame_tiles`); all from a frame
     (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.mapping.budget`), None for bare points."""
     if len(xyz) == 0:
         raise ValueError("the batch has no points: nothing to learn")
     with stage("grow") as done:
-        state, slots = grow_components(state, xyz, rgb, config, ray, footprint)
+        state, slots = grow_components(state, xyz, rgb, config, ray, footprint,
+                                       pixel_grid(pixel, camera, footprint, config))
         done(state.mixture)
     with stage("search+step") as done:
         state, before, elbo, learned = _learn(state, slots, xyz, rgb, config, ray, footprint,
@@ -429,13 +436,27 @@ def mapper(config: Config) -> Mapper:
     return Mapper(bound_init, bound_update, bound_splats, bound_update_points)
 
 
-def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None
-                    ) -> tuple[MapState, np.ndarray]:
+def pixel_grid(pixel, camera, footprint, config: Config) -> PixelGrid | None:
+    """A frame's points on its pixel grid (:mod:`vbgs.inference.pixel_patches`): their
+    pixels ``pixel [n]`` in the image of ``camera``, on the lattice of the frame's
+    budget (:func:`vbgs.mapping.budget.stride`), with their ``footprint [n]``; None
+    when any is missing (bare points)."""
+    if pixel is None or camera is None or footprint is None:
+        return None
+    w, h = int(camera.width), int(camera.height)
+    return PixelGrid(np.asarray(pixel), (h, w), stride(w, h, config.budget.points),
+                     np.asarray(footprint), np.asarray(camera.pose, np.float64)[:3, 3])
+
+
+def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None,
+                    pixel: PixelGrid | None = None) -> tuple[MapState, np.ndarray]:
     """Step 2 of :func:`update_points` alone: a growing map's new components for the points
     ``xyz [n, 3]``, ``rgb [n, 3]`` (new ground; none for a map with a fixed reference),
     and the slots they filled. The first call fixes the growth rule; ``ray [n, 3]``:
     the points' noise along their rays, ``footprint [n]`` their pixel footprints
-    (:mod:`vbgs.mapping.measurement`; far ground gets coarse cells)."""
+    (:mod:`vbgs.mapping.measurement`; far ground gets coarse cells); ``pixel``: the
+    points on the frame's pixel grid, where the seeds' patches are found
+    (:func:`pixel_grid`; None: a KD-tree over the batch)."""
     if not state.growing:
         return state, np.zeros(0, np.int64)
     mixture, rule = state.mixture, state.rule
@@ -460,7 +481,7 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     else:
         state, merged = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
-                              ray=ray, levels=levels, earns=earns)
+                              ray=ray, levels=levels, earns=earns, pixel=pixel)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 

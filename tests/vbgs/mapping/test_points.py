@@ -12,7 +12,8 @@ from vbgs.data.formats import load_scene
 from vbgs.data.images import load_image, patch_stream
 from vbgs.inference import model
 from vbgs.inference.reassign import MIN_COUNT
-from vbgs.render.camera import unproject
+from vbgs.mapping.measurement import point_footprints
+from vbgs.render.camera import unproject, valid_depth
 from vbgs.render.image import render_image
 from vbgs.render.metrics import psnr
 
@@ -203,7 +204,8 @@ def test_a_surface_prior_stream_far_from_the_origin():
 def test_a_frame_is_learned_as_its_points(assert_same):
     """``update`` takes a frame's unprojected points through ``update_points``: without the
     frame's own extras (opacity evidence, colour fit) the two streams are the same to the
-    bit, growth included."""
+    bit, growth included (given the points' pixels and footprints, as a frame gives them
+    to growth)."""
     scene = load_scene("object", size=24, n_train=3, n_test=1, seed=0)
     config = mapping.Config(components=200, render=mapping.RenderConfig(
         opacity_rule="constant"))
@@ -212,8 +214,10 @@ def test_a_frame_is_learned_as_its_points(assert_same):
     bound = mapping.mapper(config)
     for frame in scene.train:
         frames, info = mapping.update(frames, frame, config)
-        points, again = bound.update_points(points, *unproject(frame.camera, frame.rgb,
-                                                               frame.depth))
+        points, again = bound.update_points(  # with the pixels growth's patches read
+            points, *unproject(frame.camera, frame.rgb, frame.depth), camera=frame.camera,
+            pixel=np.flatnonzero(valid_depth(frame.depth)),
+            footprint=point_footprints(frame.camera, frame.depth))
         assert (info.n_points, info.n_learned, info.n_new) == (
             again.n_points, again.n_learned, again.n_new)
     for a, b in zip(jax.tree.leaves(frames.mixture), jax.tree.leaves(points.mixture),
