@@ -103,23 +103,17 @@ def test_tile_depths_and_nearest_distance():
 
 
 @pytest.mark.parametrize("noisy", [False, True])
-def test_stepper_by_tiles_equals_the_per_point_projective_stepper(noisy):
+def test_stepper_by_tiles_equals_the_per_point_projective_stepper(noisy, object_map):
     """A grown map's next frame learned by its tiles (the points' pixels given) and point
     by point (each point its projected tile's candidates): the same posterior, bound and
     points within reach."""
     import jax
 
-    from vbgs import mapping
-    from vbgs.data.formats import load_scene
     from vbgs.inference import grow
     from vbgs.inference.stepper import Stepper
     from vbgs.render.camera import unproject, valid_depth
 
-    scene = load_scene("object", size=48, n_train=10, n_test=1, seed=0)
-    config = mapping.Config(components=3000)
-    state = mapping.init(config, key=jax.random.key(0))
-    for frame in scene.train[:8]:
-        state, _ = mapping.update(state, frame, config)
+    state, scene = object_map
     frame = scene.train[8]
     xyz, rgb = unproject(frame.camera, frame.rgb, frame.depth)
     pixel = np.flatnonzero(valid_depth(frame.depth))

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from vbgs import mapping
-from vbgs.data.formats import load_scene
 from vbgs.inference import candidates, grow, model, projective
 from vbgs.inference.stepper import Stepper
 from vbgs.render.camera import unproject
@@ -15,17 +14,14 @@ C = 16
 
 
 @pytest.fixture(scope="module")
-def scene():
-    return load_scene("object", size=48, n_train=12, n_test=1, seed=0)
+def scene(object_map):
+    return object_map[1]
 
 
 @pytest.fixture(scope="module")
-def grown(scene):
+def grown(object_map):
     """A map grown on eight frames, and the next frame's points, centred."""
-    config = mapping.Config(components=3000)
-    state = mapping.init(config, key=jax.random.key(0))
-    for frame in scene.train[:8]:
-        state, _ = mapping.update(state, frame, config)
+    state, scene = object_map
     frame = scene.train[8]
     xyz, rgb = unproject(frame.camera, frame.rgb, frame.depth)
     prior = state.mixture.prior

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vbgs import mapping
-from vbgs.data.synthetic import changing_scene, make_scene, object_primitives
+from vbgs.data.synthetic import changing_scene, make_scene
 from vbgs.inference.grow import is_active
 from vbgs.mapping import change
 from vbgs.mapping.config import EvidenceConfig, SensorConfig
@@ -82,7 +82,7 @@ def test_a_moved_object_appears_at_its_new_place(changed):
         c = config(forget_after=after)
         splats = mapping.splats(stream(changed.train, c, changed.background), c)
         errors = []
-        for first, view in zip(changed.first_state, changed.test):
+        for first, view in zip(changed.first_state, changed.test, strict=True):
             image = np.asarray(rasterize(splats, view.camera,
                                          background=changed.background).rgb)
             mask = changed_pixels(first, view)
@@ -96,7 +96,8 @@ def test_a_static_stream_forgets_nothing_to_the_bit():
     on = stream(scene.train, config(), scene.background)
     off = stream(scene.train, config(forget_after=0), scene.background)
     assert on.n_forgotten == 0
-    for a, b in zip(jax.tree_util.tree_leaves(on.mixture), jax.tree_util.tree_leaves(off.mixture)):
+    for a, b in zip(jax.tree_util.tree_leaves(on.mixture), jax.tree_util.tree_leaves(off.mixture),
+                    strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_array_equal(np.asarray(on.evidence.hits), np.asarray(off.evidence.hits))
 
