@@ -438,6 +438,7 @@ class Stepper:
         limit = np.inf if not reaching else (
             self.reach if reach is None else np.pad(np.asarray(reach, x.dtype),
                                                     (0, len(x) - n)))
-        within = d2 <= jnp.asarray(limit, x.dtype) ** 2
+        # a point with no component listed (d2 inf) is never learned, reach or none
+        within = jnp.isfinite(d2) & (d2 <= jnp.asarray(limit, x.dtype) ** 2)
         return cand, jnp.where(within, w, 0.0), within if reaching else None
 

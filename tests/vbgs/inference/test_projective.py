@@ -119,6 +119,21 @@ def test_a_point_with_no_component_near_is_not_learned():
     assert info.learned[:20].all() and not info.learned[20]
 
 
+def test_a_point_with_no_component_listed_takes_no_responsibility_without_a_reach():
+    """With no reach (a fixed reference), a point whose pool is empty still adds nothing:
+    its statistics would otherwise go to component 0 (every entry of its list is -1)."""
+    cam, prior, xyz, rgb = _few_components()
+    pj = Stepper(prior, estep="sparse", n_candidates=C, search="projective", spacing=0.6)
+    pj.tiling = projective.Tiling(32, 32, 4, 16, C)
+    pts = np.concatenate([xyz[:20], [[5.0, 5.0, 2.0]]]).astype(np.float32)
+    cols = np.concatenate([rgb[:20], rgb[:1]])
+    with_far, _ = pj(model.start(prior), pts, cols, camera=cam)
+    without, _ = pj(model.start(prior), pts[:20], cols[:20], camera=cam)
+    for u, w in zip(jax.tree.leaves(with_far.stats), jax.tree.leaves(without.stats),
+                    strict=True):
+        np.testing.assert_allclose(np.asarray(u), np.asarray(w), rtol=1e-6, atol=1e-6)
+
+
 def test_projective_stream_of_a_fixed_reference_is_order_free(scene):
     """Under prior assignment with a fixed reference the candidates depend on the
     reference and the frame only: the frames in reverse order give the same posterior."""
