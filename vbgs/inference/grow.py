@@ -31,6 +31,7 @@ assignment the posterior is no longer independent of the order (as with
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -234,9 +235,8 @@ def local_normals(x: np.ndarray, chosen: np.ndarray, neighbours: int = NORMAL_NE
     instead."""
     if pixel is None:
         return quadric.patch_axes(quadric.patches(x, chosen, neighbours))[:, :, 0]
-    idx, weight = pixel_patches.window(x, chosen, pixel, neighbours)
-    normal = quadric.patch_axes(np.asarray(x, np.float64)[idx], None, weight)[:, :, 0]
-    few = weight.sum(1) < quadric.PLANE_MIN_POINTS
+    normal, count = _on_windows(_window_normals, x, chosen, pixel, neighbours)
+    few = count < quadric.PLANE_MIN_POINTS
     return np.where(few[:, None], pixel_patches.view_normals(x, chosen, pixel), normal)
 
 
@@ -248,9 +248,9 @@ def seeds_on_patches(x: np.ndarray, chosen: np.ndarray, ray: np.ndarray,
     seeds ``[m, 3]``, each chosen point slid along its ray ``u`` onto the quadric fitted
     to its ``neighbours`` nearest batch points (:mod:`vbgs.inference.quadric`), by at
     most ``SEED_SIGMAS`` of its noise. With the frame's ``pixel`` grid the neighbours are
-    those of a window about the point's pixel (:mod:`vbgs.inference.pixel_patches`); a
-    window that tells no plane leaves its seed at the measured point, its normal along
-    the ray.
+    those of a window about the point's pixel (:mod:`vbgs.inference.pixel_patches`,
+    gathered and fitted on the device a chunk of seeds at a time); a window that tells
+    no plane leaves its seed at the measured point, its normal along the ray.
 
     Why: a grown component's prior mean is the reference that, under prior assignment,
     places every later point's latent surface point (:func:`vbgs.inference.candidates.
@@ -258,14 +258,45 @@ def seeds_on_patches(x: np.ndarray, chosen: np.ndarray, ray: np.ndarray,
     (2.6 cm at 4 m for a Kinect), which the latent points then inherit as in-plane
     displacement at oblique views; the fitted surface averages ``neighbours`` points."""
     neighbours = NOISY_NORMAL_NEIGHBOURS if neighbours is None else neighbours
-    idx = weight = None
-    if pixel is not None:
-        idx, weight = pixel_patches.window(x, chosen, pixel, neighbours, ray)
-    normal, height = quadric.quadric_patches(x, chosen, neighbours, ray, index=idx,
-                                             weight=weight)
-    t = np.clip(quadric.ray_steps(normal, height, ray[chosen]), -SEED_SIGMAS, SEED_SIGMAS)
-    unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
-    return unit, x[chosen] + t[:, None] * ray[chosen]
+    if pixel is None:
+        normal, height = quadric.quadric_patches(x, chosen, neighbours, ray)
+        t = np.asarray(quadric.ray_steps(normal, height, ray[chosen]), np.float64)
+        unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
+    else:
+        unit, t = _on_windows(_window_seeds, x, chosen, pixel, neighbours, ray)
+    t = np.clip(t, -SEED_SIGMAS, SEED_SIGMAS)
+    return unit, np.asarray(x, np.float64)[chosen] + t[:, None] * ray[chosen]
+
+
+def _on_windows(fn, x: np.ndarray, chosen: np.ndarray, pixel: pixel_patches.PixelGrid,
+                neighbours: int, ray: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``fn``'s two results ``[m, ...]`` (float64) for the points ``x[chosen]`` on their
+    windows of the pixel grid (:func:`vbgs.inference.pixel_patches.chunked`)."""
+    off, pad = pixel_patches.offsets(neighbours, pixel)
+    im = pixel_patches.images(x, pixel, pad, ray)
+    out = list(pixel_patches.chunked(fn, im, chosen, pixel, off, ray, wanted=neighbours))
+    return tuple(np.concatenate([np.asarray(o[i], np.float64) for o in out])[:len(chosen)]
+                 for i in range(2))
+
+
+@partial(jax.jit, static_argnames="wanted")
+def _window_normals(im, at, reach, off, wanted: int):
+    """The normals ``[c, 3]`` of the windows' patches at ``at [c]`` and their points'
+    counts ``[c]`` (:func:`vbgs.inference.pixel_patches.nearest`)."""
+    _, gap, w = pixel_patches.nearest(im, at, reach, off, wanted)
+    return quadric.axes(gap, None, w)[:, :, 0], w.sum(1)
+
+
+@partial(jax.jit, static_argnames="wanted")
+def _window_seeds(im, at, reach, off, wanted: int):
+    """The unit normals ``[c, 3]`` of the quadrics of the windows' patches at ``at [c]``
+    and the steps ``[c]`` along their points' rays onto them (unclipped)."""
+    pix, gap, w = pixel_patches.nearest(im, at, reach, off, wanted)
+    ray = im.noise[at]
+    normal, height = quadric.fit(gap, im.noise[pix], w, ray)
+    unit = normal / jnp.sqrt((normal * normal).sum(1, keepdims=True))
+    return unit, quadric.ray_steps(normal, height, ray)
 
 
 def surface_scales(s, normals: np.ndarray, thickness: float) -> np.ndarray:

@@ -45,15 +45,21 @@ tiny run: 18.8 dB against 20.3).
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
+
+from vbgs.inference.model import bucket_size
 
 # Below this many neighbours the quadratic terms are left out (a plane: 3 coefficients).
 QUADRIC_MIN_POINTS = 10
 # Below this many the patch tells no plane: the point keeps its ray as normal, no step.
 PLANE_MIN_POINTS = 3
 # The ridge of the quadric's normal equations, a share of their trace (least_squares):
-# far below any term a patch can tell, enough to keep a term it cannot tell at 0.
-RIDGE = 1e-12
+# far below any term a patch can tell (a unit-spread column holds about a share 1/6 of the
+# trace), above float32's rounding of the equations, so a term the patch cannot tell
+# stays at 0.
+RIDGE = 1e-6
 
 
 def neighbour_index(x: np.ndarray, chosen: np.ndarray, neighbours: int) -> np.ndarray:
@@ -79,37 +85,57 @@ def patch_axes(patch: np.ndarray, noise: np.ndarray | None = None,
     ``u u^T`` (oblique rays otherwise tilt a noisy plane's normal toward them).
     ``weight [m, k]`` (0 or 1; None: all 1): a point of weight 0 counts for nothing (a
     patch on the pixel grid, :mod:`vbgs.inference.pixel_patches`)."""
-    return _axes(list(np.moveaxis(patch, -1, 0)),
-                 None if noise is None else list(np.moveaxis(noise, -1, 0)), weight)
+    patch = np.asarray(patch, np.float64)
+    gap = patch - patch[:, :1]  # about a point of each patch: float32 keeps its spread
+    w = np.ones(gap.shape[:2]) if weight is None else weight
+    return _padded_call(_axes_jit, len(gap), gap, noise, w)
 
 
-def _axes(cols: list, noise: list | None, weight: np.ndarray | None) -> np.ndarray:
-    """:func:`patch_axes` of the patch's coordinates ``cols`` (``[m, k]`` each) and its
-    noise's (or None), one product of two coordinates at a time: an einsum over
-    ``[m, k, 3]`` took three times as long."""
-    w = np.ones(cols[0].shape) if weight is None else np.asarray(weight, np.float64)
-    total = w.sum(1)  # [m]; the point itself has weight 1
-    centred = [c - (_dot(w, c) / total)[:, None] for c in cols]
-    cov = np.empty((len(w), len(cols), len(cols)))
-    for i in range(len(cols)):
-        wc = w * centred[i]
-        wn = None if noise is None else w * noise[i]
-        for j in range(i, len(cols)):
-            v = _dot(wc, centred[j]) - (0.0 if noise is None else _dot(wn, noise[j]))
-            cov[:, i, j] = cov[:, j, i] = v / total
-    return np.linalg.eigh(cov)[1]
+def axes(gap: jax.Array, noise: jax.Array | None, w: jax.Array) -> jax.Array:
+    """:func:`patch_axes` of patches given about a point each, ``gap [m, k, 3]``, and
+    their noise ``[m, k, 3]`` (or None), weights ``w [m, k]``, traced: float32 suffices,
+    the patch's spread being taken about its own points (a patch of a few centimetres
+    keeps seven digits of its own size wherever it lies)."""
+    total = jnp.maximum(w.sum(1), 1.0)  # [m]; a padded patch (no weight) stays finite
+    c = [g - ((w * g).sum(1) / total)[:, None] for g in _coords(gap)]  # centred, [m, k]
+    n = None if noise is None else _coords(noise)
+    pair = {}
+    for i in range(3):  # one reduction per pair: XLA makes a product of [m, k, 3, 3] slowly
+        for j in range(i, 3):
+            v = (w * c[i] * c[j]).sum(1)
+            pair[i, j] = v if n is None else v - (w * n[i] * n[j]).sum(1)
+    cov = jnp.stack([jnp.stack([pair[min(i, j), max(i, j)] for j in range(3)], -1)
+                     for i in range(3)], -2)
+    return jnp.linalg.eigh(cov / total[:, None, None])[1]
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``[m]``: each row's ``sum_k a b`` of ``a, b [m, k]`` (an einsum: no ``[m, k]``
-    product is made; four times as fast as its sum)."""
-    return np.einsum("mk,mk->m", a, b)
-
-
-def _columns(a: np.ndarray) -> list:
-    """``[n, d]`` -> ``d`` contiguous float64 columns ``[n]`` (gathered faster)."""
-    a = np.asarray(a, np.float64)
-    return [np.ascontiguousarray(a[:, i]) for i in range(a.shape[1])]
+def fit(gap: jax.Array, noise: jax.Array | None, w: jax.Array, ray: jax.Array | None
+        ) -> tuple[jax.Array, jax.Array]:
+    """The quadric of each patch given about its point, traced (module docstring):
+    ``gap [m, k, 3]`` the neighbours less the point, ``noise [m, k, 3]`` (or None) their
+    noise along their rays, ``w [m, k]`` (0 or 1) their weights, ``ray [m, 3]`` (or None)
+    the point's own noise. Returns the unnormalised normal ``[m, 3]`` and the height
+    ``c0 [m]``; a patch of fewer than :data:`PLANE_MIN_POINTS` kept points returns the
+    point's ``ray`` and 0 (without ``ray``: the patch's first axis and 0). Float32
+    suffices: the coordinates are about the point and scaled to unit spread, and the
+    ridge (:data:`RIDGE`) sits above float32's rounding of the normal equations."""
+    ax = axes(gap, noise, w)  # [m, 3, 3]
+    g = _coords(gap)
+    h, a, b = (w * sum(g[i] * ax[:, i, c, None] for i in range(3)) for c in range(3))
+    count = w.sum(1)  # [m]
+    scale = jnp.sqrt(jnp.maximum(((a * a).sum(1) + (b * b).sum(1))
+                                 / jnp.maximum(count, 1.0), 1e-30))[:, None]
+    a, b = a / scale, b / scale  # unit spread: the normal equations stay conditioned
+    curved = (count >= QUADRIC_MIN_POINTS)[:, None]  # too few points: a plane
+    terms = [w, a, b] + [jnp.where(curved, t, 0.0) for t in (a * a, a * b, b * b)]
+    coef = _solve(terms, h)  # [m, 6]; a plane's quadratic columns are 0: their terms 0
+    normal = ax[:, :, 0] - (coef[:, 1, None] * ax[:, :, 1]
+                            + coef[:, 2, None] * ax[:, :, 2]) / scale
+    height = coef[:, 0]
+    if ray is not None:
+        few = (count < PLANE_MIN_POINTS)[:, None]
+        normal, height = jnp.where(few, ray, normal), jnp.where(few[:, 0], 0.0, height)
+    return normal, height
 
 
 def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
@@ -118,72 +144,81 @@ def quadric_patches(x: np.ndarray, chosen: np.ndarray, neighbours: int,
     """For each point ``x[chosen]`` of ``x [n, 3]``: the unnormalised normal ``[m, 3]``
     of the quadric fitted to its ``neighbours`` nearest points of ``x`` (itself among
     them; module docstring) and the quadric's height ``c0 [m]`` above the point along
-    the patch's axis ``n0`` (the surface at the point's own tangent coordinates).
+    the patch's axis ``n0`` (the surface at the point's own tangent coordinates), by
+    :func:`fit`.
 
     ``index [m, k]`` and ``weight [m, k]`` (0 or 1): a patch given instead of the nearest
-    points (the pixel grid's window, :func:`vbgs.inference.pixel_patches.window`); its
-    points of weight 0 count for nothing. A patch of fewer than
+    points; its points of weight 0 count for nothing. A patch of fewer than
     :data:`QUADRIC_MIN_POINTS` points fits a plane; of fewer than :data:`PLANE_MIN_POINTS`
     its normal is the point's ``ray`` and its height 0 (the seed stays where it was
     measured; without ``ray`` the normal is the patch's first axis, arbitrary)."""
     x = np.asarray(x, np.float64)
     idx = neighbour_index(x, chosen, neighbours) if index is None else index
-    w = np.ones(idx.shape) if weight is None else np.asarray(weight, np.float64)
-    seed = x[chosen]  # [m, 3]
-    gap = [c[idx] - seed[:, i, None] for i, c in enumerate(_columns(x))]  # 3 x [m, k]
-    axes = _axes(gap, None if ray is None else [c[idx] for c in _columns(ray)], w)
-    # the patch in its axes' frame: h (along the normal n0), a, b
-    h, a, b = (w * sum(gap[i] * axes[:, i, c, None] for i in range(3)) for c in range(3))
-    count = w.sum(1)  # [m]
-    scale = np.sqrt(np.maximum((_dot(a, a) + _dot(b, b))[:, None] / count[:, None], 1e-300))
-    a, b = a / scale, b / scale  # unit spread: the normal equations stay conditioned
-    terms = [w, a, b]
-    curved = count >= QUADRIC_MIN_POINTS  # [m]; a patch of too few points: a plane
-    if curved.any():
-        q = curved[:, None]  # a plane's quadratic columns are 0: least_squares gives 0
-        terms += [np.where(q, a * a, 0.0), np.where(q, a * b, 0.0), np.where(q, b * b, 0.0)]
-    coef = _solve(terms, h)  # [m, p]
-    normal = (axes[:, :, 0] - (coef[:, 1, None] * axes[:, :, 1]
-                               + coef[:, 2, None] * axes[:, :, 2]) / scale)
-    height = coef[:, 0]
-    few = count < PLANE_MIN_POINTS
-    if ray is not None and few.any():
-        normal = np.where(few[:, None], np.asarray(ray, np.float64)[chosen], normal)
-        height = np.where(few, 0.0, height)
-    return normal, height
+    w = np.ones(idx.shape) if weight is None else weight
+    gap = x[idx] - x[chosen][:, None]
+    noise = None if ray is None else np.asarray(ray, np.float64)[idx]
+    own = None if ray is None else np.asarray(ray, np.float64)[chosen]
+    return _padded_call(_fit_jit, len(gap), gap, noise, w, own)
 
 
 def least_squares(design: np.ndarray, h: np.ndarray) -> np.ndarray:
     """``[m, p]``: for each patch the coefficients ``c`` that minimise ``|design c - h|^2``
     (``design [m, k, p]``, ``h [m, k]``; a masked point is a row of zeros in both, so it
-    counts for nothing), by the normal equations with a ridge of
-    :data:`RIDGE` of their trace: a term the patch cannot tell (no spread along an axis)
-    gets 0, as the pseudo-inverse's minimum norm gives it. The design's columns have unit
-    spread (:func:`quadric_patches`), so the equations are well conditioned; the batched
-    SVD of the pseudo-inverse took ten times as long (0.16 s for 6600 patches of 48
-    points) for coefficients equal to 2e-9 of their size."""
-    return _solve([design[..., p] for p in range(design.shape[-1])], h)
+    counts for nothing), by the normal equations with a ridge of :data:`RIDGE` of their
+    trace: a term the patch cannot tell (no spread along an axis) gets 0, as the
+    pseudo-inverse's minimum norm gives it. The design's columns have unit spread
+    (:func:`fit`), so the equations are well conditioned; the batched SVD of the
+    pseudo-inverse took ten times as long."""
+    design, h = jnp.asarray(design, jnp.float32), jnp.asarray(h, jnp.float32)
+    return np.asarray(_solve([design[..., p] for p in range(design.shape[-1])], h))
 
 
-def _solve(terms: list, h: np.ndarray) -> np.ndarray:
+def _solve(terms: list, h: jax.Array) -> jax.Array:
     """:func:`least_squares` of the design's columns ``terms`` (``[m, k]`` each), its
-    normal equations summed one pair of columns at a time (a batched product of
-    ``[m, p, k]`` and ``[m, k, p]``, with the stacking, took twice as long)."""
+    normal equations summed one pair of columns at a time (elementwise: no product is
+    rounded to TF32 on a GPU)."""
     p = len(terms)
-    gram = np.empty((len(h), p, p))
-    rhs = np.empty((len(h), p, 1))
-    for i in range(p):
-        rhs[:, i, 0] = _dot(terms[i], h)
-        for j in range(i, p):
-            gram[:, i, j] = gram[:, j, i] = _dot(terms[i], terms[j])
-    ridge = RIDGE * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(p)
-    return np.linalg.solve(gram + ridge, rhs)[..., 0]
+    rhs = jnp.stack([(t * h).sum(1) for t in terms], 1)  # [m, p]
+    pair = {(i, j): (terms[i] * terms[j]).sum(1) for i in range(p) for j in range(i, p)}
+    gram = jnp.stack([jnp.stack([pair[min(i, j), max(i, j)] for j in range(p)], 1)
+                      for i in range(p)], 1)  # [m, p, p]
+    trace = jnp.trace(gram, axis1=1, axis2=2)
+    gram = gram + (RIDGE * jnp.maximum(trace, 1e-30))[:, None, None] * jnp.eye(p)
+    return jnp.linalg.solve(gram, rhs[..., None])[..., 0]
 
 
-def ray_steps(normal: np.ndarray, height: np.ndarray, ray: np.ndarray) -> np.ndarray:
+def _coords(a: jax.Array) -> list:
+    """``[m, k, 3]`` -> its three coordinates ``[m, k]``."""
+    return [a[..., i] for i in range(a.shape[-1])]
+
+
+_axes_jit = jax.jit(axes)
+_fit_jit = jax.jit(fit)
+
+
+def _padded_call(fn, m: int, *arrays):
+    """``fn`` of ``arrays`` (``[m, ...]`` each, or None) as float32, their rows padded to
+    :func:`vbgs.inference.model.bucket_size` (with weight 0: a padded patch is finite and
+    dropped) so batches of nearby sizes share one compiled function; the results'
+    first ``m`` rows as float64 arrays."""
+    size = bucket_size(max(m, 1))
+
+    def pad(a):
+        if a is None:
+            return None
+        a = np.asarray(a, np.float32)
+        return np.concatenate([a, np.zeros((size - m,) + a.shape[1:], np.float32)])
+
+    out = fn(*(pad(a) for a in arrays))
+    return (np.asarray(out, np.float64)[:m] if not isinstance(out, tuple)
+            else tuple(np.asarray(o, np.float64)[:m] for o in out))
+
+
+def ray_steps(normal, height, ray):
     """``[m]``: the steps ``t`` along each point's noise ``ray [m, 3]`` that put it on its
     quadric, to first order (``normal [m, 3]`` unnormalised and ``height [m]`` of
-    :func:`quadric_patches`): ``t = c0 / (n . u)``; 0 where the ray runs in the surface."""
-    along = np.einsum("mi,mi->m", normal, ray)
-    ok = np.abs(along) > 1e-12 * np.linalg.norm(normal, axis=1)
-    return np.where(ok, height / np.where(ok, along, 1.0), 0.0)
+    :func:`fit`): ``t = c0 / (n . u)``; 0 where the ray runs in the surface (within
+    float32's rounding of it). Traceable."""
+    along = (normal * ray).sum(-1)
+    ok = jnp.abs(along) > 1e-6 * jnp.sqrt((normal * normal).sum(-1) * (ray * ray).sum(-1))
+    return jnp.where(ok, height / jnp.where(ok, along, 1.0), 0.0)

@@ -8,6 +8,9 @@ from vbgs.inference.pixel_patches import PixelGrid
 
 F = 150.0  # focal length in pixels
 
+# Normals agree within this angle (radians): the patches are fitted in float32.
+ANGLE = 5e-4
+
 
 def _rays(h, w):
     v, u = np.mgrid[:h, :w] + 0.5
@@ -73,7 +76,7 @@ def test_a_tilted_plane_gives_the_kd_tree_s_normals_and_seeds():
     want = np.tile(TILT, (len(chosen), 1))
     kd = grow.local_normals(x, chosen)
     px = grow.local_normals(x, chosen, pixel=grid)
-    assert _angle(px, want).max() < 1e-4 and _angle(kd, want).max() < 1e-4
+    assert _angle(px, want).max() < ANGLE and _angle(kd, want).max() < ANGLE
     # noisy depth (half a pixel footprint along each ray): seeds slid back onto the plane
     # as far as the KD-tree's, normals as near the plane's (both tilted by the noise)
     rng = np.random.default_rng(1)
@@ -112,7 +115,7 @@ def test_a_sphere_gives_the_kd_tree_s_normals():
     n_kd, s_kd = grow.seeds_on_patches(x, chosen, ray)
     n_px, s_px = grow.seeds_on_patches(x, chosen, ray, pixel=grid)
     assert _angle(n_px, n_kd).max() < 1.0
-    assert np.abs(np.linalg.norm(radial, axis=1) - 1.0).max() < 1e-9
+    assert np.abs(np.linalg.norm(radial, axis=1) - 1.0).max() < 1e-6
     # the quadric leaves exact points where they are on both paths
     assert np.abs(np.linalg.norm(s_px - [0, 0, 3.0], axis=1) - 1.0).max() < 1e-5
     assert np.abs(np.linalg.norm(s_kd - [0, 0, 3.0], axis=1) - 1.0).max() < 1e-5
@@ -126,7 +129,7 @@ def test_a_thinned_frame_steps_its_windows_by_the_stride():
     assert (weight.sum(1) == 48).all()  # the wanted count, every one a point of the plane
     assert (np.abs(grid.flat[idx] - grid.flat[chosen][:, None]) % 3 == 0).all()
     px = grow.local_normals(x, chosen, 48, pixel=grid)
-    assert _angle(px, np.tile(TILT, (len(chosen), 1))).max() < 1e-4
+    assert _angle(px, np.tile(TILT, (len(chosen), 1))).max() < ANGLE
 
 
 def _box_before_wall():
@@ -154,13 +157,13 @@ def test_a_seed_on_the_foreground_s_edge_takes_the_foreground_s_normal():
         assert not (weight.astype(bool) & wall).any()  # none of the wall kept
         px = grow.local_normals(x, edge, k, pixel=grid)
         kd = grow.local_normals(x, edge, k)
-        assert _angle(px, np.tile(box_n, (len(edge), 1))).max() < 1e-4
-        assert _angle(kd, np.tile(box_n, (len(edge), 1))).max() < 1e-4
+        assert _angle(px, np.tile(box_n, (len(edge), 1))).max() < ANGLE
+        assert _angle(kd, np.tile(box_n, (len(edge), 1))).max() < ANGLE
     # the wall's first column, beside the box: the wall's normal (its points nearer the
     # camera in the window are the box's, far in 3-D)
     wall_edge = np.searchsorted(grid.flat, rows * w + w // 2)
     px = grow.local_normals(x, wall_edge, 48, pixel=grid)
-    assert _angle(px, np.tile(wall_n, (len(rows), 1))).max() < 1e-4
+    assert _angle(px, np.tile(wall_n, (len(rows), 1))).max() < ANGLE
 
 
 def test_a_thin_pole_before_a_wall_keeps_none_of_the_wall():
@@ -180,7 +183,7 @@ def test_a_thin_pole_before_a_wall_keeps_none_of_the_wall():
         assert not (weight.astype(bool) & ~on_pole).any()
         assert (weight.sum(1) == min(k, 39)).all()  # 13 rows of 3 within 6.1 pixels
         px = grow.local_normals(x, seeds, k, pixel=grid)
-        assert _angle(px, np.tile(box_n, (len(seeds), 1))).max() < 1e-4
+        assert _angle(px, np.tile(box_n, (len(seeds), 1))).max() < ANGLE
         ray = 1e-3 * x / np.linalg.norm(x, axis=1, keepdims=True)  # a noise model
         n, s = grow.seeds_on_patches(x, seeds, ray, k, pixel=grid)
         assert _angle(n, np.tile(box_n, (len(seeds), 1))).max() < 1e-3
@@ -199,7 +202,7 @@ def test_a_window_of_too_few_points_keeps_the_measured_point_and_its_ray():
     view = x[speck] / np.linalg.norm(x[speck], axis=1, keepdims=True)
     normal = grow.local_normals(x, speck, 48, pixel=grid)
     assert _angle(normal[:2], view[:2]).max() < 1e-9
-    assert _angle(normal[2:], np.array([[0.0, 0.0, 1.0]])).max() < 1e-4  # the wall's
+    assert _angle(normal[2:], np.array([[0.0, 0.0, 1.0]])).max() < ANGLE  # the wall's
     ray = 0.01 * x / np.linalg.norm(x, axis=1, keepdims=True)
     noisy = x + 0.5 * ray
     normal, seeds = grow.seeds_on_patches(noisy, speck, ray, pixel=grid)
@@ -229,6 +232,6 @@ def test_a_masked_point_counts_for_nothing():
         sub = x[keep]
         n1, h1 = quadric.quadric_patches(sub, np.array([0]), len(keep), ray[keep],
                                          index=np.arange(len(keep))[None])
-        np.testing.assert_allclose(normal[m], n1[0], rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(height[m], h1[0], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(normal[m], n1[0], rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(height[m], h1[0], rtol=1e-4, atol=1e-6)
     assert len(idx[2][weight[2] > 0]) < quadric.QUADRIC_MIN_POINTS

@@ -20,7 +20,8 @@ def test_a_sphere_without_noise_keeps_its_points_and_radial_normals():
     unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     radial = pts[chosen] / np.linalg.norm(pts[chosen], axis=1, keepdims=True)
     assert np.abs(np.abs((unit * radial).sum(1)) - 1).max() < 1e-6
-    assert np.abs(height).max() < 1e-6  # the quadric passes through the point itself
+    # the quadric passes through the point itself (float32: to a hundredth of a millimetre)
+    assert np.abs(height).max() < 1e-5
     # the plane of the first version: its centre lies inside the sphere, off the point
     patch = quadric.patches(pts, chosen, 48)
     off = np.abs(((pts[chosen] - patch.mean(1)) * radial).sum(1))
@@ -68,15 +69,16 @@ def test_exact_points_under_a_noise_model_stay_on_a_sphere():
 def test_least_squares_is_the_pseudo_inverse_s_solution():
     """The normal equations with their tiny ridge against pinv: the same coefficients on
     patches that tell every term, and 0 (pinv's minimum norm) for a term a patch cannot
-    tell (all its points on a line: no spread along b)."""
+    tell (all its points on a line: no spread along b). Float32 normal equations of
+    random designs: the coefficients to a few parts in a thousand."""
     rng = np.random.default_rng(4)
     a, b = rng.normal(size=(2, 50, 48))
     design = np.stack([np.ones_like(a), a, b, a * a, a * b, b * b], -1)
     h = rng.normal(size=(50, 48))
     want = np.einsum("mpk,mk->mp", np.linalg.pinv(design), h)
-    np.testing.assert_allclose(quadric.least_squares(design, h), want, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(quadric.least_squares(design, h), want, rtol=5e-3, atol=1e-4)
     line = np.stack([np.ones_like(a), a, 0 * b, a * a, 0 * b, 0 * b], -1)
     got = quadric.least_squares(line, h)
     want = np.einsum("mpk,mk->mp", np.linalg.pinv(line), h)
-    np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(got, want, rtol=5e-3, atol=1e-4)
     assert not got[:, [2, 4, 5]].any()
