@@ -101,8 +101,30 @@ def candidate_latent(x: jnp.ndarray, c: jnp.ndarray, terms, cand: jnp.ndarray,
     slides along its ray onto the component's surface, and keeps as much of its noise
     as the component's own spread along the ray allows."""
     logits, a, q = _logits(x, c, terms, cand, colour_noise, ray)
+    return (logits,) + latent_shift(a, q)
+
+
+def latent_shift(a: jnp.ndarray, q: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """``(beta, gamma)`` of :func:`candidate_latent` from :func:`scores`' ``a`` and
+    ``q``: ``gamma = 1 / (1 + q)``, ``beta = a gamma``."""
     gamma = 1.0 / (1.0 + q)
-    return logits, a * gamma, gamma
+    return a * gamma, gamma
+
+
+def latent_moments(beta: jnp.ndarray, gamma: jnp.ndarray, x: jnp.ndarray, ray: jnp.ndarray
+                   ) -> list[tuple[jnp.ndarray, jnp.ndarray]]:
+    """What a point's latent surface point under a candidate adds to the statistics
+    beyond the measured point (:func:`vbgs.inference.model.e_step_with`), as pairs of a
+    weight per point and candidate (``beta``, ``gamma`` ``[..., C]``) and a feature per
+    point (``x``, ``ray`` ``[..., d]``): the moments are ``sum r w f``. The
+    ``d * d`` columns are ``beta (x u^T + u x^T) - (beta^2 + gamma) u u^T``, the ``d``
+    after them ``beta u`` (``x x^T - E[y y^T | x]`` and ``x - E[y | x]``). The E-steps
+    sum each pair in the arrangement their layout favours."""
+    d = x.shape[-1]
+    xu = x[..., :, None] * ray[..., None, :]
+    sym = (xu + jnp.swapaxes(xu, -1, -2)).reshape(x.shape[:-1] + (d * d,))
+    uu = (ray[..., :, None] * ray[..., None, :]).reshape(x.shape[:-1] + (d * d,))
+    return [(beta, sym), (-(beta * beta + gamma), uu), (beta, ray)]
 
 
 def _logits(x, c, terms, cand, colour_noise, ray):

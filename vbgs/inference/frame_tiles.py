@@ -142,14 +142,10 @@ def e_step(terms, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray, cand: jnp.ndar
         phi = model.features(xb.reshape(-1, d), cb.reshape(-1, 3)).reshape(xb.shape[:2] + (-1,))
         rows = [_per_tile(resp, phi)]  # [t, C, F]
         if rayb is not None:  # the latent moments (model.e_step_with), summed per tile
-            gamma = 1.0 / (1.0 + q)
-            beta = a * gamma
-            xu = xb[..., :, None] * rayb[..., None, :]  # [t, P, d, d]
-            sym = (xu + jnp.swapaxes(xu, -1, -2)).reshape(xb.shape[:2] + (d * d,))
-            uu = (rayb[..., :, None] * rayb[..., None, :]).reshape(xb.shape[:2] + (d * d,))
-            rb = resp * beta
-            rows += [_per_tile(rb, sym) - _per_tile(resp * (beta * beta + gamma), uu),
-                     _per_tile(rb, rayb)]
+            (b, sym), (g, uu), (_, u) = candidates.latent_moments(
+                *candidates.latent_shift(a, q), xb, rayb)
+            rb = resp * b
+            rows += [_per_tile(rb, sym) + _per_tile(resp * g, uu), _per_tile(rb, u)]
         rows = jnp.concatenate(rows, -1)  # [t, C, width (+ d * d + d)]
         return acc.at[candb.reshape(-1)].add(rows.reshape(-1, rows.shape[-1])), lse
 

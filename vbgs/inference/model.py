@@ -508,11 +508,9 @@ def e_step_with(reference, x: jnp.ndarray, c: jnp.ndarray, w: jnp.ndarray,
         acc, pair = acc
         acc = candidates.scatter_moments(acc, resp, phi, candb)
         # the latent moments, per point and candidate: [chunk, C, d*d + d]
-        uu = (rayb[:, :, None] * rayb[:, None, :]).reshape(-1, 1, d * d)
-        xu = (xb[:, :, None] * rayb[:, None, :]).reshape(-1, 1, d * d)
-        ux = (rayb[:, :, None] * xb[:, None, :]).reshape(-1, 1, d * d)
-        b, g = beta[:, :, None], gamma[:, :, None]
-        psi = jnp.concatenate([b * (xu + ux) - (b * b + g) * uu, b * rayb[:, None, :]], -1)
+        (b, sym), (g, uu), (_, u) = candidates.latent_moments(beta, gamma, xb, rayb)
+        psi = jnp.concatenate([b[..., None] * sym[:, None] + g[..., None] * uu[:, None],
+                               b[..., None] * u[:, None]], -1)
         return (acc, candidates.scatter_pair_moments(pair, resp, psi, candb)), lse
 
     def shape(a):
