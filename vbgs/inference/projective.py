@@ -260,15 +260,24 @@ def nearest(means: jnp.ndarray, x: jnp.ndarray, cand: jnp.ndarray, c: int
 
 
 @partial(jax.jit, static_argnames=("tiling",))
+def tile_pool(means: jnp.ndarray, active: jnp.ndarray, v: View, tiling: Tiling
+              ) -> tuple[Projected, jnp.ndarray]:
+    """The means ``[k, 3]`` (``active [k]``) as the frame at ``v`` sees them, projected
+    once a frame (binning and ranking read the same pixels), and each tile's pool of
+    components (:func:`tile_lists`, :func:`neighbourhoods`), which
+    :func:`tile_candidates` ranks for the tile's depths."""
+    seen = project(v, means)
+    lists, count = tile_lists(seen, active, tiling)
+    return seen, neighbourhoods(lists, count, tiling)
+
+
 def search(means: jnp.ndarray, active: jnp.ndarray, v: View, x: jnp.ndarray, w: jnp.ndarray,
            tiling: Tiling) -> tuple[jnp.ndarray, jnp.ndarray]:
     """Each point's candidates ``[n, C]`` (its tile's, :func:`tile_candidates`; -1 where
     fewer) and squared distance to its nearest candidate ``[n]``; the points ``x [n, 3]``
     (weights ``w [n]``, 0: padding) and the means ``[k, 3]`` both centred on the model's
     origin."""
-    seen = project(v, means)  # once a frame: binning and ranking read the same pixels
-    lists, count = tile_lists(seen, active, tiling)
-    pool = neighbourhoods(lists, count, tiling)
+    seen, pool = tile_pool(means, active, v, tiling)
     tile, depths = point_tiles(x, w, v, tiling)
     cand = tile_candidates(pool, seen, v.intrinsics[0], v.intrinsics[1], depths,
                            tiling)[tile]

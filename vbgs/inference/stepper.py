@@ -183,9 +183,7 @@ def _tile_step(state: State, x, c, w, pixel, fixed: Fixed | None, config: StepCo
     q = state.prior if config.assign == "prior" else state.posterior
     where = frame_tiles.layout(pixel, tiling)
     xg, cg, wg, limit = (frame_tiles.gridded(a, where) for a in (x, c, w, limit))
-    seen = projective.project(v, q.space.mean)
-    lists, count = projective.tile_lists(seen, q.alpha > grow.ACTIVE_ALPHA, tiling)
-    pool = projective.neighbourhoods(lists, count, tiling)
+    seen, pool = projective.tile_pool(q.space.mean, q.alpha > grow.ACTIVE_ALPHA, v, tiling)
     depth = projective.project(v, xg.reshape(-1, 3)).z.reshape(wg.shape)
     n_tiles = tiling.tiles_x * tiling.tiles_y
     cand = projective.tile_candidates(pool, seen, v.intrinsics[0], v.intrinsics[1],
@@ -398,7 +396,8 @@ class Stepper:
         flat = np.full(size, -1, np.int32)
         flat[:n] = pixel
         limit = np.full(size, np.inf, x.dtype)
-        if reach is not None or self.reach is not None:
+        reaching = reach is not None or self.reach is not None
+        if reaching:
             limit[:n] = self.reach if reach is None else np.asarray(reach, x.dtype)
         config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
                             None, True)
@@ -406,8 +405,7 @@ class Stepper:
         posterior, stats, info, within = _tile_step(
             state, x, c, w, flat, self.fixed, config, self.tiling,
             projective.view(camera, self._origin, x.dtype), limit, rays)
-        learned = np.asarray(within)[:n] if (reach is not None or self.reach is not None) \
-            else None
+        learned = np.asarray(within)[:n] if reaching else None
         return state._replace(posterior=posterior, stats=stats), StepInfo(*info, learned)
 
     def _fix_tiling(self, x: np.ndarray, n: int, camera) -> None:
