@@ -66,11 +66,13 @@ NOISE_SIGMAS = 3.0
 # The window holds this many times the wanted neighbours, the nearest of which in 3-D
 # are taken (module docstring: 1, the window of the wanted count, loses to the KD-tree).
 WINDOW_SHARE = 2.5
-# Seeds per compiled call of a window's work (:func:`chunked`): two shapes for any count,
-# the small one while a frame has few seeds (a 128 px frame grows hundreds; a chunk of
-# 4096 costs some 50 ms on this project's 2-core CPU whatever it holds).
+# Seeds per compiled call of a window's work (:func:`chunked`): one shape a frame size, the
+# small one for small frames (a 128 px frame grows hundreds of seeds, and a chunk of 4096
+# costs some 50 ms on this project's 2-core CPU whatever it holds). By the frame, not the
+# seeds' count: a stream whose count crossed a threshold compiled anew mid-stream (2 s).
 CHUNK = 4096
 SMALL_CHUNK = 512
+SMALL_FRAME = 64 * SMALL_CHUNK  # pixels: up to some 180 x 180
 
 
 class PixelGrid(NamedTuple):
@@ -199,13 +201,14 @@ def _window_chunk(im: Images, at, reach, off, wanted: int):
 def chunked(fn, im: Images, chosen: np.ndarray, grid: PixelGrid, off: np.ndarray,
             ray: np.ndarray | None = None, chunk: int | None = None, **static):
     """``fn(im, at, reach, off, **static)`` (jitted) over the points ``chosen`` in
-    chunks of ``chunk`` (None: :data:`SMALL_CHUNK` for a few points, else :data:`CHUNK`;
-    the last padded with its first point: one compiled shape), each given the chunk's padded pixels ``at [chunk]`` and the squared
+    chunks of ``chunk`` (None: :data:`SMALL_CHUNK` for a frame of at most
+    :data:`SMALL_FRAME` pixels, else :data:`CHUNK`; the last padded with its first
+    point: one compiled shape), each given the chunk's padded pixels ``at [chunk]`` and the squared
     reach ``[chunk, k]`` of the window's offsets ``off [k, 2]`` (module docstring);
     yields each chunk's results (the padding's rows included)."""
-    if chunk is None:
-        chunk = SMALL_CHUNK if len(chosen) <= 4 * SMALL_CHUNK else CHUNK
     h, w = grid.shape
+    if chunk is None:
+        chunk = SMALL_CHUNK if h * w <= SMALL_FRAME else CHUNK
     flat = grid.flat[chosen]
     at = (flat // w + im.pad) * im.width + flat % w + im.pad
     fp = np.asarray(grid.footprint, np.float64)[chosen]
