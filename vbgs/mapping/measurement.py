@@ -91,9 +91,11 @@ The sensors and their ``sigma_z`` are :mod:`vbgs.sensors`; a map's sensor is
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from vbgs.render.camera import Camera, camera_rays, valid_depth
+from vbgs.render.camera import Camera, _pixel_rows, _pixel_slopes, _world_points, valid_depth
 from vbgs.sensors import sensor
 
 
@@ -103,11 +105,7 @@ def point_rays(camera: Camera, depth: np.ndarray, model: str, level: float = 1.0
     the order :func:`vbgs.render.camera.unproject` returns the points
     (``R_n = u_n u_n^T``; module docstring)."""
     depth = np.asarray(depth)
-    mask = valid_depth(depth)
-    z = depth[mask].astype(np.float64)
-    sigma = np.asarray(sensor(model).sigma_z(z, camera, level), np.float64)  # [n]
-    rays = camera_rays(camera)[mask]  # [n, 3] camera frame, unit z
-    return ((sigma[:, None] * rays) @ np.asarray(camera.pose)[:3, :3].T).astype(np.float32)
+    return _rays(camera, depth, np.flatnonzero(valid_depth(depth)), model, level)
 
 
 def point_footprints(camera: Camera, depth: np.ndarray) -> np.ndarray:
@@ -116,7 +114,61 @@ def point_footprints(camera: Camera, depth: np.ndarray) -> np.ndarray:
     :func:`vbgs.render.camera.unproject` returns the points: how finely the frame
     resolves the ground there (:mod:`vbgs.inference.grow`: far ground gets coarse cells)."""
     depth = np.asarray(depth)
-    z = depth[valid_depth(depth)].astype(np.float64)
+    return _footprints(camera, depth, np.flatnonzero(valid_depth(depth)))
+
+
+class FramePoints(NamedTuple):
+    """A depth frame's valid pixels as a learner takes them (:func:`frame_points`)."""
+
+    xyz: np.ndarray  # [n, 3] float32 world points (vbgs.render.camera.unproject)
+    rgb: np.ndarray  # [n, 3] float32 their colours
+    ray: np.ndarray | None  # [n, 3] float32 their noise along the rays (point_rays)
+    footprint: np.ndarray | None  # [n] float64 their pixel footprints (point_footprints)
+    pixel: np.ndarray  # [n] int their pixels, row * width + col (raster order)
+
+
+def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str | None = None,
+                 level: float = 1.0, footprints: bool = True) -> FramePoints:
+    """The pixels of ``depth [h, w]`` with valid depth as :class:`FramePoints`: what
+    :func:`vbgs.render.camera.unproject` (of ``rgb [h, w, 3]``), :func:`point_rays`
+    (sensor ``model`` at ``level``; None: no rays) and :func:`point_footprints` (if
+    ``footprints``) return, equal to the bit, from one pass over the pixels (their mask
+    and indices found once; 10 ms a 640 x 480 frame against some 75 ms for the
+    functions one by one as they were)."""
+    depth, rgb = np.asarray(depth), np.asarray(rgb)
+    shape = (camera.height, camera.width)
+    if rgb.shape != shape + (3,) or depth.shape != shape:
+        raise ValueError(
+            f"frame shapes rgb {rgb.shape} and depth {depth.shape} do not match the camera "
+            f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
+        )
+    pixel = np.flatnonzero(valid_depth(depth))
+    return FramePoints(
+        _world_points(camera, depth, pixel), _pixel_rows(rgb, pixel).astype(np.float32),
+        None if model is None else _rays(camera, depth, pixel, model, level),
+        _footprints(camera, depth, pixel) if footprints else None, pixel)
+
+
+def _rays(camera: Camera, depth: np.ndarray, pixel: np.ndarray, model: str, level: float
+          ) -> np.ndarray:
+    """:func:`point_rays` at the pixels ``pixel [n]`` (``row * width + col``): ``sigma_z``
+    times the camera-frame ray turned into the world, in float64 a column at a time
+    (NumPy's ``[n, 3] @ [3, 3]`` takes ten times as long), rounded to float32."""
+    z = depth.reshape(-1)[pixel].astype(np.float64)
+    sigma = np.asarray(sensor(model).sigma_z(z, camera, level), np.float64)  # [n]
+    x, y = _pixel_slopes(camera, pixel)  # the ray (x, y, 1) at unit depth
+    x *= sigma
+    y *= sigma
+    rot = np.asarray(camera.pose)[:3, :3]
+    out = np.empty((len(pixel), 3), np.float32)
+    for j in range(3):
+        out[:, j] = x * rot[j, 0] + y * rot[j, 1] + sigma * rot[j, 2]
+    return out
+
+
+def _footprints(camera: Camera, depth: np.ndarray, pixel: np.ndarray) -> np.ndarray:
+    """:func:`point_footprints` at the pixels ``pixel [n]``."""
+    z = depth.reshape(-1)[pixel].astype(np.float64)
     return z / (0.5 * (float(camera.fx) + float(camera.fy)))
 
 
