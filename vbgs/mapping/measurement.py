@@ -95,7 +95,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from vbgs.render.camera import Camera, _pixel_rows, _pixel_slopes, _world_points, valid_depth
+from vbgs.render.camera import (Camera, _blocks, _block_rays, _pixel_rows, _slopes,
+                                _turned_into, _world_points, valid_depth)
 from vbgs.sensors import sensor
 
 
@@ -114,7 +115,7 @@ def point_footprints(camera: Camera, depth: np.ndarray) -> np.ndarray:
     :func:`vbgs.render.camera.unproject` returns the points: how finely the frame
     resolves the ground there (:mod:`vbgs.inference.grow`: far ground gets coarse cells)."""
     depth = np.asarray(depth)
-    return _footprints(camera, depth, np.flatnonzero(valid_depth(depth)))
+    return depth[valid_depth(depth)].astype(np.float64) / _focal(camera)
 
 
 class FramePoints(NamedTuple):
@@ -146,30 +147,29 @@ def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str 
     return FramePoints(
         _world_points(camera, depth, pixel), _pixel_rows(rgb, pixel).astype(np.float32),
         None if model is None else _rays(camera, depth, pixel, model, level),
-        _footprints(camera, depth, pixel) if footprints else None, pixel)
+        depth.reshape(-1)[pixel].astype(np.float64) / _focal(camera) if footprints else None,
+        pixel)
 
 
 def _rays(camera: Camera, depth: np.ndarray, pixel: np.ndarray, model: str, level: float
           ) -> np.ndarray:
-    """:func:`point_rays` at the pixels ``pixel [n]`` (``row * width + col``): ``sigma_z``
-    times the camera-frame ray turned into the world, in float64 a column at a time
-    (NumPy's ``[n, 3] @ [3, 3]`` takes ten times as long), rounded to float32."""
-    z = depth.reshape(-1)[pixel].astype(np.float64)
-    sigma = np.asarray(sensor(model).sigma_z(z, camera, level), np.float64)  # [n]
-    x, y = _pixel_slopes(camera, pixel)  # the ray (x, y, 1) at unit depth
-    x *= sigma
-    y *= sigma
-    rot = np.asarray(camera.pose)[:3, :3]
+    """:func:`point_rays` at the pixels ``pixel [n]`` (``row * width + col``) of ``depth
+    [h, w]``: ``sigma_z`` times the camera-frame ray, turned into the world in float64 a
+    block of pixels and a column at a time (:func:`vbgs.render.camera._world_points`;
+    NumPy's ``[n, 3] @ [3, 3]`` takes ten times as long), rounded to float32."""
+    noise, flat, slopes = sensor(model), depth.reshape(-1), _slopes(camera)
+    pose, width = np.asarray(camera.pose), int(camera.width)
     out = np.empty((len(pixel), 3), np.float32)
-    for j in range(3):
-        out[:, j] = x * rot[j, 0] + y * rot[j, 1] + sigma * rot[j, 2]
+    for s in _blocks(len(pixel)):
+        z, x, y = _block_rays(flat, pixel[s], width, slopes)
+        sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
+        _turned_into(out[s], pose, x * sigma, y * sigma, sigma, moved=False)
     return out
 
 
-def _footprints(camera: Camera, depth: np.ndarray, pixel: np.ndarray) -> np.ndarray:
-    """:func:`point_footprints` at the pixels ``pixel [n]``."""
-    z = depth.reshape(-1)[pixel].astype(np.float64)
-    return z / (0.5 * (float(camera.fx) + float(camera.fy)))
+def _focal(camera: Camera) -> float:
+    """The mean focal length in pixels: a pixel's footprint is ``z`` over it."""
+    return 0.5 * (float(camera.fx) + float(camera.fy))
 
 
 def depth_variance(means, camera: Camera, model: str, level: float = 1.0) -> np.ndarray:
