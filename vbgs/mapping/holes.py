@@ -141,20 +141,20 @@ def fill_holes(depth: np.ndarray, rgb: np.ndarray, empty: np.ndarray, focal: flo
     empty = np.asarray(empty, bool)
     if radius <= 0 or not (~ok & ~empty).any() or not ok.any():
         return depth
-    known = np.where(ok, depth, 0).astype(np.float32)
-    out = np.asarray(_filled(known, np.asarray(rgb, np.float32), empty, np.float32(focal),
-                             np.float32(tol), int(radius)))
-    return np.where(ok, depth, out.astype(depth.dtype))
+    out = np.asarray(_filled(depth.astype(np.float32, copy=False), np.asarray(rgb, np.float32),
+                             empty, np.float32(focal), np.float32(tol), int(radius)))
+    return out if depth.dtype == np.float32 else np.where(ok, depth, out.astype(depth.dtype))
 
 
 @partial(jax.jit, static_argnames="radius")
-def _filled(known: jax.Array, rgb: jax.Array, empty: jax.Array, focal: jax.Array,
+def _filled(depth: jax.Array, rgb: jax.Array, empty: jax.Array, focal: jax.Array,
             tol: jax.Array, radius: int) -> jax.Array:
-    """``[h, w]`` float32: the holes' filled depth (0 where left), from ``known [h, w]``
-    (the depth, 0 where missing), ``rgb [h, w, 3]``, ``empty [h, w]`` (bool); the ring
-    offsets unrolled, each shift a slice of one padded copy (:func:`fill_holes`)."""
-    h, w = known.shape
-    ok = known > 0
+    """``[h, w]`` float32: ``depth [h, w]`` where valid, else the holes' filled depth (0
+    where left), given ``rgb [h, w, 3]`` and ``empty [h, w]`` (bool); the ring offsets
+    unrolled, each shift a slice of one padded copy (:func:`fill_holes`)."""
+    h, w = depth.shape
+    ok = jnp.isfinite(depth) & (depth > 0)  # valid_depth
+    known = jnp.where(ok, depth, 0.0)
     todo = ~ok & ~empty
     reach = radius + 1
     pad = 2 * reach
@@ -179,7 +179,7 @@ def _filled(known: jax.Array, rgb: jax.Array, empty: jax.Array, focal: jax.Array
         todo = todo & ~take
     filled = ~ok & (out > 0)
     rim, behind = _sides(out, known_p, _padded(empty, reach, False), pad, focal, reach)
-    return jnp.where(filled & (rim | ~behind), 0.0, out)
+    return jnp.where(ok, depth, jnp.where(filled & (rim | ~behind), 0.0, out))
 
 
 def _extrapolated(z1: jax.Array, z2: jax.Array) -> jax.Array:
