@@ -134,8 +134,8 @@ def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str 
     :func:`vbgs.render.camera.unproject` (of ``rgb [h, w, 3]``), :func:`point_rays`
     (sensor ``model`` at ``level``; None: no rays) and :func:`point_footprints` (if
     ``footprints``) return, equal to the bit, from one pass over the pixels (their mask
-    and indices found once; 10 ms a 640 x 480 frame against some 75 ms for the
-    functions one by one as they were)."""
+    and indices found once; 13 ms a 640 x 480 frame against 72 ms for the
+    functions one by one as they were, the float64 work a block of pixels at a time)."""
     depth, rgb = np.asarray(depth), np.asarray(rgb)
     shape = (camera.height, camera.width)
     if rgb.shape != shape + (3,) or depth.shape != shape:

@@ -74,7 +74,7 @@ def empty_pixels(depth: np.ndarray, holes: bool = False, max_depth: float = np.i
     the band's pixels of the background's colour (within ``tol``) are empty again
     (module docstring). The regions are read off one labelling of the connected
     depth-less pixels each (:func:`_touching`), the same pixels as SciPy's binary
-    propagation gives, in a quarter of its time (6 ms against 20 at 640 x 480)."""
+    propagation gives, in a third of its time (8 ms against 29 at 640 x 480)."""
     no_depth = ~valid_depth(depth, max_depth)
     if not holes:
         return no_depth
