@@ -62,6 +62,11 @@ not the depth the pixel's centre ray meets.
 
 from __future__ import annotations
 
+import functools
+from functools import partial
+
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from vbgs.render.camera import valid_depth
@@ -101,74 +106,109 @@ def ring_offsets(radius: int) -> list[list[tuple[int, int]]]:
     return [rings[d2] for d2 in sorted(rings)]
 
 
-def _shifted(a: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
-    """``out[y, x] = a[y + dy, x + dx]``, ``fill`` outside the image."""
-    h, w = a.shape[:2]
-    out = np.full_like(a, fill)
-    ys, yd = slice(max(dy, 0), h + min(dy, 0)), slice(max(-dy, 0), h + min(-dy, 0))
-    xs, xd = slice(max(dx, 0), w + min(dx, 0)), slice(max(-dx, 0), w + min(-dx, 0))
-    out[yd, xd] = a[ys, xs]
-    return out
+def _shifted(padded: jax.Array, pad: int, dy: int, dx: int, h: int, w: int) -> jax.Array:
+    """``out[y, x] = a[y + dy, x + dx]`` for ``padded``: ``a [h, w, ...]`` padded by
+    ``pad`` pixels on each side with the value outside the image (``|dy|, |dx| <= pad``)."""
+    return jax.lax.slice_in_dim(jax.lax.slice_in_dim(padded, pad + dy, pad + dy + h, axis=0),
+                                pad + dx, pad + dx + w, axis=1)
 
 
-def _extrapolated(known: np.ndarray, dy: int, dx: int) -> np.ndarray:
-    """Per pixel, the depth of the surface through its neighbours at ``(dy, dx)`` and
-    ``(2 dy, 2 dx)`` carried on by one step, ``1/z = 2/z1 - 1/z2``; ``z1`` where the second
-    has no depth; 0 where the first has none (``known``: depth, 0 where missing)."""
-    z1 = _shifted(known, dy, dx, 0.0)
-    z2 = _shifted(known, 2 * dy, 2 * dx, 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = np.where((z1 > 0) & (z2 > 0), 2.0 / z1 - 1.0 / z2, 1.0 / z1)
-        return np.where((z1 > 0) & (w > 0), 1.0 / w, 0.0).astype(known.dtype)
+def _padded(a: jax.Array, pad: int, fill) -> jax.Array:
+    """``a [h, w, ...]`` with ``pad`` pixels of ``fill`` about its first two axes."""
+    return jnp.pad(a, ((pad, pad), (pad, pad)) + ((0, 0),) * (a.ndim - 2),
+                   constant_values=fill)
 
 
 def fill_holes(depth: np.ndarray, rgb: np.ndarray, empty: np.ndarray, focal: float,
                radius: int = HOLE_RADIUS, tol: float = HOLE_COLOUR_TOL) -> np.ndarray:
-    """``depth [h, w]`` with the holes behind its depth edges filled (module docstring): pixels without depth that are not ``empty [h, w]`` (bool:
-    showing nothing) take the depth extrapolated from the nearest pixel with depth within
-    ``radius`` whose ``rgb [h, w, 3]`` differs by at most ``tol`` in every channel, unless
-    that makes them a rim or they lie beside no nearer surface; ``focal``: the focal length in pixels (a footprint is z /
-    focal). Pixels with depth are unchanged; ``radius`` 0 returns ``depth`` itself."""
+    """``depth [h, w]`` with the holes behind its depth edges filled (module docstring):
+    pixels without depth that are not ``empty [h, w]`` (bool: showing nothing) take the
+    depth extrapolated from the nearest pixel with depth within ``radius`` whose ``rgb
+    [h, w, 3]`` differs by at most ``tol`` in every channel, unless that makes them a rim
+    or they lie beside no nearer surface; ``focal``: the focal length in pixels (a
+    footprint is z / focal). Pixels with depth are unchanged (of ``depth``'s dtype);
+    ``radius`` 0 returns ``depth`` itself.
+
+    One compiled function per frame shape and ``radius`` (:func:`_filled`; 4 ms
+    against 97 ms for the NumPy loops over shifted copies it replaced, 640 x 480, 2 CPU
+    cores), in float32: depth in scene units needs no more (an extrapolation is kept or
+    dropped by comparisons at 4 footprints, a relative 4 / focal of some 1e-2, against
+    float32's 6e-8). A float32 depth comes out to the bit as those loops gave it on the
+    CPU (the same IEEE operations in the same order); a float64 one is rounded to
+    float32 for the fill."""
     depth = np.asarray(depth)
     ok = valid_depth(depth)
     empty = np.asarray(empty, bool)
-    todo = ~ok & ~empty
-    if radius <= 0 or not todo.any() or not ok.any():
+    if radius <= 0 or not (~ok & ~empty).any() or not ok.any():
         return depth
-    rgb = np.asarray(rgb, np.float32)
-    known = np.where(ok, depth, 0.0).astype(depth.dtype)
-    out = known.copy()
+    out = np.asarray(_filled(depth.astype(np.float32, copy=False), np.asarray(rgb, np.float32),
+                             empty, np.float32(focal), np.float32(tol), int(radius)))
+    return out if depth.dtype == np.float32 else np.where(ok, depth, out.astype(depth.dtype))
+
+
+@partial(jax.jit, static_argnames="radius")
+def _filled(depth: jax.Array, rgb: jax.Array, empty: jax.Array, focal: jax.Array,
+            tol: jax.Array, radius: int) -> jax.Array:
+    """``[h, w]`` float32: ``depth [h, w]`` where valid, else the holes' filled depth (0
+    where left), given ``rgb [h, w, 3]`` and ``empty [h, w]`` (bool); the ring offsets
+    unrolled, each shift a slice of one padded copy (:func:`fill_holes`)."""
+    h, w = depth.shape
+    ok = jnp.isfinite(depth) & (depth > 0)  # valid_depth
+    known = jnp.where(ok, depth, 0.0)
+    todo = ~ok & ~empty
+    reach = radius + 1
+    pad = 2 * reach
+    known_p = _padded(known, pad, 0.0)
+    planes = [rgb[..., c] for c in range(3)]  # one fused loop, no [h, w, 3] copies
+    padded = [_padded(p, radius, jnp.inf) for p in planes]
+    out = known
     for ring in ring_offsets(radius):
-        best_diff = np.full(depth.shape, np.inf, np.float32)
-        best_depth = np.zeros_like(known)
+        best_diff = jnp.full(known.shape, jnp.inf, jnp.float32)
+        best_depth = jnp.zeros_like(known)
         for dy, dx in ring:
-            z = _extrapolated(known, dy, dx)
-            diff = np.abs(rgb - _shifted(rgb, dy, dx, np.inf)).max(-1)  # [h, w]
+            z = _extrapolated(_shifted(known_p, pad, dy, dx, h, w),
+                              _shifted(known_p, pad, 2 * dy, 2 * dx, h, w))
+            diff = functools.reduce(jnp.maximum, [  # [h, w] the largest channel's
+                jnp.abs(planes[c] - _shifted(padded[c], radius, dy, dx, h, w))
+                for c in range(3)])
             better = (z > 0) & (diff < best_diff)
-            best_diff = np.where(better, diff, best_diff)
-            best_depth = np.where(better, z, best_depth)
+            best_diff = jnp.where(better, diff, best_diff)
+            best_depth = jnp.where(better, z, best_depth)
         take = todo & (best_diff <= tol)
-        out[take] = best_depth[take]
-        todo &= ~take
+        out = jnp.where(take, best_depth, out)
+        todo = todo & ~take
     filled = ~ok & (out > 0)
-    rim, behind = _sides(out, known, empty, focal, radius + 1)
-    out[filled & (rim | ~behind)] = 0.0
-    return np.where(ok, depth, out)
+    rim, behind = _sides(out, known_p, _padded(empty, reach, False), pad, focal, reach)
+    return jnp.where(ok, depth, jnp.where(filled & (rim | ~behind), 0.0, out))
 
 
-def _sides(filled: np.ndarray, known: np.ndarray, empty: np.ndarray, focal: float,
-           reach: int) -> tuple[np.ndarray, np.ndarray]:
+def _extrapolated(z1: jax.Array, z2: jax.Array) -> jax.Array:
+    """Per pixel, the depth of the surface through a neighbour ``z1`` and the one beyond
+    it ``z2`` (0: no depth) carried on by one step, ``1/z = 2/z1 - 1/z2``; ``z1`` where
+    the second has no depth; 0 where the first has none."""
+    w = jnp.where((z1 > 0) & (z2 > 0), 2.0 / z1 - 1.0 / z2, 1.0 / z1)
+    return jnp.where((z1 > 0) & (w > 0), 1.0 / w, 0.0)
+
+
+def _sides(filled: jax.Array, known_p: jax.Array, empty_p: jax.Array, pad: int,
+           focal: jax.Array, reach: int) -> tuple[jax.Array, jax.Array]:
     """``[h, w]`` bool each: the rims, pixels within ``reach`` of an empty pixel or of a
     measured surface farther than their ``filled`` depth by more than
     :data:`EDGE_FOOTPRINTS` footprints (the near side of a depth edge); and the pixels
-    within ``reach`` of a measured surface nearer by as much (the far side)."""
-    jump = EDGE_FOOTPRINTS * filled / focal
-    rim = np.zeros(filled.shape, bool)
-    behind = np.zeros(filled.shape, bool)
+    within ``reach`` of a measured surface nearer by as much (the far side).
+    ``known_p``, ``empty_p``: the measured depth and the empty pixels padded by ``pad``
+    and ``reach`` pixels (0, False)."""
+    h, w = filled.shape
+    # (4 z) / f rounded as written: XLA turns a division by a scalar into a product
+    # with its reciprocal, which rounds differently; the barrier keeps the division
+    jump = EDGE_FOOTPRINTS * filled / jax.lax.optimization_barrier(
+        jnp.broadcast_to(focal, filled.shape))
+    rim = jnp.zeros(filled.shape, bool)
+    behind = jnp.zeros(filled.shape, bool)
     for ring in ring_offsets(reach):
         for dy, dx in ring:
-            rim |= _shifted(empty, dy, dx, False)
-            other = _shifted(known, dy, dx, 0.0)
+            rim |= _shifted(empty_p, reach, dy, dx, h, w)
+            other = _shifted(known_p, pad, dy, dx, h, w)
             rim |= other > filled + jump
             behind |= (other > 0) & (other < filled - jump)
     return rim, behind

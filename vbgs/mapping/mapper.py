@@ -103,11 +103,10 @@ from vbgs.mapping.budget import stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.denoise import noise_left, smoothed
 from vbgs.mapping.holes import fill_holes
-from vbgs.mapping.measurement import depth_sigmas, depth_variance, point_footprints, point_rays
+from vbgs.mapping.measurement import depth_sigmas, depth_variance, frame_points
 from vbgs.mapping.stages import stage
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
-from vbgs.render.camera import unproject, valid_depth
 from vbgs.render.splats import Splats, drawn, from_posterior, mixture_geometry
 
 
@@ -233,12 +232,11 @@ def _prepare(state: MapState, frame: Frame, config: Config, background):
         measured = frame._replace(depth=fill_holes(
             frame.depth, frame.rgb, empty, focal, g.hole_radius, g.hole_colour_tol))
     state, depth, weight = _within_budget(state, measured, config)
-    xyz, rgb = unproject(frame.camera, frame.rgb, depth)
+    xyz, rgb, ray, footprint, pixel = frame_points(  # pixels in raster order
+        frame.camera, frame.rgb, depth, sensor.model if sensor.noisy else None, level,
+        footprints=state.growing)
     if len(xyz) == 0:
         raise ValueError("the frame has no pixel with valid depth: nothing to learn")
-    ray = point_rays(frame.camera, depth, sensor.model, level) if sensor.noisy else None
-    footprint = point_footprints(frame.camera, depth) if state.growing else None
-    pixel = np.flatnonzero(valid_depth(depth))  # in unproject's (raster) order
     state, kept, keys = _unexplained(state, xyz, footprint, config)
     if kept is not None:
         xyz, rgb, ray, footprint, weight, keys, pixel = (

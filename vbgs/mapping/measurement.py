@@ -91,9 +91,12 @@ The sensors and their ``sigma_z`` are :mod:`vbgs.sensors`; a map's sensor is
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from vbgs.render.camera import Camera, camera_rays, valid_depth
+from vbgs.render.camera import (Camera, _blocks, _block_rays, _pixel_rows, _slopes,
+                                _turned_into, valid_depth)
 from vbgs.sensors import sensor
 
 
@@ -103,11 +106,7 @@ def point_rays(camera: Camera, depth: np.ndarray, model: str, level: float = 1.0
     the order :func:`vbgs.render.camera.unproject` returns the points
     (``R_n = u_n u_n^T``; module docstring)."""
     depth = np.asarray(depth)
-    mask = valid_depth(depth)
-    z = depth[mask].astype(np.float64)
-    sigma = np.asarray(sensor(model).sigma_z(z, camera, level), np.float64)  # [n]
-    rays = camera_rays(camera)[mask]  # [n, 3] camera frame, unit z
-    return ((sigma[:, None] * rays) @ np.asarray(camera.pose)[:3, :3].T).astype(np.float32)
+    return _rays(camera, depth, np.flatnonzero(valid_depth(depth)), model, level)
 
 
 def point_footprints(camera: Camera, depth: np.ndarray) -> np.ndarray:
@@ -116,8 +115,72 @@ def point_footprints(camera: Camera, depth: np.ndarray) -> np.ndarray:
     :func:`vbgs.render.camera.unproject` returns the points: how finely the frame
     resolves the ground there (:mod:`vbgs.inference.grow`: far ground gets coarse cells)."""
     depth = np.asarray(depth)
-    z = depth[valid_depth(depth)].astype(np.float64)
-    return z / (0.5 * (float(camera.fx) + float(camera.fy)))
+    return depth[valid_depth(depth)].astype(np.float64) / _focal(camera)
+
+
+class FramePoints(NamedTuple):
+    """A depth frame's valid pixels as a learner takes them (:func:`frame_points`)."""
+
+    xyz: np.ndarray  # [n, 3] float32 world points (vbgs.render.camera.unproject)
+    rgb: np.ndarray  # [n, 3] float32 their colours
+    ray: np.ndarray | None  # [n, 3] float32 their noise along the rays (point_rays)
+    footprint: np.ndarray | None  # [n] float64 their pixel footprints (point_footprints)
+    pixel: np.ndarray  # [n] int their pixels, row * width + col (raster order)
+
+
+def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str | None = None,
+                 level: float = 1.0, footprints: bool = True) -> FramePoints:
+    """The pixels of ``depth [h, w]`` with valid depth as :class:`FramePoints`: what
+    :func:`vbgs.render.camera.unproject` (of ``rgb [h, w, 3]``), :func:`point_rays`
+    (sensor ``model`` at ``level``; None: no rays) and :func:`point_footprints` (if
+    ``footprints``) return, equal to the bit, from one pass over the pixels (their mask
+    and indices found once; 10 ms a 640 x 480 frame against 72 ms for the
+    functions one by one as they were, the float64 work a block of pixels at a time)."""
+    depth, rgb = np.asarray(depth), np.asarray(rgb)
+    shape = (camera.height, camera.width)
+    if rgb.shape != shape + (3,) or depth.shape != shape:
+        raise ValueError(
+            f"frame shapes rgb {rgb.shape} and depth {depth.shape} do not match the camera "
+            f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
+        )
+    pixel = np.flatnonzero(valid_depth(depth))
+    n, flat, slopes = len(pixel), depth.reshape(-1), _slopes(camera)
+    pose, width, focal = np.asarray(camera.pose), int(camera.width), _focal(camera)
+    noise = None if model is None else sensor(model)
+    xyz = np.empty((n, 3), np.float32)
+    ray = None if noise is None else np.empty((n, 3), np.float32)
+    footprint = np.empty(n, np.float64) if footprints else None
+    for s in _blocks(n):  # camera._world_points, _rays and point_footprints in one pass
+        z, x, y = _block_rays(flat, pixel[s], width, slopes)
+        _turned_into(xyz[s], pose, x * z, y * z, z)
+        if noise is not None:
+            sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
+            _turned_into(ray[s], pose, x * sigma, y * sigma, sigma, moved=False)
+        if footprint is not None:
+            footprint[s] = z / focal
+    return FramePoints(xyz, _pixel_rows(rgb, pixel).astype(np.float32, copy=False), ray,
+                       footprint, pixel)
+
+
+def _rays(camera: Camera, depth: np.ndarray, pixel: np.ndarray, model: str, level: float
+          ) -> np.ndarray:
+    """:func:`point_rays` at the pixels ``pixel [n]`` (``row * width + col``) of ``depth
+    [h, w]``: ``sigma_z`` times the camera-frame ray, turned into the world in float64 a
+    block of pixels and a column at a time (:func:`vbgs.render.camera._world_points`;
+    NumPy's ``[n, 3] @ [3, 3]`` takes ten times as long), rounded to float32."""
+    noise, flat, slopes = sensor(model), depth.reshape(-1), _slopes(camera)
+    pose, width = np.asarray(camera.pose), int(camera.width)
+    out = np.empty((len(pixel), 3), np.float32)
+    for s in _blocks(len(pixel)):
+        z, x, y = _block_rays(flat, pixel[s], width, slopes)
+        sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
+        _turned_into(out[s], pose, x * sigma, y * sigma, sigma, moved=False)
+    return out
+
+
+def _focal(camera: Camera) -> float:
+    """The mean focal length in pixels: a pixel's footprint is ``z`` over it."""
+    return 0.5 * (float(camera.fx) + float(camera.fy))
 
 
 def depth_variance(means, camera: Camera, model: str, level: float = 1.0) -> np.ndarray:

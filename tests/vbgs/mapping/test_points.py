@@ -224,3 +224,40 @@ def test_a_frame_is_learned_as_its_points(assert_same):
                     strict=True):
         assert_same(a, b)
     assert frames.n_points == points.n_points and frames.n_frames == points.n_frames == 3
+
+
+def test_a_frames_points_rays_and_footprints_in_one_pass():
+    """measurement.frame_points against the functions one by one and the direct formulas:
+    the points and colours of unproject, the footprints ``z / f`` and the pixels to the
+    bit; the rays ``sigma_z(z) R (x, y, 1)`` equal to NumPy's matrix product within one
+    float32 rounding (summed in another order in float64); a Kinect's ray at 2 m on the
+    optical axis of a camera at the origin is (0, 0, 0.0012 + 0.0019 * 1.6^2)."""
+    from vbgs.mapping.measurement import frame_points, point_rays
+    from vbgs.render.camera import BLOCK, Camera, camera_rays, look_at
+    from vbgs.sensors import kinect_sigma_z
+
+    rng = np.random.default_rng(1)
+    cam = Camera(150.3, 149.1, 100.0, 80.0, 200, 160, look_at([1.5, -2.0, 0.7], [0.1, 0.2, 0.3]))
+    depth = rng.uniform(0.5, 6.0, (160, 200)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.3] = 0.0
+    depth[80, 100] = 2.0  # its centre (100.5, 80.5) the optical axis below
+    rgb = rng.random((160, 200, 3)).astype(np.float32)
+    mask = valid_depth(depth)
+    assert mask.sum() > 2 * BLOCK
+    got = frame_points(cam, rgb, depth, "kinect", 0.7)
+    xyz, colours = unproject(cam, rgb, depth)
+    np.testing.assert_array_equal(got.xyz, xyz)
+    np.testing.assert_array_equal(got.rgb, colours)
+    np.testing.assert_array_equal(got.pixel, np.flatnonzero(mask))
+    np.testing.assert_array_equal(got.footprint, point_footprints(cam, depth))
+    np.testing.assert_array_equal(got.footprint, depth[mask] / np.float64(0.5 * (150.3 + 149.1)))
+    np.testing.assert_array_equal(got.ray, point_rays(cam, depth, "kinect", 0.7))
+    sigma = 0.7 * kinect_sigma_z(depth[mask].astype(np.float64))
+    product = ((sigma[:, None] * camera_rays(cam)[mask]) @ cam.pose[:3, :3].T).astype(np.float32)
+    np.testing.assert_array_max_ulp(got.ray, product, maxulp=1)
+    bare = frame_points(cam, rgb, depth, footprints=False)
+    assert bare.ray is None and bare.footprint is None
+    axis = frame_points(cam._replace(cx=100.5, cy=80.5, pose=np.eye(4)), rgb, depth, "kinect")
+    i = int(np.searchsorted(axis.pixel, 80 * 200 + 100))
+    np.testing.assert_allclose(axis.ray[i], [0.0, 0.0, 0.0012 + 0.0019 * 1.6**2], rtol=1e-6)
+    np.testing.assert_allclose(axis.xyz[i], [0.0, 0.0, 2.0])

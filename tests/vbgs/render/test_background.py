@@ -85,3 +85,37 @@ def test_the_edge_band_shows_the_background_where_it_has_its_colour():
     assert aware[band & (rgb[..., 0] == 1.0)].all()  # white band pixels: background
     assert not aware[10:30, 10].any()  # the grey edge holes: still no evidence
     assert (aware == plain | (band & (rgb[..., 0] == 1.0))).all()
+
+
+def _by_propagation(depth, rgb, background, tol=bg.BACKGROUND_TOL):
+    """empty_pixels as SciPy's erosion and propagation give it: the reference."""
+    from scipy import ndimage
+
+    no_depth = ~(np.isfinite(depth) & (depth > 0))
+    inner = ndimage.binary_erosion(no_depth, iterations=bg.EDGE_HOLES_PX, border_value=1)
+    seeds = np.zeros_like(inner)
+    seeds[[0, -1], :], seeds[:, [0, -1]] = inner[[0, -1], :], inner[:, [0, -1]]
+    empty = ndimage.binary_propagation(seeds, mask=inner)
+    like = np.all(np.abs(rgb - background) <= tol, axis=-1)
+    return empty, empty | (ndimage.binary_propagation(empty, mask=no_depth) & like)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_empty_pixels_are_the_border_regions_scipy_propagates(seed):
+    """Random blobs without depth (some reaching the border, some inside, some joined by
+    thin necks the erosion cuts) and two colours: the labelled regions are exactly the
+    pixels SciPy's erosion and binary propagation give, with and without the band's
+    background colour."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    blobs = ndimage.gaussian_filter(rng.random((48, 64)), 2.0)
+    depth = np.where(blobs > np.quantile(blobs, 0.55), 0.0, 2.0)
+    depth[rng.random(depth.shape) < 0.05] = np.nan  # dropouts
+    rgb = np.where(rng.random((48, 64, 1)) < 0.5, [0.9, 0.9, 0.9], [0.2, 0.3, 0.4])
+    plain, aware = _by_propagation(depth, rgb, np.full(3, 0.95))
+    got = bg.empty_pixels(depth, holes=True)
+    np.testing.assert_array_equal(got, plain)
+    np.testing.assert_array_equal(
+        bg.empty_pixels(depth, holes=True, rgb=rgb, background=np.full(3, 0.95)), aware)
+    assert 0 < plain.sum() < aware.sum() < (~(depth > 0)).sum()  # each rule leaves some out

@@ -159,3 +159,27 @@ def test_rigid_equals_the_matrix_product():
     fast = rigid(p, pose)
     np.testing.assert_allclose(fast, slow, rtol=1e-14, atol=1e-14)
     assert (fast.astype(np.float32) != slow.astype(np.float32)).mean() < 1e-3
+
+
+def test_unproject_equals_the_rays_times_depth_turned_by_the_pose():
+    """unproject (blocks of pixels, a column at a time) against the direct formula,
+    ``rigid(camera_rays[mask] * z)`` in float64 rounded to float32: equal to the bit on a
+    frame of more than one block; depth_points and camera_rays against pixel_rays."""
+    from vbgs.render.camera import BLOCK, camera_rays, depth_points
+    from vbgs.render.pixels import pixel_rays
+
+    rng = np.random.default_rng(0)
+    cam = Camera(150.3, 149.1, 101.7, 77.9, 200, 160, look_at([1.5, -2.0, 0.7], [0.1, 0.2, 0.3]))
+    depth = rng.uniform(0.5, 6.0, (160, 200)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.3] = 0.0
+    rgb = rng.random((160, 200, 3)).astype(np.float32)
+    mask = valid_depth(depth)
+    assert mask.sum() > 2 * BLOCK
+    rays = pixel_rays(160, 200, cam.fx, cam.fy, cam.cx, cam.cy)
+    np.testing.assert_array_equal(camera_rays(cam), rays)
+    points = rays[mask] * depth[mask].astype(np.float64)[:, None]
+    np.testing.assert_array_equal(depth_points(cam, depth), points)
+    xyz, colours = unproject(cam, rgb, depth)
+    assert xyz.dtype == colours.dtype == np.float32
+    np.testing.assert_array_equal(xyz, rigid(points, cam.pose).astype(np.float32))
+    np.testing.assert_array_equal(colours, rgb[mask])
