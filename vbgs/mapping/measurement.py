@@ -95,8 +95,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from vbgs.render.camera import (Camera, _blocks, _block_rays, _pixel_rows, _slopes,
-                                _turned_into, valid_depth)
+from vbgs.render.camera import (Camera, pixel_blocks, block_rays, pixel_rows, ray_slopes,
+                                turned_into, valid_depth)
 from vbgs.sensors import sensor
 
 
@@ -144,21 +144,21 @@ def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str 
             f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
         )
     pixel = np.flatnonzero(valid_depth(depth))
-    n, flat, slopes = len(pixel), depth.reshape(-1), _slopes(camera)
+    n, flat, slopes = len(pixel), depth.reshape(-1), ray_slopes(camera)
     pose, width, focal = np.asarray(camera.pose), int(camera.width), _focal(camera)
     noise = None if model is None else sensor(model)
     xyz = np.empty((n, 3), np.float32)
     ray = None if noise is None else np.empty((n, 3), np.float32)
     footprint = np.empty(n, np.float64) if footprints else None
-    for s in _blocks(n):  # camera._world_points, _rays and point_footprints in one pass
-        z, x, y = _block_rays(flat, pixel[s], width, slopes)
-        _turned_into(xyz[s], pose, x * z, y * z, z)
+    for s in pixel_blocks(n):  # camera._world_points, _rays and point_footprints in one pass
+        z, x, y = block_rays(flat, pixel[s], width, slopes)
+        turned_into(xyz[s], pose, x * z, y * z, z)
         if noise is not None:
             sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
-            _turned_into(ray[s], pose, x * sigma, y * sigma, sigma, moved=False)
+            turned_into(ray[s], pose, x * sigma, y * sigma, sigma, moved=False)
         if footprint is not None:
             footprint[s] = z / focal
-    return FramePoints(xyz, _pixel_rows(rgb, pixel).astype(np.float32, copy=False), ray,
+    return FramePoints(xyz, pixel_rows(rgb, pixel).astype(np.float32, copy=False), ray,
                        footprint, pixel)
 
 
@@ -168,13 +168,13 @@ def _rays(camera: Camera, depth: np.ndarray, pixel: np.ndarray, model: str, leve
     [h, w]``: ``sigma_z`` times the camera-frame ray, turned into the world in float64 a
     block of pixels and a column at a time (:func:`vbgs.render.camera._world_points`;
     NumPy's ``[n, 3] @ [3, 3]`` takes ten times as long), rounded to float32."""
-    noise, flat, slopes = sensor(model), depth.reshape(-1), _slopes(camera)
+    noise, flat, slopes = sensor(model), depth.reshape(-1), ray_slopes(camera)
     pose, width = np.asarray(camera.pose), int(camera.width)
     out = np.empty((len(pixel), 3), np.float32)
-    for s in _blocks(len(pixel)):
-        z, x, y = _block_rays(flat, pixel[s], width, slopes)
+    for s in pixel_blocks(len(pixel)):
+        z, x, y = block_rays(flat, pixel[s], width, slopes)
         sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
-        _turned_into(out[s], pose, x * sigma, y * sigma, sigma, moved=False)
+        turned_into(out[s], pose, x * sigma, y * sigma, sigma, moved=False)
     return out
 
 

@@ -118,14 +118,14 @@ def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 def camera_rays(camera: Camera) -> np.ndarray:
     """``[height, width, 3]``: each pixel's ray in the camera frame at unit camera depth
     (:func:`vbgs.render.pixels.pixel_rays`), laid out from its columns' and rows' slopes
-    (:func:`_slopes`)."""
-    x, y = _slopes(camera)
+    (:func:`ray_slopes`)."""
+    x, y = ray_slopes(camera)
     out = np.empty((camera.height, camera.width, 3), np.float64)
     out[..., 0], out[..., 1], out[..., 2] = x, y[:, None], 1.0
     return out
 
 
-def _slopes(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+def ray_slopes(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     """``x [width]``, ``y [height]`` float64: the rays' camera-frame x of each column and y
     of each row at unit depth (a ray is ``(x[col], y[row], 1)``), read off
     :func:`vbgs.render.pixels.pixel_rays` of one row and one column."""
@@ -143,21 +143,21 @@ def _slopes(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 BLOCK = 8192
 
 
-def _blocks(n: int):
+def pixel_blocks(n: int):
     """Slices of ``range(n)`` of :data:`BLOCK` items, in order."""
     return (slice(s, min(s + BLOCK, n)) for s in range(0, n, BLOCK))
 
 
-def _block_rays(flat_depth: np.ndarray, pixel: np.ndarray, width: int, slopes
+def block_rays(flat_depth: np.ndarray, pixel: np.ndarray, width: int, slopes
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``z [k]`` (float64), ``x [k]``, ``y [k]``: the depth in ``flat_depth [h * w]`` at the
     pixels ``pixel [k]`` and their rays ``(x, y, 1)`` at unit depth, from ``slopes``
-    (:func:`_slopes`)."""
+    (:func:`ray_slopes`)."""
     row = pixel // width
     return flat_depth[pixel].astype(np.float64), slopes[0][pixel - row * width], slopes[1][row]
 
 
-def _turned_into(out: np.ndarray, pose: np.ndarray, x: np.ndarray, y: np.ndarray,
+def turned_into(out: np.ndarray, pose: np.ndarray, x: np.ndarray, y: np.ndarray,
                  z: np.ndarray, moved: bool = True) -> None:
     """Write into ``out [k, 3]`` (float32) the camera-frame vectors ``(x, y, z)`` (``[k]``
     float64 each) in the world, ``R v + t`` under the 4 x 4 ``pose = [R t]`` (``moved``
@@ -194,7 +194,7 @@ def unproject(
         )
     pixel = np.flatnonzero(valid_depth(depth, max_depth))
     return (_world_points(camera, depth, pixel),
-            _pixel_rows(rgb, pixel).astype(np.float32, copy=False))
+            pixel_rows(rgb, pixel).astype(np.float32, copy=False))
 
 
 def depth_points(camera: Camera, depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:
@@ -216,10 +216,10 @@ def rigid(points: np.ndarray, pose) -> np.ndarray:
 
 def _points_at(camera: Camera, depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Camera-frame points ``[n, 3]`` (float64) of the pixels ``mask [h, w]``: each ray
-    (:func:`_block_rays`) times its depth."""
+    (:func:`block_rays`) times its depth."""
     pixel = np.flatnonzero(mask)
-    z, x, y = _block_rays(np.asarray(depth).reshape(-1), pixel, int(camera.width),
-                          _slopes(camera))
+    z, x, y = block_rays(np.asarray(depth).reshape(-1), pixel, int(camera.width),
+                          ray_slopes(camera))
     out = np.empty((len(pixel), 3), np.float64)
     out[:, 0], out[:, 1], out[:, 2] = x * z, y * z, z
     return out
@@ -230,16 +230,16 @@ def _world_points(camera: Camera, depth: np.ndarray, pixel: np.ndarray) -> np.nd
     col``) of ``depth [h, w]``, as :func:`rigid` of :func:`_points_at` gives them (the
     same float64 operations, a block of :data:`BLOCK` pixels at a time, one column at a
     time: unproject takes 7.5 ms against 48 at 640 x 480), rounded once to float32."""
-    flat, slopes = np.asarray(depth).reshape(-1), _slopes(camera)
+    flat, slopes = np.asarray(depth).reshape(-1), ray_slopes(camera)
     pose, width = np.asarray(camera.pose), int(camera.width)
     out = np.empty((len(pixel), 3), np.float32)
-    for s in _blocks(len(pixel)):
-        z, x, y = _block_rays(flat, pixel[s], width, slopes)
-        _turned_into(out[s], pose, x * z, y * z, z)
+    for s in pixel_blocks(len(pixel)):
+        z, x, y = block_rays(flat, pixel[s], width, slopes)
+        turned_into(out[s], pose, x * z, y * z, z)
     return out
 
 
-def _pixel_rows(image: np.ndarray, pixel: np.ndarray) -> np.ndarray:
+def pixel_rows(image: np.ndarray, pixel: np.ndarray) -> np.ndarray:
     """``image [h, w, c]`` at the pixels ``pixel [n]`` (``row * width + col``): ``[n, c]``,
     its dtype, each pixel's ``c`` values copied as one item (a third of the time of an
     ``[n, c]`` gather at 640 x 480)."""
