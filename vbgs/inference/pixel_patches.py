@@ -159,7 +159,7 @@ def _nearest_kept(dist: jax.Array, keep: jax.Array, wanted: int, steps: int = 24
     rows' first points (by pixel order) inside the last interval fill what is left."""
     d = jnp.where(keep, dist, jnp.inf)
     hi = jnp.max(jnp.where(keep, dist, 0.0), 1)  # count(d <= hi) = kept
-    lo = jnp.zeros_like(hi) - 1.0  # count(d <= lo) = 0
+    lo = -hi  # count(d <= lo) = 0; the interval scales with the distances
 
     def halve(_, bounds):
         lo, hi = bounds
