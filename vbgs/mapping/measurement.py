@@ -95,8 +95,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from vbgs.render.camera import (Camera, pixel_blocks, block_rays, pixel_rows, ray_slopes,
-                                turned_into, valid_depth)
+from vbgs.render.camera import (Camera, block_rays, check_frame, pixel_blocks, pixel_rows,
+                                ray_slopes, turned_into, valid_depth)
 from vbgs.sensors import sensor
 
 
@@ -136,13 +136,7 @@ def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str 
     ``footprints``) return, equal to the bit, from one pass over the pixels (their mask
     and indices found once; 10 ms a 640 x 480 frame against 72 ms for the
     functions one by one as they were, the float64 work a block of pixels at a time)."""
-    depth, rgb = np.asarray(depth), np.asarray(rgb)
-    shape = (camera.height, camera.width)
-    if rgb.shape != shape + (3,) or depth.shape != shape:
-        raise ValueError(
-            f"frame shapes rgb {rgb.shape} and depth {depth.shape} do not match the camera "
-            f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
-        )
+    rgb, depth = check_frame(camera, rgb, depth)
     pixel = np.flatnonzero(valid_depth(depth))
     n, flat, slopes = len(pixel), depth.reshape(-1), ray_slopes(camera)
     pose, width, focal = np.asarray(camera.pose), int(camera.width), _focal(camera)
@@ -154,8 +148,7 @@ def frame_points(camera: Camera, rgb: np.ndarray, depth: np.ndarray, model: str 
         z, x, y = block_rays(flat, pixel[s], width, slopes)
         turned_into(xyz[s], pose, x * z, y * z, z)
         if noise is not None:
-            sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
-            turned_into(ray[s], pose, x * sigma, y * sigma, sigma, moved=False)
+            _noise_into(ray[s], noise, camera, level, pose, z, x, y)
         if footprint is not None:
             footprint[s] = z / focal
     return FramePoints(xyz, pixel_rows(rgb, pixel).astype(np.float32, copy=False), ray,
@@ -172,10 +165,18 @@ def _rays(camera: Camera, depth: np.ndarray, pixel: np.ndarray, model: str, leve
     pose, width = np.asarray(camera.pose), int(camera.width)
     out = np.empty((len(pixel), 3), np.float32)
     for s in pixel_blocks(len(pixel)):
-        z, x, y = block_rays(flat, pixel[s], width, slopes)
-        sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
-        turned_into(out[s], pose, x * sigma, y * sigma, sigma, moved=False)
+        _noise_into(out[s], noise, camera, level, pose, *block_rays(flat, pixel[s], width,
+                                                                    slopes))
     return out
+
+
+def _noise_into(out: np.ndarray, noise, camera: Camera, level: float, pose: np.ndarray,
+                z: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+    """Write into ``out [k, 3]`` the noise along the rays ``(x, y, 1)`` of readings at
+    depth ``z`` (``[k]`` float64 each, :func:`vbgs.render.camera.block_rays`): the sensor
+    ``noise``'s ``sigma_z`` times the ray, turned into the world by ``pose``."""
+    sigma = np.asarray(noise.sigma_z(z, camera, level), np.float64)  # [k]
+    turned_into(out, pose, x * sigma, y * sigma, sigma, moved=False)
 
 
 def _focal(camera: Camera) -> float:

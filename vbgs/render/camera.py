@@ -184,17 +184,23 @@ def unproject(
     (0, NaN, inf or beyond ``max_depth`` mark missing depth).
     Returns ``xyz [n, 3]`` (world) and ``rgb [n, 3]`` as float32.
     """
-    rgb = np.asarray(rgb)
-    depth = np.asarray(depth)
+    rgb, depth = check_frame(camera, rgb, depth)
+    pixel = np.flatnonzero(valid_depth(depth, max_depth))
+    return (_world_points(camera, depth, pixel),
+            pixel_rows(rgb, pixel).astype(np.float32, copy=False))
+
+
+def check_frame(camera: Camera, rgb, depth) -> tuple[np.ndarray, np.ndarray]:
+    """``rgb [h, w, 3]`` and ``depth [h, w]`` as arrays, refused with what was expected
+    when their shapes are not the camera's."""
+    rgb, depth = np.asarray(rgb), np.asarray(depth)
     shape = (camera.height, camera.width)
     if rgb.shape != shape + (3,) or depth.shape != shape:
         raise ValueError(
             f"frame shapes rgb {rgb.shape} and depth {depth.shape} do not match the camera "
             f"size {shape}: expected rgb {shape + (3,)} and depth {shape}"
         )
-    pixel = np.flatnonzero(valid_depth(depth, max_depth))
-    return (_world_points(camera, depth, pixel),
-            pixel_rows(rgb, pixel).astype(np.float32, copy=False))
+    return rgb, depth
 
 
 def depth_points(camera: Camera, depth: np.ndarray, max_depth: float = np.inf) -> np.ndarray:
