@@ -235,7 +235,7 @@ def local_normals(x: np.ndarray, chosen: np.ndarray, neighbours: int = NORMAL_NE
     instead."""
     if pixel is None:
         return quadric.patch_axes(quadric.patches(x, chosen, neighbours))[:, :, 0]
-    normal, count = _on_windows(_window_normals, x, chosen, pixel, neighbours)
+    normal, count = pixel_patches.over_windows(_window_normals, x, chosen, pixel, neighbours)
     few = count < quadric.PLANE_MIN_POINTS
     return np.where(few[:, None], pixel_patches.view_normals(x, chosen, pixel), normal)
 
@@ -263,21 +263,10 @@ def seeds_on_patches(x: np.ndarray, chosen: np.ndarray, ray: np.ndarray,
         t = np.asarray(quadric.ray_steps(normal, height, ray[chosen]), np.float64)
         unit = normal / np.linalg.norm(normal, axis=1, keepdims=True)
     else:
-        unit, t = _on_windows(_window_seeds, x, chosen, pixel, neighbours, ray)
+        unit, t = (np.asarray(a, np.float64) for a in pixel_patches.over_windows(
+            _window_seeds, x, chosen, pixel, neighbours, ray))
     t = np.clip(t, -SEED_SIGMAS, SEED_SIGMAS)
     return unit, np.asarray(x, np.float64)[chosen] + t[:, None] * ray[chosen]
-
-
-def _on_windows(fn, x: np.ndarray, chosen: np.ndarray, pixel: pixel_patches.PixelGrid,
-                neighbours: int, ray: np.ndarray | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """``fn``'s two results ``[m, ...]`` (float64) for the points ``x[chosen]`` on their
-    windows of the pixel grid (:func:`vbgs.inference.pixel_patches.chunked`)."""
-    off, pad = pixel_patches.offsets(neighbours, pixel)
-    im = pixel_patches.images(x, pixel, pad, ray)
-    out = list(pixel_patches.chunked(fn, im, chosen, pixel, off, ray, wanted=neighbours))
-    return tuple(np.concatenate([np.asarray(o[i], np.float64) for o in out])[:len(chosen)]
-                 for i in range(2))
 
 
 @partial(jax.jit, static_argnames="wanted")

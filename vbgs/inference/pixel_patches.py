@@ -182,14 +182,23 @@ def window(x: np.ndarray, chosen: np.ndarray, grid: PixelGrid, wanted: int,
     of the module docstring), ``k = wanted`` nearest in 3-D of a disc of
     :data:`WINDOW_SHARE` times as many pixels (:func:`nearest`, its kept points
     first). ``ray [n, 3]``: the points' noise along their rays."""
-    off, pad = offsets(wanted, grid)
-    im = images(x, grid, pad, ray)
-    out = [(np.asarray(i), np.asarray(w)) for i, w in chunked(
-        _window_chunk, im, chosen, grid, off, ray, wanted=wanted)]
-    idx, weight = (np.concatenate(a)[:len(chosen)] for a in zip(*out, strict=True))
-    order = np.argsort(weight <= 0, axis=1, kind="stable")[:, :min(wanted, len(off))]
+    idx, weight = over_windows(_window_chunk, x, chosen, grid, wanted, ray)
+    order = np.argsort(weight <= 0, axis=1, kind="stable")[:, :min(wanted, idx.shape[1])]
     idx, weight = np.take_along_axis(idx, order, 1), np.take_along_axis(weight, order, 1)
     return np.where(weight > 0, idx, chosen[:, None]), weight.astype(np.float64)
+
+
+def over_windows(fn, x: np.ndarray, chosen: np.ndarray, grid: PixelGrid, wanted: int,
+                 ray: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+    """The results of ``fn(im, at, reach, off, wanted=wanted)`` (jitted, each ``[c,
+    ...]``) for the points ``x[chosen]`` on their windows: the frame's :func:`images`
+    made once and the points taken :func:`chunked`, each result's chunks joined and cut
+    to ``[m, ...]``."""
+    off, pad = offsets(wanted, grid)
+    im = images(x, grid, pad, ray)
+    out = list(chunked(fn, im, chosen, grid, off, ray, wanted=wanted))
+    return tuple(np.concatenate([np.asarray(o[i]) for o in out])[:len(chosen)]
+                 for i in range(len(out[0])))
 
 
 @functools.partial(jax.jit, static_argnames="wanted")
