@@ -61,6 +61,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.mapping.image_shifts import padded, shifted
 from vbgs.render.camera import valid_depth
 
 DENOISE_RADIUS = 1  # window half-side in pixels (3 x 3); 0: no smoothing. Chosen on validation
@@ -76,14 +77,6 @@ K_SIGMA = 3.0  # a neighbour farther than this many standard deviations is anoth
 SLOPE_FOOTPRINTS = 2.0  # first pass: a neighbour d px away may differ by d times this
 #                         many footprints more (a surface inclined up to 63 degrees)
 MIN_POINTS = 6  # fewer inliers than this (the pixel included): the reading is kept
-
-
-def _shifted(a: jax.Array, dy: int, dx: int) -> jax.Array:
-    """``out[y, x] = a[y + dy, x + dx]``, 0 outside the image (``dy, dx`` static)."""
-    h, w = a.shape
-    r = max(abs(dy), abs(dx))
-    padded = jnp.pad(a, r)
-    return padded[r + dy:r + dy + h, r + dx:r + dx + w]
 
 
 def _plane_fit(inlier) -> tuple[jax.Array, jax.Array, jax.Array]:
@@ -117,7 +110,9 @@ def _smoothed(z: jax.Array, sig: jax.Array, focal, radius: int):
     window's offsets unrolled (``radius`` static), one fused pass over the pixels."""
     ok = z > 0
     inv = jnp.where(ok, 1.0 / jnp.where(ok, z, 1.0), 0.0)
-    window = [(dy, dx, _shifted(z, dy, dx), _shifted(inv, dy, dx))
+    h, w = z.shape
+    zp, ip = padded(z, radius), padded(inv, radius)  # 0 outside the image
+    window = [(dy, dx, shifted(zp, radius, dy, dx, h, w), shifted(ip, radius, dy, dx, h, w))
               for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)]
     near = [(dy, dx, ok & (zn > 0) & (jnp.abs(zn - z) <= (
         K_SIGMA * math.sqrt(2.0) * sig + SLOPE_FOOTPRINTS * math.hypot(dy, dx) * z / focal)),

@@ -69,6 +69,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.mapping.image_shifts import padded, shifted
 from vbgs.render.camera import valid_depth
 
 # Pixels a hole's depth may come from; 0: holes stay holes. Chosen on validation views,
@@ -104,19 +105,6 @@ def ring_offsets(radius: int) -> list[list[tuple[int, int]]]:
             if 0 < d2 <= radius * radius:
                 rings.setdefault(d2, []).append((dy, dx))
     return [rings[d2] for d2 in sorted(rings)]
-
-
-def _shifted(padded: jax.Array, pad: int, dy: int, dx: int, h: int, w: int) -> jax.Array:
-    """``out[y, x] = a[y + dy, x + dx]`` for ``padded``: ``a [h, w, ...]`` padded by
-    ``pad`` pixels on each side with the value outside the image (``|dy|, |dx| <= pad``)."""
-    return jax.lax.slice_in_dim(jax.lax.slice_in_dim(padded, pad + dy, pad + dy + h, axis=0),
-                                pad + dx, pad + dx + w, axis=1)
-
-
-def _padded(a: jax.Array, pad: int, fill) -> jax.Array:
-    """``a [h, w, ...]`` with ``pad`` pixels of ``fill`` about its first two axes."""
-    return jnp.pad(a, ((pad, pad), (pad, pad)) + ((0, 0),) * (a.ndim - 2),
-                   constant_values=fill)
 
 
 def fill_holes(depth: np.ndarray, rgb: np.ndarray, empty: np.ndarray, focal: float,
@@ -158,18 +146,18 @@ def _filled(depth: jax.Array, rgb: jax.Array, empty: jax.Array, focal: jax.Array
     todo = ~ok & ~empty
     reach = radius + 1
     pad = 2 * reach
-    known_p = _padded(known, pad, 0.0)
+    known_p = padded(known, pad, 0.0)
     planes = [rgb[..., c] for c in range(3)]  # one fused loop, no [h, w, 3] copies
-    padded = [_padded(p, radius, jnp.inf) for p in planes]
+    planes_p = [padded(p, radius, jnp.inf) for p in planes]
     out = known
     for ring in ring_offsets(radius):
         best_diff = jnp.full(known.shape, jnp.inf, jnp.float32)
         best_depth = jnp.zeros_like(known)
         for dy, dx in ring:
-            z = _extrapolated(_shifted(known_p, pad, dy, dx, h, w),
-                              _shifted(known_p, pad, 2 * dy, 2 * dx, h, w))
+            z = _extrapolated(shifted(known_p, pad, dy, dx, h, w),
+                              shifted(known_p, pad, 2 * dy, 2 * dx, h, w))
             diff = functools.reduce(jnp.maximum, [  # [h, w] the largest channel's
-                jnp.abs(planes[c] - _shifted(padded[c], radius, dy, dx, h, w))
+                jnp.abs(planes[c] - shifted(planes_p[c], radius, dy, dx, h, w))
                 for c in range(3)])
             better = (z > 0) & (diff < best_diff)
             best_diff = jnp.where(better, diff, best_diff)
@@ -178,7 +166,7 @@ def _filled(depth: jax.Array, rgb: jax.Array, empty: jax.Array, focal: jax.Array
         out = jnp.where(take, best_depth, out)
         todo = todo & ~take
     filled = ~ok & (out > 0)
-    rim, behind = _sides(out, known_p, _padded(empty, reach, False), pad, focal, reach)
+    rim, behind = _sides(out, known_p, padded(empty, reach, False), pad, focal, reach)
     return jnp.where(ok, depth, jnp.where(filled & (rim | ~behind), 0.0, out))
 
 
@@ -207,8 +195,8 @@ def _sides(filled: jax.Array, known_p: jax.Array, empty_p: jax.Array, pad: int,
     behind = jnp.zeros(filled.shape, bool)
     for ring in ring_offsets(reach):
         for dy, dx in ring:
-            rim |= _shifted(empty_p, reach, dy, dx, h, w)
-            other = _shifted(known_p, pad, dy, dx, h, w)
+            rim |= shifted(empty_p, reach, dy, dx, h, w)
+            other = shifted(known_p, pad, dy, dx, h, w)
             rim |= other > filled + jump
             behind |= (other > 0) & (other < filled - jump)
     return rim, behind
