@@ -151,6 +151,9 @@ class VbgsLearner:
             extra["points_unlearned"] = self.state.points_unlearned
         if self.state.growing:  # seen through frames in a row: gone (vbgs.mapping.change)
             extra["components_forgotten"] = self.state.n_forgotten
+            # rounds of merges that made room for new ground, and the components merged
+            extra.update(merge_rounds=self.state.n_merge_rounds,
+                         components_merged=self.state.n_merged)
         if self.config.budget.saturation:  # valid points skipped as already explained
             seen = self.state.n_points + self.state.n_skipped
             extra["points_skipped"] = self.state.n_skipped / max(seen, 1)

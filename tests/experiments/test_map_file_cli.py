@@ -21,12 +21,25 @@ def test_a_saved_map_resumes_to_the_same_record(tmp_path, capsys):
     assert main([*TINY, "--save-map", str(path), "--stage-times"]) == 0
     whole = _record(capsys)
     assert path.is_file()
-    assert set(whole["stage_seconds"]) == {"prepare", "grow", "search+step", "evidence"}
+    assert set(whole["stage_seconds"]) == {"prepare", "merge", "grow", "search+step",
+                                           "evidence"}
     assert all(v > 0 for v in whole["stage_seconds"].values())
+    assert whole["merge_rounds"] == whole["components_merged"] == 0  # 600 slots: room left
     assert main([*TINY, "--resume-map", str(path)]) == 0
     resumed = _record(capsys)
     for key in ("psnr", "ssim", "depth_l1", "components_used"):
         assert resumed[key] == whole[key], key
+
+
+def test_the_merges_that_made_room_are_counted(capsys):
+    """The room's 12 frames want more than 100 slots: rounds of merges free them, and
+    the record counts the rounds and the components merged (measured 7 and 90)."""
+    argv = ["fit-scene", "--scene", "room", "--components", "100", "--frames", "12",
+            "--test-views", "2", "--size", "32", "--json"]
+    assert main(argv) == 0
+    r = _record(capsys)
+    assert 5 <= r["merge_rounds"] <= 9 and 70 <= r["components_merged"] <= 110
+    assert r["components_used"] == 100
 
 
 def test_projective_search_learns_the_scene(capsys):

@@ -4,12 +4,13 @@ JAX dispatches device work asynchronously, so a host profiler charges a stage's 
 time to whichever later line first waits for it. Inside :func:`timing`, each stage of
 :func:`vbgs.mapping.update` waits for what it produced before its clock stops, so each
 stage is charged its own work (the price: no overlap of host and device work, so the
-sum is a little more than an untimed frame). Outside it, :func:`stage` costs a function
-call and times nothing::
+sum is a little more than an untimed frame). A stage inside another (``merge``, inside
+``grow``) is charged to its own name and left out of the outer one's. Outside it,
+:func:`stage` costs a function call and times nothing::
 
     with stages.timing() as seconds:
         state, info = learner.update(state, frame)
-    seconds   # {"prepare": ..., "grow": ..., "search+step": ..., "evidence": ...}
+    seconds   # {"prepare": ..., "merge": ..., "grow": ..., "search+step": ..., "evidence": ...}
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from contextlib import contextmanager
 import jax
 
 _seconds: list[dict[str, float] | None] = [None]
+_open: list["_Stage"] = []  # the stages being timed, outermost first
 
 
 @contextmanager
@@ -34,10 +36,11 @@ def timing() -> Iterator[dict[str, float]]:
 
 
 class _Stage:
-    __slots__ = ("outputs",)
+    __slots__ = ("outputs", "inner")
 
     def __init__(self):
         self.outputs = []
+        self.inner = 0.0  # seconds of the stages inside this one
 
     def __call__(self, *trees):
         """Register what the stage produced (its clock stops when that is ready)."""
@@ -55,6 +58,13 @@ def stage(name: str) -> Iterator[_Stage]:
         yield s
         return
     t0 = time.perf_counter()
-    yield s
+    _open.append(s)
+    try:
+        yield s
+    finally:
+        _open.pop()
     jax.block_until_ready([o for o in s.outputs if o is not None])
-    seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - t0
+    spent = time.perf_counter() - t0
+    seconds[name] = seconds.get(name, 0.0) + spent - s.inner
+    if _open:  # a stage inside another: charged to its own name, not twice
+        _open[-1].inner += spent
