@@ -22,7 +22,7 @@ from contextlib import contextmanager
 import jax
 
 _seconds: list[dict[str, float] | None] = [None]
-_open: list["_Stage"] = []  # the stages being timed, outermost first
+_open: list[_Stage] = []  # the stages being timed, outermost first
 
 
 @contextmanager
