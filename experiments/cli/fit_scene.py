@@ -59,6 +59,11 @@ def add(sub):
                    help="VBGS forgets a component its frames have seen through N times in a "
                         "row, none hitting it: what the world no longer holds (default: "
                         "the map's evidence.forget_after; 0: never)")
+    p.add_argument("--recolour-sigmas", type=float, default=None, metavar="S",
+                   help="VBGS: a frame whose rays on a component show a mean colour more "
+                        "than S colour sigmas from its own counts toward forgetting it, as "
+                        "a see-through does (a repainted surface; default: the map's "
+                        "evidence.recolour_sigmas, 0: colour tells no change)")
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
                         "a random offset (vbgs.mapping.budget; 0: all)")
@@ -134,7 +139,7 @@ def add(sub):
 def run(args) -> dict:
     from experiments.tasks.scene_report import save_views
     from experiments.tasks.scene_task import SceneTask, run_scene
-    from vbgs.mapping import BudgetConfig, EvidenceConfig
+    from vbgs.mapping import BudgetConfig
 
     render = {k: v for k, v in (("opacity", args.opacity), ("splat_scale", args.splat_scale),
                                 ("splat_blur", args.splat_blur),
@@ -158,8 +163,7 @@ def run(args) -> dict:
                                                                saturation=args.budget_saturation),
                      save_map=args.save_map, resume_map=args.resume_map,
                      stage_times=args.stage_times, **calibration(args),
-                     **({} if args.forget_after is None else
-                        {"evidence": EvidenceConfig(forget_after=args.forget_after)}),
+                     **_evidence(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
@@ -189,3 +193,14 @@ def run(args) -> dict:
                                              f"{out['ate_rmse']:.4f}")
     return out
 
+
+
+def _evidence(args) -> dict:
+    """The task's ``evidence`` setting where ``--forget-after`` or ``--recolour-sigmas``
+    changes it (else none: the map's defaults)."""
+    from vbgs.mapping import EvidenceConfig
+
+    given = {name: value for name, value in (("forget_after", args.forget_after),
+                                             ("recolour_sigmas", args.recolour_sigmas))
+             if value is not None}
+    return {"evidence": EvidenceConfig(**given)} if given else {}

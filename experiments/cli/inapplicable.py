@@ -86,7 +86,8 @@ RULES = {
         *((dest, flag, lambda a: a.method == "vbgs", _VBGS_MAP)
           for dest, flag in (("search", "--search"), ("save_map", "--save-map"),
                              ("resume_map", "--resume-map"), ("stage_times", "--stage-times"),
-                             ("forget_after", "--forget-after"))),
+                             ("forget_after", "--forget-after"),
+                             ("recolour_sigmas", "--recolour-sigmas"))),
         _SENSOR_LEVEL,
     ),
     "tune": (_SENSOR_LEVEL,),

@@ -22,6 +22,20 @@ see-throughs with no hit the log odds of *gone* against *still there* have grown
 component that was never hit (``MIN_HITS`` rays) is not a surface the map learned and
 is left to the opacity evidence.
 
+**Colour.** A surface repainted in place is hit as before, so depth alone never tells
+it; nor does it tell a moved object's components that touched the ground it stood on
+(their rays hit the ground within the band, and they draw the object's colour there: a
+ghost of its footprint). With ``EvidenceConfig.recolour_sigmas`` above 0 a frame also
+reads the colour at a component's sample rays that hit it (at least
+``MIN_COLOUR_HITS`` of the five) and counts against the component when their mean lies
+farther than that many colour sigmas (the model's ``colour_noise``) from the mean of
+what its earlier frames' rays showed (at least ``MIN_COLOUR_FRAMES`` of them, each
+agreeing). The reference is that history, not the component's posterior colour: five
+pixels of a high-contrast texture are a biased sample of the patch a component averages,
+the same from one view to the next, and judged against the posterior colour a static
+textured world would be found changed. A frame that agrees joins the history and, as a
+hit, resets the count; one that disagrees does not join it.
+
 Only a measured return beyond the component is free space for this test: with exact
 depth a pixel without depth shows nothing (sky, empty space) and counts as well, but a
 sensor's missing pixel (out of its range, a hole) says nothing about what stands there.
@@ -52,6 +66,7 @@ a fixed reference still equals one batch.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
@@ -67,32 +82,53 @@ from vbgs.render.opacity import Evidence, FrameEvidence
 FORGET_AFTER = 6
 # Rays that must have hit a component before it can be judged gone (a surface learned).
 MIN_HITS = 5.0
+# A frame reads a component's colour when this many of its five sample rays hit it (a
+# majority: one pixel beside an edge does not decide), and judges it against the mean
+# of at least this many earlier frames that read it and agreed.
+MIN_COLOUR_HITS = 3
+MIN_COLOUR_FRAMES = 2
 
 _m_step = jax.jit(model.m_step)
 
 
 class Doubt(NamedTuple):
-    """Per component, the frames in a row it was seen through since a frame hit it."""
+    """Per component, the frames in a row it was seen through (or recoloured) since a
+    frame hit it, and the colours its rays showed in the frames that agreed."""
 
     frames: jax.Array  # [k] int32
+    colour: jax.Array  # [k, 3] the sum of the mean colours its hit samples showed
+    colour_frames: jax.Array  # [k] the frames in that sum
 
 
 def no_doubt(k: int) -> Doubt:
-    """Before any frame: no component doubted."""
-    return Doubt(jnp.zeros(k, jnp.int32))
+    """Before any frame: no component doubted, no colour shown."""
+    return Doubt(jnp.zeros(k, jnp.int32), jnp.zeros((k, 3), jnp.float32),
+                 jnp.zeros(k, jnp.float32))
 
 
 @jax.jit
-def _counted(frames, hits, seen_through, judged):
-    return jnp.where(seen_through & judged, frames + 1, jnp.where(hits > 0, 0, frames))
+def _counted(doubt: Doubt, hits, seen_through, shown, n_shown, judged, colour_tol):
+    readable = n_shown >= MIN_COLOUR_HITS
+    before = doubt.colour / jnp.maximum(doubt.colour_frames, 1.0)[:, None]
+    recoloured = (readable & (doubt.colour_frames >= MIN_COLOUR_FRAMES)
+                  & (((shown - before) ** 2).sum(-1) > colour_tol**2))
+    against = (seen_through | recoloured) & judged
+    frames = jnp.where(against, doubt.frames + 1, jnp.where(hits > 0, 0, doubt.frames))
+    agrees = readable & ~recoloured  # the colour the component is known by
+    return Doubt(frames, doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
+                 doubt.colour_frames + agrees)
 
 
-def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active) -> Doubt:
+def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active,
+            colour_tol: float = math.inf) -> Doubt:
     """``doubt`` after one frame's evidence ``frame``: a see-through of an ``active [k]``
     component hit ``MIN_HITS`` rays or more before (``evidence``, the counts before the
-    frame) adds one, a hit resets the count, a frame without either keeps it."""
+    frame), or a recolouring (module docstring: its hit samples' mean colour farther
+    than ``colour_tol`` from the mean of those its earlier agreeing frames showed), adds
+    one; any other hit resets the count; a frame without either keeps it."""
     judged = jnp.asarray(active) & (evidence.hits >= MIN_HITS)
-    return Doubt(_counted(doubt.frames, frame.hits, frame.seen_through, judged))
+    return _counted(doubt, frame.hits, frame.seen_through, frame.shown, frame.n_shown,
+                    judged, jnp.float32(colour_tol))
 
 
 def gone(doubt: Doubt, forget_after: int) -> np.ndarray:

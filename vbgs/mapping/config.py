@@ -156,13 +156,18 @@ class EvidenceConfig:
     pass_sigmas: an observed depth within this many sigma (camera z) is a hit;
     prior_hits, prior_passes: the Beta prior's pseudo-counts of rays;
     forget_after: a growing map forgets a component its frames saw through this many
-        times in a row with none hitting it (:mod:`vbgs.mapping.change`; 0: never).
+        times in a row with none hitting it (:mod:`vbgs.mapping.change`; 0: never);
+    recolour_sigmas: a frame whose rays that hit a component show a mean colour farther
+        than this many colour sigmas (``prior.colour_noise``) from the component's counts
+        against it as a see-through does (a repainted surface; 0, the default: colour
+        tells no change, :mod:`vbgs.mapping.change` says why).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
     prior_hits: float = opacity.PRIOR_HITS
     prior_passes: float = opacity.PRIOR_PASSES
     forget_after: int = FORGET_AFTER
+    recolour_sigmas: float = 0.0
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):
@@ -171,6 +176,10 @@ class EvidenceConfig:
                 or self.forget_after < 0:
             raise ValueError(f"evidence.forget_after must be a whole number of frames >= 0 "
                              f"(0: never forget), got {self.forget_after!r}")
+        r = self.recolour_sigmas
+        if isinstance(r, bool) or not isinstance(r, int | float) or not 0 <= r < math.inf:
+            raise ValueError(f"evidence.recolour_sigmas must be a number >= 0 (0: colour "
+                             f"tells no change), got {r!r}")
 
 
 @dataclass(frozen=True)

@@ -82,6 +82,7 @@ current posterior, so those are not (see :mod:`vbgs.inference.grow`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from functools import partial
 from typing import NamedTuple
@@ -276,10 +277,13 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
                                     else info.before)
         variance = depth_variance(geometry[0], frame.camera, sensor.model, level) \
             if sensor.noisy else None
+        e = config.evidence
+        reads_colour = state.growing and e.forget_after > 0 and e.recolour_sigmas > 0
         seen = opacity.frame_evidence(  # a sensor's missing pixel is no free space
-            *geometry, frame.camera, frame.depth, pass_sigmas=config.evidence.pass_sigmas,
+            *geometry, frame.camera, frame.depth, pass_sigmas=e.pass_sigmas,
             sensor_var=variance, empty=empty,
-            through_empty=None if empty is None else np.zeros_like(empty))
+            through_empty=None if empty is None else np.zeros_like(empty),
+            rgb=frame.rgb if reads_colour else None)
         state = _forget(state._replace(evidence=opacity.added(state.evidence, seen)),
                         seen, state.evidence, config)
     if config.render.colour_rule == "fit":
@@ -299,8 +303,11 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
     if not state.growing or after <= 0:
         return state
     prior = state.mixture.prior
+    e = config.evidence
+    tol = e.recolour_sigmas * config.prior.colour_noise if e.recolour_sigmas > 0 else math.inf
     doubt = change.observe(change.no_doubt(prior.n_components) if state.doubt is None
-                           else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA)
+                           else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA,
+                           tol)
     slots = change.gone(doubt, after)
     if len(slots) == 0:
         return state._replace(doubt=doubt)

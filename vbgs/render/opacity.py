@@ -90,6 +90,8 @@ class FrameEvidence(NamedTuple):
     passes: jax.Array  # [k] rays that passed through it
     seen_through: jax.Array  # [k] bool: every sample ray, each at least THROUGH_PIXELS
     #                          from the centre, passed through it (vbgs.mapping.change)
+    shown: jax.Array  # [k, 3] the mean colour of the frame at the sample rays that hit it
+    n_shown: jax.Array  # [k] int: how many hit samples that mean is over (0: no colour read)
 
 
 def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
@@ -106,7 +108,8 @@ def added(evidence: Evidence, frame: FrameEvidence) -> Evidence:
 
 
 def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = PASS_SIGMAS,
-                   sensor_var=None, empty=None, through_empty=None) -> FrameEvidence:
+                   sensor_var=None, empty=None, through_empty=None, rgb=None
+                   ) -> FrameEvidence:
     """One frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
     (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
@@ -120,14 +123,16 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     every pixel without depth is empty (exact depth: nothing else is missing).
     ``through_empty [h, w]``: the pixels without depth the see-through test takes as
     free space (None: ``empty``; a sensor's missing pixels, out of its range, say
-    nothing about what stands there)."""
+    nothing about what stands there). ``rgb [h, w, 3]``: the frame's colours, of which
+    the mean over each component's hit samples is returned (None: no colour read)."""
     k = np.shape(means)[0]
     sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
     empty = empty_pixels(depth) if empty is None else empty
     through_empty = empty if through_empty is None else through_empty
+    rgb = np.zeros((1, 1, 3)) if rgb is None else rgb  # 1x1: no colour read
     return FrameEvidence(*_frame_counts(
         jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
-        jnp.asarray(empty), jnp.asarray(through_empty),
+        jnp.asarray(empty), jnp.asarray(through_empty), jnp.asarray(rgb, jnp.float32),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
@@ -135,10 +140,12 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
 
 
 @jax.jit
-def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, means, covs, fx, fy, cx, cy,
-                  pose, depth):
-    """Hits and passes ``[k]`` of one frame (module docstring), and whether it was seen
-    through ``[k]``: the five samples taken at least ``THROUGH_PIXELS`` apart all passed."""
+def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, means, covs, fx, fy,
+                  cx, cy, pose, depth):
+    """Hits and passes ``[k]`` of one frame (module docstring), whether it was seen
+    through ``[k]`` (the five samples taken at least ``THROUGH_PIXELS`` apart all passed)
+    and the mean colour ``[k, 3]`` of ``rgb`` at the samples that hit, with their number
+    ``[k]`` (0 where ``rgb`` is 1x1: no colour read)."""
     height, width = depth.shape
     k = means.shape[0]
     splats = Splats(means, covs, jnp.zeros((k, 3)), jnp.ones(k))
@@ -172,11 +179,17 @@ def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, means, covs, fx
         shows_nothing = empty[row, col]
         hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
         passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > far_side)))
-        return hit, passed
+        return hit, passed, row, col
 
-    hit, passed = sample(sigma_u, sigma_v, empty)
+    hit, passed, row, col = sample(sigma_u, sigma_v, empty)
     per_sample = area / N_SAMPLES
     wide = jnp.float32(THROUGH_PIXELS)
-    _, through = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
-                        through_empty)
-    return hit.sum(0) * per_sample, passed.sum(0) * per_sample, through.all(0)
+    _, through, _, _ = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
+                              through_empty)
+    n_hit = hit.sum(0)
+    if rgb.shape[:2] == depth.shape:  # the colours the hits show
+        shown = (rgb[row, col] * hit[..., None]).sum(0) / jnp.maximum(n_hit, 1)[:, None]
+        n_shown = n_hit.astype(jnp.int32)
+    else:
+        shown, n_shown = jnp.zeros((k, 3)), jnp.zeros(k, jnp.int32)
+    return n_hit * per_sample, passed.sum(0) * per_sample, through.all(0), shown, n_shown

@@ -111,3 +111,24 @@ def test_an_indefinite_covariance_gets_no_evidence_and_spoils_no_other():
     keep = [0, 2, 3]
     np.testing.assert_array_equal(hits[keep], np.asarray(clean.hits)[keep])
     np.testing.assert_array_equal(passes[keep], np.asarray(clean.passes)[keep])
+
+
+def test_the_colour_a_frame_shows_at_each_component():
+    """The wall's left half is grey, its right half red: each component on the wall gets
+    the colour of its half over its five hit samples; one floating in front of the wall
+    (no hit) gets none; without the frame's colours none is read, and hits, passes and
+    see-throughs are the same either way."""
+    cam = from_fov(32, 32, np.deg2rad(60), np.eye(4))
+    depth = np.full((32, 32), 2.0)
+    rgb = np.full((32, 32, 3), 0.5)
+    rgb[:, 16:] = (0.9, 0.1, 0.1)
+    means = np.array([[-0.6, 0.0, 2.0], [0.6, 0.0, 2.0], [-0.6, 0.0, 1.0]])
+    covs = np.tile(0.02**2 * np.eye(3), (3, 1, 1))
+    seen = opacity.frame_evidence(means, covs, cam, depth, rgb=rgb)
+    assert np.asarray(seen.n_shown).tolist() == [5, 5, 0]
+    np.testing.assert_allclose(np.asarray(seen.shown)[:2], [[0.5] * 3, [0.9, 0.1, 0.1]],
+                               rtol=1e-6)
+    plain = opacity.frame_evidence(means, covs, cam, depth)
+    assert not np.asarray(plain.n_shown).any()
+    for a, b in zip(seen[:3], plain[:3], strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
