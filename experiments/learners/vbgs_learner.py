@@ -59,9 +59,10 @@ class VbgsLearner:
         prior = None if task.init == "stream" else scene_prior(task, scene)
         self.state = mapping.init(self.config, key=init_key(task), prior=prior)
         self.skip = 0  # frames a resumed map learned already
+        self.resumed = None  # the frames the map was saved after (--resume-map)
         if task.resume_map:
             self.state = mapping.load(task.resume_map, self.config)
-            self.skip = self.state.n_frames
+            self.skip = self.resumed = self.state.n_frames
         self.learned = 0  # frames this run has learned
         self.stage_seconds: dict[str, float] = {}  # summed over the steady frames timed
         self.timed_frames = 0
@@ -140,6 +141,8 @@ class VbgsLearner:
         median points a component holds and, for a map that grows, the share of points
         no component learned."""
         extra = {"points_per_component": self.state.points_per_component}
+        if self.resumed is not None:  # the stream went on from a map saved after this frame
+            extra["frames_resumed"] = self.resumed
         if self.stage_seconds:  # each stage's mean seconds a steady frame
             frames = max(self.timed_frames, 1)
             extra["stage_seconds"] = {k: v / frames for k, v in self.stage_seconds.items()}

@@ -27,6 +27,7 @@ def test_a_saved_map_resumes_to_the_same_record(tmp_path, capsys):
     assert whole["merge_rounds"] == whole["components_merged"] == 0  # 600 slots: room left
     assert main([*TINY, "--resume-map", str(path)]) == 0
     resumed = _record(capsys)
+    assert resumed["frames_resumed"] == 6 and "frames_resumed" not in whole
     for key in ("psnr", "ssim", "depth_l1", "components_used"):
         assert resumed[key] == whole[key], key
 
