@@ -446,7 +446,10 @@ def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray
     if levels is None:
         return _pick(x, taken, rule.cell, order, quota, ray)
     chosen = np.zeros(0, np.int64)
-    for level in np.flatnonzero(np.bincount(levels)):  # np.unique(levels), 10x faster
+    present = np.flatnonzero(np.bincount(levels))  # np.unique(levels), 10x faster
+    if len(present) == 1:  # one level (near ground alone): the points as they are
+        return _pick(x, taken, rule.cell * 2.0 ** present[0], order, quota, ray)
+    for level in present:
         if quota - len(chosen) <= 0:
             break
         here = order[levels[order] == level]  # this level's points, in the random order
