@@ -303,3 +303,24 @@ def test_empty_prior_is_kept_and_equal_to_a_fresh_one():
         assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
     other = grow.empty_prior(32, origin + 1, 0.1)
     assert other is not first and not np.array_equal(other.origin, first.origin)
+
+
+def test_a_small_quota_picks_from_a_prefix_the_cells_a_full_pass_picks():
+    """_pick reads only a prefix of the order when its quota is far under the points; the
+    cells it returns are those a pass over every point returns, with noise along rays or
+    without, whether the prefix holds enough empty cells or not."""
+    from vbgs.inference.grow import PREFIX_TIMES, _first_cells, _pick
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-1, 1, (40000, 3)) * [1.0, 1.0, 0.02]  # a noisy slab
+    taken = rng.uniform(-1, 1, (3000, 3)) * [1.0, 1.0, 0.02]
+    ray = np.tile([0.0, 0.0, 0.004], (len(x), 1))
+    order = rng.permutation(len(x))
+    checked_prefix = False
+    for cell in (0.05, 0.2, 1.5):  # many empty cells, some, none beyond the taken ones
+        for quota in (1, 7, 60, 150):
+            for r in (None, ray):
+                full = _first_cells(x, taken, cell, order, quota, r)
+                np.testing.assert_array_equal(_pick(x, taken, cell, order, quota, r), full)
+                checked_prefix |= PREFIX_TIMES**2 * quota <= len(x) and len(full) == quota
+    assert checked_prefix
