@@ -416,6 +416,11 @@ def host_rng(key: jax.Array) -> np.random.Generator:
     return np.random.default_rng(np.asarray(jax.random.key_data(key)).ravel().tolist())
 
 
+# _pick reads a prefix of this many times its quota first, when the points are at least
+# this many times the prefix (a 640x480 frame's refinement: tens of seeds, 300k points).
+PREFIX_TIMES = 16
+
+
 def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
           quota: int, ray: np.ndarray | None = None) -> np.ndarray:
     """Up to ``quota`` points of ``x [n, d]`` (indices), one per cell of side ``cell``
@@ -441,11 +446,6 @@ def _pick(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,
         if len(got) == quota:
             return part[got]
     return _first_cells(x, taken, cell, order, quota, ray)
-
-
-# _pick reads a prefix of this many times its quota first, when the points are at least
-# this many times the prefix (a 640x480 frame's refinement: tens of seeds, 300k points).
-PREFIX_TIMES = 16
 
 
 def _first_cells(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarray,

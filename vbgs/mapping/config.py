@@ -158,9 +158,9 @@ class EvidenceConfig:
     forget_after: a growing map forgets a component its frames saw through this many
         times in a row with none hitting it (:mod:`vbgs.mapping.change`; 0: never);
     recolour_sigmas: a frame whose rays that hit a component show a mean colour farther
-        than this many colour sigmas (``prior.colour_noise``) from the component's counts
-        against it as a see-through does (a repainted surface; 0, the default: colour
-        tells no change, :mod:`vbgs.mapping.change` says why).
+        than this many colour sigmas (``prior.colour_noise``) from what earlier frames'
+        rays showed on it counts against it as a see-through does (a repainted surface;
+        0, the default: colour tells no change, :mod:`vbgs.mapping.change` says why).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
