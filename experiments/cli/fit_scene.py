@@ -61,9 +61,10 @@ def add(sub):
                         "the map's evidence.forget_after; 0: never)")
     p.add_argument("--recolour-sigmas", type=float, default=None, metavar="S",
                    help="VBGS: a frame whose rays on a component show a mean colour more "
-                        "than S colour sigmas from its own counts toward forgetting it, as "
-                        "a see-through does (a repainted surface; default: the map's "
-                        "evidence.recolour_sigmas, 0: colour tells no change)")
+                        "than S colour sigmas from what earlier frames' rays showed on it "
+                        "counts toward forgetting it, as a see-through does (a repainted "
+                        "surface; default: the map's evidence.recolour_sigmas, 0: colour "
+                        "tells no change)")
     p.add_argument("--budget-points", type=int, default=0, metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
                         "a random offset (vbgs.mapping.budget; 0: all)")
@@ -192,7 +193,6 @@ def run(args) -> dict:
         save_trajectory_plot(args.plot, out, f"{args.scene}, --poses {args.poses}: ATE RMSE "
                                              f"{out['ate_rmse']:.4f}")
     return out
-
 
 
 def _evidence(args) -> dict:

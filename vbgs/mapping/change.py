@@ -119,6 +119,13 @@ def _counted(doubt: Doubt, hits, seen_through, shown, n_shown, judged, colour_to
                  doubt.colour_frames + agrees)
 
 
+def colour_tolerance(recolour_sigmas: float, colour_noise: float) -> float:
+    """How far a frame's colour on a component may lie from what earlier frames showed
+    before it counts against the component: ``recolour_sigmas`` colour sigmas
+    (``colour_noise``); infinite when 0 (colour tells no change, none is read)."""
+    return recolour_sigmas * colour_noise if recolour_sigmas > 0 else math.inf
+
+
 def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active,
             colour_tol: float = math.inf) -> Doubt:
     """``doubt`` after one frame's evidence ``frame``: a see-through of an ``active [k]``

@@ -278,14 +278,15 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
         variance = depth_variance(geometry[0], frame.camera, sensor.model, level) \
             if sensor.noisy else None
         e = config.evidence
-        reads_colour = state.growing and e.forget_after > 0 and e.recolour_sigmas > 0
+        tol = change.colour_tolerance(e.recolour_sigmas, config.prior.colour_noise)
+        reads_colour = state.growing and e.forget_after > 0 and math.isfinite(tol)
         seen = opacity.frame_evidence(  # a sensor's missing pixel is no free space
             *geometry, frame.camera, frame.depth, pass_sigmas=e.pass_sigmas,
             sensor_var=variance, empty=empty,
             through_empty=None if empty is None else np.zeros_like(empty),
             rgb=frame.rgb if reads_colour else None)
         state = _forget(state._replace(evidence=opacity.added(state.evidence, seen)),
-                        seen, state.evidence, config)
+                        seen, state.evidence, tol, config)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
                                     frame.rgb, 0.0 if background is None else background,
@@ -295,19 +296,18 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
 
 
 def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Evidence,
-            config: Config) -> MapState:
-    """A growing map's components that its frames have now seen through
+            colour_tol: float, config: Config) -> MapState:
+    """A growing map's components that its frames have now seen through (or recoloured
+    beyond ``colour_tol``, :func:`vbgs.mapping.change.colour_tolerance`)
     ``evidence.forget_after`` times in a row forgotten (:mod:`vbgs.mapping.change`):
     ``seen`` the frame's evidence, ``before`` the evidence before it."""
     after = config.evidence.forget_after
     if not state.growing or after <= 0:
         return state
     prior = state.mixture.prior
-    e = config.evidence
-    tol = e.recolour_sigmas * config.prior.colour_noise if e.recolour_sigmas > 0 else math.inf
     doubt = change.observe(change.no_doubt(prior.n_components) if state.doubt is None
                            else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA,
-                           tol)
+                           colour_tol)
     slots = change.gone(doubt, after)
     if len(slots) == 0:
         return state._replace(doubt=doubt)

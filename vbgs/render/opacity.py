@@ -129,10 +129,10 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
     empty = empty_pixels(depth) if empty is None else empty
     through_empty = empty if through_empty is None else through_empty
-    rgb = np.zeros((1, 1, 3)) if rgb is None else rgb  # 1x1: no colour read
     return FrameEvidence(*_frame_counts(
         jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
-        jnp.asarray(empty), jnp.asarray(through_empty), jnp.asarray(rgb, jnp.float32),
+        jnp.asarray(empty), jnp.asarray(through_empty),
+        None if rgb is None else jnp.asarray(rgb, jnp.float32),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
@@ -145,7 +145,7 @@ def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, means, cov
     """Hits and passes ``[k]`` of one frame (module docstring), whether it was seen
     through ``[k]`` (the five samples taken at least ``THROUGH_PIXELS`` apart all passed)
     and the mean colour ``[k, 3]`` of ``rgb`` at the samples that hit, with their number
-    ``[k]`` (0 where ``rgb`` is 1x1: no colour read)."""
+    ``[k]`` (0 where ``rgb`` is None: no colour read)."""
     height, width = depth.shape
     k = means.shape[0]
     splats = Splats(means, covs, jnp.zeros((k, 3)), jnp.ones(k))
@@ -187,7 +187,7 @@ def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, means, cov
     _, through, _, _ = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
                               through_empty)
     n_hit = hit.sum(0)
-    if rgb.shape[:2] == depth.shape:  # the colours the hits show
+    if rgb is not None:  # the colours the hits show
         shown = (rgb[row, col] * hit[..., None]).sum(0) / jnp.maximum(n_hit, 1)[:, None]
         n_shown = n_hit.astype(jnp.int32)
     else:
