@@ -54,7 +54,7 @@ import math
 import jax
 import numpy as np
 
-from vbgs.render.camera import valid_depth
+from vbgs.render.camera import Camera, valid_depth
 
 # Kept points count 1 each, not s^2 (module docstring: chosen on validation views).
 WEIGHTED = False
@@ -98,3 +98,27 @@ def lattice(depth: np.ndarray, s: int, offset: tuple[int, int], *,
     out[oy::s, ox::s] = depth[oy::s, ox::s]
     n = int(np.count_nonzero(valid_depth(out)))
     return out, np.full(n, float(s * s) if weighted else 1.0, np.float32)
+
+
+def on_lattice(camera: Camera, pixel: np.ndarray, s: int) -> tuple[Camera, np.ndarray]:
+    """A thinned frame's points as the frame of its lattice: the camera of the kept
+    pixels alone (``ceil(w / s) x ceil(h / s)`` pixels, whatever the offset, so one
+    compiled shape serves every frame; focal lengths ``f / s``, principal point
+    ``(c - o - 1/2) / s + 1/2``, so a kept pixel's centre is its lattice pixel's) and
+    their flat pixels ``[n]`` in it. ``pixel [n]``: their flat pixels in ``camera``'s
+    image, all on one lattice of stride ``s`` (:func:`lattice`). The projective search
+    lays a frame out by its pixels (:mod:`vbgs.inference.frame_tiles`): on the full
+    image three in four slots of a stride-2 frame would be empty and scored all the
+    same. ``s = 1``: the camera and pixels as they are."""
+    if s == 1 or len(pixel) == 0:
+        return camera, pixel
+    w = int(camera.width)
+    row, col = np.divmod(np.asarray(pixel, np.int64), w)
+    oy, ox = int(row[0] % s), int(col[0] % s)
+    if np.any(row % s != oy) or np.any(col % s != ox):
+        raise ValueError(f"the pixels do not lie on one lattice of stride {s}")
+    sub = camera._replace(fx=camera.fx / s, fy=camera.fy / s,
+                          cx=(camera.cx - ox - 0.5) / s + 0.5,
+                          cy=(camera.cy - oy - 0.5) / s + 0.5,
+                          width=-(-w // s), height=-(-int(camera.height) // s))
+    return sub, (row // s) * sub.width + col // s

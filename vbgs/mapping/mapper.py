@@ -100,7 +100,7 @@ from vbgs.components import AUTO_BUCKET
 import vbgs.mapping.saturation as saturation
 import vbgs.mapping.change as change
 import vbgs.mapping.splits as splits
-from vbgs.mapping.budget import stride, thin
+from vbgs.mapping.budget import on_lattice, stride, thin
 from vbgs.mapping.config import Config
 from vbgs.mapping.denoise import noise_left, smoothed
 from vbgs.mapping.holes import fill_holes
@@ -376,6 +376,9 @@ def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, wei
     if levels is not None and state.stepper.reach is not None:
         reach = state.stepper.reach * 2.0**levels
     before = state.mixture.posterior
+    if camera is not None and pixel is not None:  # a thinned frame searched on its lattice
+        camera, pixel = on_lattice(camera, pixel, stride(int(camera.width), int(camera.height),
+                                                         config.budget.points))
     mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight, camera, pixel)
     return state._replace(mixture=mixture), before, step.elbo, step.learned
 
