@@ -72,6 +72,17 @@ SHORTLIST = 1
 TIE_WEIGHT = 0.25
 # Tiles are at least this many pixels a side (smaller ones cost more lists than they save).
 MIN_TILE = 2
+# A frame is cut into at most this many tiles across its shorter side. Each tile pays for
+# its lists (nine pooled, a top-C, a gather of C terms) whatever it holds, so at a
+# sensor's size small tiles cost more in lists than in scores: the room at 640 x 480
+# under the Kinect (100k components, 4-pixel tiles from TILE_SPACINGS) spent 0.12 of its
+# 0.32 s step on lists. Chosen on validation views at that size (the room, 20 frames, 2
+# validation views; one-off val_probe runs with the tile side forced, docs/performance.md):
+# tiles of 4, 6, 8, 12 and 16 pixels gave 22.54, 22.57, 22.63, 22.90 and 22.46 dB, within
+# what one stream's 2 views tell apart; the step took 0.32-0.39 s at 4 and 0.18-0.20 s at
+# 8 (a recorded frame). 64 across gives 8 at 480 rows and leaves 128-pixel frames at
+# MIN_TILE.
+TILES_ACROSS = 64
 
 
 class Tiling(NamedTuple):
@@ -123,11 +134,13 @@ def world_to_camera(camera, origin) -> tuple[np.ndarray, np.ndarray]:
 def tile_size(camera, spacing: float, depth: float) -> int:
     """Pixels a tile side: :data:`TILE_SPACINGS` component spacings (``spacing``, world
     units, e.g. the growth rule's cell) seen at ``depth`` (the frame's median), at least
-    :data:`MIN_TILE` and at most a quarter of the frame's shorter side."""
+    :data:`MIN_TILE` and a :data:`TILES_ACROSS`-th of the frame's shorter side, at most a
+    quarter of it."""
     focal = 0.5 * (float(camera.fx) + float(camera.fy))
     t = TILE_SPACINGS * focal * float(spacing) / max(float(depth), 1e-30)
-    cap = max(MIN_TILE, min(int(camera.width), int(camera.height)) // 4)
-    return int(min(max(MIN_TILE, math.ceil(t)), cap))
+    side = min(int(camera.width), int(camera.height))
+    cap = max(MIN_TILE, side // 4)
+    return int(min(max(MIN_TILE, math.ceil(t), -(-side // TILES_ACROSS)), cap))
 
 
 def plan(camera, spacing: float, depth: float, n_candidates: int,

@@ -160,3 +160,17 @@ def test_bad_settings_are_refused():
         Stepper(prior, estep="sparse", search="projective")
     with pytest.raises(ValueError, match="search must be one of kdtree, projective"):
         mapping.Config(search="octree")
+
+
+def test_tiles_are_few_enough_at_a_sensors_size():
+    """At most TILES_ACROSS tiles across the shorter side: 8 pixels at 640 x 480 (4 on
+    its stride-2 lattice, the same patch of the scene), while a 128-pixel frame keeps the
+    spacing's tiles (MIN_TILE where the components are dense)."""
+    from vbgs.render.camera import from_fov, look_at
+    pose = look_at((0.0, -2.0, 0.5), (0.0, 0.0, 0.5))
+    dense = 1e-4  # world units: a spacing far under a pixel
+    assert projective.tile_size(from_fov(640, 480, 1.0, pose), dense, 2.0) == 8
+    assert projective.tile_size(from_fov(320, 240, 1.0, pose), dense, 2.0) == 4
+    assert projective.tile_size(from_fov(128, 128, 1.0, pose), dense, 2.0) == projective.MIN_TILE
+    # a coarse spacing still sets larger tiles (the frame's quarter at most)
+    assert projective.tile_size(from_fov(640, 480, 1.0, pose), 0.5, 2.0) > 8
