@@ -65,9 +65,11 @@ def add(sub):
                         "counts toward forgetting it, as a see-through does (a repainted "
                         "surface; default: the map's evidence.recolour_sigmas, 0: colour "
                         "tells no change)")
-    p.add_argument("--budget-points", type=int, default=0, metavar="N",
+    p.add_argument("--budget-points", type=int, default=80000,  # BudgetConfig's default
+                   metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
-                        "a random offset (vbgs.mapping.budget; 0: all)")
+                        "a random offset (vbgs.mapping.budget; default %(default)s: a "
+                        "640x480 frame's every other pixel, smaller frames whole; 0: all)")
     p.add_argument("--budget-saturation", type=int, default=0,  # BudgetConfig's default
                    metavar="N", help="VBGS learns at most about N points per cell of its "
                    "map: points of cells learned that often are skipped before any "

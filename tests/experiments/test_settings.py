@@ -41,6 +41,15 @@ def test_cli_defaults_equal_the_task_defaults(command, task):
     assert checked >= 5  # every command shares at least five settings
 
 
+def test_budget_flags_default_to_the_budget_config():
+    # the nested budget.points and .saturation, declared beside their flags without
+    # importing the mapper at parse time
+    from vbgs.mapping import BudgetConfig
+    flags = _defaults("fit-scene")
+    assert flags["budget_points"] == BudgetConfig().points == SceneTask().budget.points
+    assert flags["budget_saturation"] == BudgetConfig().saturation
+
+
 def test_fit_image_reassign_auto_matches_the_task_default():
     # --reassign auto means on for a batch fit, which is ImageTask's default
     assert _defaults("fit-image")["reassign"] == "auto" and ImageTask().reassign is True

@@ -58,6 +58,16 @@ from vbgs.render.camera import Camera, valid_depth
 
 # Kept points count 1 each, not s^2 (module docstring: chosen on validation views).
 WEIGHTED = False
+# The default budget: a frame of more than this many pixels (a 640 x 480 sensor's) is
+# learned on a lattice of stride 2; a frame of up to 320 x 240 pixels, fit-scene's 128 px
+# among them, is learned whole. Chosen on validation views (the module docstring:
+# stride 2 is the only thinning within 0.2 dB of every point, 23.04 against 23.11 dB; at
+# today's code, the room at 640 x 480 under the Kinect, 20 frames, 2 validation views,
+# one-off val_probe runs: 22.78 against 22.54 dB by projection, 22.79 against 22.60 with
+# the KD-tree), and it halves a frame's time there (docs/performance.md). A fixed count,
+# not a stride: what a frame's points buy is a few points per component, and 100k
+# components at 640 x 480 are what 80k points serve; ``points = 0`` learns every pixel.
+POINTS = 80000
 
 
 def stride(width: int, height: int, points: int) -> int:

@@ -22,7 +22,7 @@ from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
 from vbgs.mapping.change import FORGET_AFTER
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
-from vbgs.mapping.budget import WEIGHTED as BUDGET_WEIGHTED
+from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
 from vbgs.sensors import SENSOR_NAMES, WHITE_NOISE_SENSORS
@@ -258,7 +258,8 @@ class BudgetConfig:
     """A frame's point budget (:mod:`vbgs.mapping.budget`).
 
     points: the most points one frame gives (every ``s``-th pixel along each axis from a
-        random offset); 0: every valid pixel;
+        random offset); 0: every valid pixel; the default thins frames of more than 80k
+        pixels (a 640 x 480 sensor's) to stride 2 (:data:`vbgs.mapping.budget.POINTS`);
     weighted: each kept point counts ``s^2`` (the statistics an unbiased estimate of the
         whole frame's) rather than 1 (the default: better on validation views);
     saturation: the most points a growing map learns per cell over the stream (points
@@ -266,7 +267,7 @@ class BudgetConfig:
         :mod:`vbgs.mapping.saturation`); 0: no such limit.
     """
 
-    points: int = 0
+    points: int = BUDGET_POINTS
     weighted: bool = BUDGET_WEIGHTED
     saturation: int = 0
 
@@ -346,11 +347,12 @@ class Config:
             raise ValueError(f"local_iters must be a positive integer, got {value!r}")
         if not isinstance(self.reseed, bool):
             raise ValueError(f"reseed must be true or false, got {self.reseed!r}")
-        if self.slow_path and (self.budget.points or self.sensor.noisy):
+        if self.slow_path and ((self.budget.points and self.budget.weighted)
+                               or self.sensor.noisy):
             raise ValueError("local_iters > 1 under posterior assignment and reseed learn "
                              "every point at weight 1 without its noise: leave "
-                             "budget.points at 0 and the sensor exact, or take one E-step "
-                             "per batch without reseed")
+                             "budget.weighted off (or budget.points at 0) and the sensor "
+                             "exact, or take one E-step per batch without reseed")
         if self.sensor.noisy and self.estep != "sparse":
             raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
                              f"estep='sparse': its noise is modelled in the sparse E-step")

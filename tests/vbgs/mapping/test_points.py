@@ -12,6 +12,7 @@ from vbgs.data.formats import load_scene
 from vbgs.data.images import load_image, patch_stream
 from vbgs.inference import model
 from vbgs.inference.reassign import MIN_COUNT
+from vbgs.mapping import budget
 from vbgs.mapping.measurement import point_footprints
 from vbgs.render.camera import unproject, valid_depth
 from vbgs.render.image import render_image
@@ -99,8 +100,10 @@ def test_reseeding_is_the_update_after_reassign_and_needs_a_fixed_reference(astr
                             prior=model.PriorConfig())
     with pytest.raises(ValueError, match="grows its own"):
         points_stream(config, batches)
-    with pytest.raises(ValueError, match="budget.points"):
-        mapping.Config(reseed=True, budget=mapping.BudgetConfig(points=1000))
+    with pytest.raises(ValueError, match="budget.weighted off"):
+        mapping.Config(reseed=True, budget=mapping.BudgetConfig(points=1000, weighted=True))
+    # unweighted, a thinned frame's points are each at weight 1, as the slow path learns them
+    assert mapping.Config(reseed=True).budget.points == budget.POINTS
     with pytest.raises(ValueError, match="local_iters must be a positive integer"):
         mapping.Config(local_iters=0)
 
