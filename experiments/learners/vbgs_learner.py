@@ -134,7 +134,7 @@ class VbgsLearner:
         """Add the last frame's streaming bound ``B_t`` (untimed) over the points it
         learned."""
         if self.info is not None and self.info.n_learned:
-            self.bound = self.bound.add(mapping.bound(self.info, self.state, self.config))
+            self.bound = self.bound.add(mapping.bound(self.info, self.config))
 
     def details(self, result: SceneResult) -> dict:
         """The streaming bound (:meth:`vbgs.inference.bound.StreamBound.summary`), the

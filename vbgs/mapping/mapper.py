@@ -160,6 +160,8 @@ class MapInfo(NamedTuple):
     n_new: int  # slots changed for the batch (components grown, and merged pairs)
     before: model.Mixture  # the posterior the batch was learned from: after growth or
     #                        re-seeding, before the batch (for the streaming bound)
+    after: model.Mixture  # the posterior that learned it, before the frame's evidence
+    #                       forgot any component (vbgs.mapping.change)
     xyz: np.ndarray  # [n_learned, d] the points learned
     rgb: np.ndarray  # [n_learned, 3]
 
@@ -358,7 +360,8 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
     state = state._replace(n_points=state.n_points + n,
                            n_unlearned=state.n_unlearned + n - len(xyz),
                            n_frames=state.n_frames + 1)
-    return state, MapInfo(elbo, n, len(xyz), len(slots), before, xyz, rgb)
+    return state, MapInfo(elbo, n, len(xyz), len(slots), before, state.mixture.posterior, xyz,
+                          rgb)
 
 
 def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, weight, camera,
@@ -418,10 +421,16 @@ def splats(state: MapState, config: Config, drop_unused: bool = False) -> Splats
     return drawn(out) if drop_unused else out
 
 
-def bound(info: MapInfo, state: MapState, config: Config) -> BatchBound:
+def bound(info: MapInfo, config: Config) -> BatchBound:
     """The streaming bound ``B_t`` (:mod:`vbgs.inference.bound`) of the frame that
-    ``info`` describes, ``state`` being the map right after it."""
-    return batch_bound(info.before, state.mixture.posterior, info.xyz, info.rgb,
+    ``info`` describes: from the posterior it was learned from to the one that learned
+    it. Components the frame's evidence then forgot (:mod:`vbgs.mapping.change`) are
+    not counted here: forgetting is no update by the frame's points but a new prior for
+    the frames after it (a change point), which the next frame's ``before`` holds. Read
+    against the map after forgetting, a forgotten component's KL, from its posterior
+    back to its prior, is that of all the data it ever held (the walk: -1.7e10 nats for
+    a frame that forgot 2 components, the stream's bound negative)."""
+    return batch_bound(info.before, info.after, info.xyz, info.rgb,
                        config=config.prior, estep=config.estep,
                        n_candidates=config.candidates)
 

@@ -155,3 +155,23 @@ def test_a_bad_setting_is_refused():
         EvidenceConfig(forget_after=-1)
     with pytest.raises(ValueError, match="forget_after"):
         EvidenceConfig(forget_after=2.5)
+
+
+def test_forgetting_is_a_new_prior_not_a_frames_evidence(changed):
+    """The streaming bound of a frame that forgets components is read from the posterior
+    that learned it, not the map after forgetting: the frames that forget stay on the
+    scale of the others (read after forgetting, each forgotten component's KL back to its
+    prior is that of all the data it held, millions of nats here)."""
+    cfg = config()
+    state = mapping.init(cfg, key=jax.random.key(0))
+    per_point, forgot = [], []
+    for frame in changed.train:
+        n = state.n_forgotten
+        state, info = mapping.update(state, frame, cfg, changed.background)
+        b = mapping.bound(info, cfg)
+        per_point.append(b.bound / b.n_points)
+        forgot.append(state.n_forgotten > n)
+        assert info.before is not info.after
+    assert any(forgot) and not all(forgot)
+    quiet = np.median([p for p, f in zip(per_point, forgot) if not f])
+    assert min(p for p, f in zip(per_point, forgot) if f) > quiet - 20.0, (per_point, forgot)
