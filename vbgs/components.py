@@ -18,12 +18,11 @@ AUTO_BUCKET = 4096
 # The most components "auto" may use without ":MAX" (a memory ceiling: a bucket size).
 AUTO_MAX_COMPONENTS = 131072
 # "auto": first-frame points per level-0 cell (the resolution, in the sensor's own
-# samples, that fixes the cell side in place of a share of K: mapper._auto_room). Chosen
-# on VALIDATION views, the best mean over object, room and walk, by `python -m
-# experiments.run tune --scene object room walk --components auto --frames 60 --size 128
-# --grid growth.auto_points=1,2,4 --out results/tuning/components` (mean.md): the
-# best mean. Checked again against 8 under the Bayes-factor split rule; the figures are in
-# docs/validation.md ("AUTO_POINTS").
+# samples, that fixes the cell side in place of a share of K: mapper._auto_room). Rule:
+# the best mean validation PSNR over object, room and walk, by `python -m experiments.run
+# tune --scene object room walk --components auto --frames 60 --size 128 --grid
+# growth.auto_points=2,4,8 --out results/tuning/components` (results/tuning/components/
+# mean.md, its code version in its first line): 4 the best, 24.06 dB mean.
 AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
 # bound_pairs); 0: none (at auto:MAX the budget's merges still make room). Off: on

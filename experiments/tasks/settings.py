@@ -65,14 +65,14 @@ PROTOCOL = Choice(("continual", "static"), "continual",
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")
-# The fit scores 0.13 dB more on validation views (rule: the best mean over the object and
-# the room; results/tuning/colour/mean.md, re-made at the code of today's tracking table:
-# 24.78 against 24.65 dB) at about twice the seconds per frame (fit-scene, object, 128 px,
+# The fit scores 0.15 dB more on validation views (rule: the best mean over the object and
+# the room; results/tuning/colour/mean.md, the code version in its first line: 24.76
+# against 24.61 dB) at about twice the seconds per frame (fit-scene, object, 128 px,
 # 20k: 0.39 against 0.20, measured on the aliased frames). Off by default: the gain is
 # just over 0.1 dB, and turning it on would re-make every VBGS result at twice the time.
 COLOUR_RULE = Choice(("posterior", "fit"), "posterior",
                      "VBGS splat colours: the posterior colour means, or fitted to the "
-                     "training pixels (fit: +0.13 dB on validation views, about twice the "
+                     "training pixels (fit: +0.15 dB on validation views, about twice the "
                      "time per frame)")
 DEPTH_KIND = Choice(DEPTH_KINDS, "inverse", "what the depth model outputs")
 DEPTH_REFERENCE = Choice(DEPTH_REFERENCES, "auto",

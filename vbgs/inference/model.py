@@ -85,15 +85,14 @@ jax.tree_util.register_static(PriorConfig)
 # over the silhouettes of views that had seen the surface before, those cost an early view
 # 0.5 dB. A component a stream grows on a 3-D batch gets a prior flattened along the
 # batch's local surface normal (vbgs.inference.grow.local_normals), thickness 0.1 of its width.
-# Images fill their plane: no normal, the isotropic prior. Chosen with the splat scale and
-# pixel filter (vbgs.render.splats.VBGS_COV_SCALE, VBGS_BLUR) on VALIDATION views, the best mean
-# over the object and the room, by `python -m experiments.run tune --scene object room
-# --components 20000 --frames 60 --size 128 --grid prior.cov_scale=0.25,0.5,0.6,0.7
-# prior.surface_thickness=0.03,0.1,0.3,1 splat_scale=1.0,1.2,1.4,1.6,1.8
-# splat_blur=0,0.02,0.05 --out results/tuning/prior` (results/tuning/prior/mean.md):
-# validation PSNR object / room 26.12 / 20.57 dB at cov_scale 0.6, thickness 0.1 (scale
-# 1.2, blur 0.02); 26.25 / 20.38 at 0.5, 0.1 (1.4, 0.02); the isotropic prior at 0.5
-# (thickness 1, the earlier default): 24.38 / 20.13, at its best 0.25: 25.18 / 20.17.
+# Images fill their plane: no normal, the isotropic prior. Rule: the best mean validation
+# PSNR over the object and the room (128 px, 20k, 60 frames), one axis at a time around the
+# defaults, by `python -m experiments.run tune --scene object room --components 20000
+# --frames 60 --size 128 --grid prior.NAME=... --out results/tuning/prior/NAME`
+# (the command and code version head each table): cov_scale 0.6 the best,
+# results/tuning/prior/cov_scale/mean.md; thickness 0.1 the best,
+# results/tuning/prior/surface_thickness/mean.md; both at 24.61 dB mean (the isotropic
+# prior, thickness 1: 23.03).
 SURFACE_COV_SCALE = 0.6
 SURFACE_THICKNESS = 0.1
 SURFACE_PRIOR = PriorConfig(cov_scale=SURFACE_COV_SCALE, surface_thickness=SURFACE_THICKNESS)

@@ -67,12 +67,12 @@ from vbgs.render.camera import valid_depth
 DENOISE_RADIUS = 1  # window half-side in pixels (3 x 3); 0: no smoothing. Chosen on validation
 # views at both of the project's sizes (8 views each, `python -m experiments.run tune --scene
 # object room --simulate-sensor kinect --sensor kinect --val-views 8 --grid
-# growth.denoise_radius=...`, results/tuning/denoise/ and its size64/):
-# 128 px / 20k / 60 frames, mean of the two scenes 0: 23.30 dB, 1: 23.63, 2: 23.64, 3: 23.43
-# (the object 24.60, 25.29, 25.30, 25.06; the room 22.01, 21.97, 21.98, 21.81); 64 px / 5000
-# / 20 frames 0: 20.96, 1: 21.50, 2: 21.14 (the object 21.67, 22.74, 22.17). A window is
+# growth.denoise_radius=...`, results/tuning/denoise/mean.md and its size64/; rule: the
+# best mean validation PSNR over the object and the room at both sizes): at 128 px / 20k /
+# 60 frames (re-made at the code in the table's first line) 2 and 1 tie, 23.67 and 23.63 dB;
+# at 64 px / 5000 / 20 frames 1 is the best, 21.51 against 21.14 at 2. A window is
 # some 4 cm a pixel at 64 px: 5 x 5 spans the object's curves. Without the holes 2 is the
-# better at 128 px (the object 25.77 against 25.39 dB; results/tuning/denoise/noise_only/).
+# better at 128 px (the object 25.77 against 25.36 dB; results/tuning/denoise/noise_only/).
 K_SIGMA = 3.0  # a neighbour farther than this many standard deviations is another surface
 SLOPE_FOOTPRINTS = 2.0  # first pass: a neighbour d px away may differ by d times this
 #                         many footprints more (a surface inclined up to 63 degrees)
