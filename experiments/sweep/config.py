@@ -24,7 +24,7 @@ import difflib
 import math
 import tomllib
 from collections.abc import Callable
-from dataclasses import MISSING, dataclass
+from dataclasses import MISSING, dataclass, is_dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +46,7 @@ from experiments.tasks.settings import (
     STREAM,
     valid_splat_scale,
 )
-from experiments.sweep.tasks import TASKS, TaskUnavailable
+from experiments.sweep.tasks import TASKS, TaskUnavailable, nested_default
 
 
 class ConfigError(ValueError):
@@ -223,9 +223,54 @@ def _task_fields() -> dict[str, Any]:
     return out
 
 
+def _nested_spec(key: str) -> Spec | None:
+    """A dotted setting of a task's nested config (``evidence.forget_after``), checked
+    by its default's type; None when ``key`` names none."""
+    for kind in TASKS.values():
+        try:
+            default = nested_default(kind.name, key) if kind.available() else None
+        except (KeyError, TaskUnavailable):
+            continue
+        return Spec((type(default),) if default is not None else (), "nested setting")
+    return None
+
+
+def _flatten(table: dict, prefix: str = "") -> dict:
+    """A TOML table with the dotted settings it holds as nested tables
+    (``evidence.forget_after = 0`` reads as ``{"evidence": {"forget_after": 0}}``) made
+    flat again: ``{"evidence.forget_after": 0}``; a table under any other key is left for
+    the value checks to refuse."""
+    flat = {}
+    for key, value in table.items():
+        name = prefix + key
+        if isinstance(value, dict) and (prefix or name in _nested_heads()):
+            flat.update(_flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def _nested_heads() -> set[str]:
+    """The task fields that hold a nested config (``evidence``, ``growth``, ...)."""
+    heads = set()
+    for kind in TASKS.values():
+        try:
+            fields = kind.fields() if kind.available() else {}
+        except TaskUnavailable:
+            continue
+        for name, f in fields.items():
+            default = f.default if f.default is not MISSING else (
+                f.default_factory() if f.default_factory is not MISSING else None)
+            if is_dataclass(default):
+                heads.add(name)
+    return heads
+
+
 def _spec_for(key: str, where: str, extra: dict[str, Any]) -> Spec:
     if key in SETTINGS:
         return SETTINGS[key]
+    if "." in key and (spec := _nested_spec(key)) is not None:
+        return spec
     if key in extra:  # a task field the table above does not know: check by its default
         default = extra[key]
         types = (type(default),) if default not in (None, MISSING) else ()
@@ -291,6 +336,7 @@ def parse_config(data: dict, source: str = "<config>") -> SweepConfig:
     grids = data.get("grid")
     if not isinstance(grids, list) or not grids or not all(isinstance(g, dict) for g in grids):
         raise ConfigError(f"{source}: grid: give at least one [[grid]] table")
+    fixed, grids = _flatten(fixed), [_flatten(g) for g in grids]
     extra = _task_fields()
     for key, value in fixed.items():
         where = f"{source}: fixed.{key}"

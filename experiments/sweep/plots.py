@@ -1,5 +1,6 @@
 """Figures of a sweep: PSNR against components, PSNR against seconds, forgetting
-curves and a grid of renders. Each function returns ``(path, note)``: the PNG written,
+curves, a grid of renders and, on scenes that change, each learner's PSNR over the
+changed and the unchanged pixels. Each function returns ``(path, note)``: the PNG written,
 or ``None`` and a note saying why there is nothing to plot."""
 
 from __future__ import annotations
@@ -23,14 +24,16 @@ from matplotlib.ticker import (  # noqa: E402
 from experiments.sweep.cells import as_picture  # noqa: E402
 from vbgs.data.images import read_rgb  # noqa: E402
 
-# Settings that tell lines apart (when they vary); the others are averaged over.
-LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth")
+# Settings that tell lines apart (when they vary), with any dotted setting of a nested
+# config (``evidence.forget_after``); the others are averaged over.
+LINE_STYLE = ("method", "init", "stream", "assign", "replay", "estep", "depth", "from_frame")
 MAX_RENDERS_PER_ROW, MAX_RENDER_ROWS = 10, 10
 RENDER_FIGURE_WIDTH = 14.0  # inches: about 1500 px at the figures' 110 dpi
 
 
 def _line_columns(df: pd.DataFrame, style: list[str]) -> list[str]:
-    return [c for c in LINE_STYLE if c in style and c in df
+    names = [*LINE_STYLE, *sorted(c for c in style if "." in c)]
+    return [c for c in names if c in style and c in df
             and df[c].astype(str).nunique() > 1]
 
 
@@ -241,3 +244,69 @@ def plot_renders(df: pd.DataFrame, style: list[str], out: Path, path: Path):
         else:
             ax.set_xticks([])
     return _save(fig, path, "Target and renders (PSNR in dB, k = components)"), ""
+
+
+# The scores of a changing world's cells (experiments.tasks.change_scores), as drawn.
+CHANGE_BARS = (("psnr_unchanged", "unchanged pixels (what is still there)", "tab:blue"),
+               ("psnr_changed", "changed pixels (what moved, left or arrived)", "tab:orange"))
+
+
+def _learner(row: pd.Series, cols: list[str]) -> str:
+    """A learner's name in words from the settings that tell the cells apart (the ones
+    a changing-world study varies in words, any other as ``name=value``)."""
+    parts = []
+    for c in cols:
+        v = row.get(c)
+        if v is None or pd.isna(v):
+            continue
+        v = _plain(v)
+        if c == "method":
+            parts.append({"vbgs": "VBGS", "gradient": "gradient",
+                          "vbgs-polish": "VBGS-polish"}.get(v, str(v)))
+        elif c == "replay":
+            parts.append(f"replay {v}" if row.get("method") != "vbgs" else "")
+        elif c == "from_frame":
+            parts.append(f"fresh map from frame {v}" if v else "")
+        elif c == "evidence.forget_after":
+            parts.append(f"forget after {v}" if v else "no forgetting")
+        elif c == "evidence.recolour_sigmas":
+            parts.append(f"colour {v} sigmas" if v else "")
+        else:
+            parts.append(f"{c}={v}")
+    return ", ".join(p for p in parts if p) or "all cells"
+
+
+def plot_changes(df: pd.DataFrame, style: list[str], path: Path):
+    """One panel per scene that changed: a pair of bars per learner (the line style,
+    averaged over seeds), its final map's PSNR over the test views' changed pixels and
+    over the unchanged ones, the final-state PSNR over all pixels written beside them."""
+    if df.empty or "psnr_changed" not in df or not df["psnr_changed"].notna().any():
+        return None, ("skipped: no cell reports `psnr_changed` (scenes that change: "
+                      "object-change, room-change)")
+    df = df[df["psnr_changed"].notna()]
+    cols = _line_columns(df, style)
+    df = df.assign(_label=df.apply(lambda row: _learner(row, cols), axis=1))
+    panels = list(df.groupby(["task", "dataset"], sort=True))
+    learners = max(part["_label"].nunique() for _, part in panels)
+    fig, axes = _panels(len(panels), width=6.2, height=1.0 + 0.55 * learners)
+    for ax, ((task, dataset), part) in zip(axes, panels, strict=False):
+        names = [m for m, _, _ in CHANGE_BARS] + ["psnr"]
+        stats = part.groupby("_label", sort=True)[names].mean(numeric_only=True)
+        stats = stats.sort_values("psnr")
+        y = np.arange(len(stats))
+        for i, (name, label, colour) in enumerate(CHANGE_BARS):
+            values = stats[name].to_numpy(float)
+            ax.barh(y + (0.2 if i == 0 else -0.2), values, height=0.38, color=colour,
+                    label=label)
+            for yy, v in zip(y + (0.2 if i == 0 else -0.2), values, strict=True):
+                ax.text(v + 0.2, yy, f"{v:.1f}", va="center", fontsize=7)
+        ax.set_yticks(y, [f"{label}\nall pixels {p:.2f} dB"
+                          for label, p in zip(stats.index, stats["psnr"], strict=True)],
+                      fontsize=7)
+        ax.set_xlim(0, float(np.nanmax(stats[names].to_numpy(float))) + 3)
+        ax.set_xlabel("final-state PSNR (dB)")
+        ax.set_title(f"{task}: {dataset}")
+        ax.grid(alpha=0.3, axis="x")
+    _legend(fig, axes)
+    return _save(fig, path, "A world that changes: PSNR of the final map on the pixels that "
+                 "changed and on the rest"), ""

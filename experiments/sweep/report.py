@@ -7,7 +7,9 @@ the ELBO trace or the forgetting curve stay in ``cells/<key>.json``.
 ``tables.md`` gives PSNR / SSIM / depth L1 (and, where cells report them, forgetting =
 PSNR of the early views when seen minus at the end, seconds per frame, peak memory and
 replay-buffer size, and the continual-learning metrics of cells with a matrix:
-average final PSNR, forgetting and backward transfer, :mod:`experiments.tasks.continual`)
+average final PSNR, forgetting and backward transfer, :mod:`experiments.tasks.continual`;
+and of cells on a scene that changes, the PSNR over its changed and unchanged pixels, the
+unchanged pixels' retention and the first state's PSNR, :mod:`experiments.tasks.change_scores`)
 as mean ± std over seeds (n = number of seeds), one table per task,
 one row per combination of the other settings. A setting a
 cell does not have (``assign`` for a batch fit, say) shows as "—".
@@ -25,6 +27,7 @@ from experiments.provenance import first_line
 from experiments.sweep.cells import cell_path, load_record
 from experiments.sweep.cl_report import plot_cl_matrices, write_cl_matrix
 from experiments.sweep.plots import (
+    plot_changes,
     plot_forgetting,
     plot_psnr_vs_components,
     plot_psnr_vs_seconds,
@@ -41,6 +44,9 @@ GROUP_ORDER = ("task", "dataset", "method", "components", "init", "stream", "ord
 METRICS = (("psnr", "PSNR (dB)"), ("ssim", "SSIM"), ("depth_l1", "depth L1"),
            ("forgetting_db", "forgetting (dB)"), ("cl_avg_final_psnr", "CL final PSNR (dB)"),
            ("cl_forgetting", "CL forgetting (dB)"), ("cl_backward_transfer", "CL BWT (dB)"),
+           ("psnr_changed", "changed px (dB)"), ("psnr_unchanged", "unchanged px (dB)"),
+           ("unchanged_retention", "unchanged retention (dB)"),
+           ("psnr_first_state", "first state (dB)"),
            ("seconds", "fit s"),
            ("seconds_per_frame", "s/frame"), ("peak_memory_mb", "peak MB"),
            ("replay_mb", "replay MB"), ("components_used", "used"),
@@ -268,6 +274,7 @@ def write_report(out: Path) -> dict:
         "renders": plot_renders(ok, style, out, out / "renders.png"),
         "PSNR against sensor noise and holes": plot_robustness(ok, out / "robustness.png"),
         "continual-learning matrices": plot_cl_matrices(records, out / "cl_matrix.png"),
+        "a world that changes": plot_changes(ok, style, out / "changing.png"),
     }
     robustness = write_robustness_table(ok, out / "robustness.md", robustness_header(plan))
     cl_csv, _ = write_cl_matrix(records, out / "cl_matrix.csv")

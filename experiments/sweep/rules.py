@@ -18,10 +18,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from experiments.sweep.tasks import DESCRIPTIVE, TASKS, task_fields
+from experiments.sweep.tasks import DESCRIPTIVE, TASKS, is_nested, task_fields
 from vbgs.sensors import HOLED_SENSORS
 
 SKIP, DROP = "skip", "drop"
+# The scene task's nested configs that only VBGS's map reads (vbgs.mapping.Config): a
+# dotted setting under one (``evidence.forget_after``) is dropped for the gradient
+# baseline, one under ``baseline`` (its trainer) for VBGS.
+VBGS_CONFIGS = ("prior", "growth", "evidence", "budget")
 
 
 @dataclass(frozen=True)
@@ -118,8 +122,18 @@ def apply_rules(settings: dict) -> Verdict:
             dropped.append((rule.setting, rule.reason))
     for name, _ in dropped:
         s.pop(name, None)
+    for name in sorted(n for n in s if "." in n and is_nested(s["task"], n)):
+        head = name.partition(".")[0]
+        if head in VBGS_CONFIGS and _gradient(s):
+            dropped.append((name, "a constant of VBGS's map; the gradient baseline has none"))
+            s.pop(name)
+        elif head == "baseline" and s.get("method") == "vbgs":
+            dropped.append((name, "a constant of the gradient learners' trainer"))
+            s.pop(name)
     fields = task_fields(s["task"]) | set(DESCRIPTIVE)
     for name in sorted(set(s) - fields):
+        if "." in name and is_nested(s["task"], name):
+            continue  # a dotted setting of the task's nested configs
         dropped.append((name, f"not a setting of the {s['task']} task"))
         s.pop(name)
     return Verdict(s, "; ".join(f"{name} dropped ({why})" for name, why in dropped))

@@ -11,6 +11,13 @@ code changes here. The only translations are listed in :class:`TaskKind`:
   (as ``fit-image --reassign auto`` does);
 * ``depth_model = "sensor"`` means ``None``: use the dataset's own depth.
 
+A field that holds a nested config of method constants (the scene task's ``evidence``,
+``growth``, ``prior``, ``budget``, ``baseline``) is reached by dotted name,
+``evidence.forget_after``, as ``tune`` reaches it (a TOML table ``evidence.forget_after =
+[6, 0]`` in a grid is read as that name): :func:`nested_default` gives its default,
+:func:`build_task` sets it with :func:`vbgs.mapping.with_dotted`, and the nested config
+refuses a value it cannot take.
+
 Modules are imported lazily, so a task whose module is not there yet (the scene task
 while it is being written) only fails for the cells that need it.
 """
@@ -115,15 +122,50 @@ def task_fields(task: str) -> set[str]:
     return (set(kind.fields()) - {kind.dataset_field}) | {"dataset"}
 
 
+def nested_default(task: str, name: str):
+    """The default of the dotted setting ``name`` (``evidence.forget_after``) of ``task``:
+    a leaf of a field that holds a nested config. KeyError when ``name`` is not one."""
+    head, dot, rest = name.partition(".")
+    f = TASKS[task].fields().get(head)
+    if not dot or f is None:
+        raise KeyError(name)
+    config = f.default if f.default is not dataclasses.MISSING else (
+        f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+    for part in rest.split("."):
+        if not dataclasses.is_dataclass(config) or part not in {
+                g.name for g in dataclasses.fields(config)}:
+            raise KeyError(name)
+        config = getattr(config, part)
+    if dataclasses.is_dataclass(config):  # a config, not one of its constants
+        raise KeyError(name)
+    return config
+
+
+def is_nested(task: str, name: str) -> bool:
+    """Whether ``name`` is a dotted setting of ``task`` (:func:`nested_default`)."""
+    try:
+        nested_default(task, name)
+    except KeyError:
+        return False
+    return True
+
+
 def build_task(settings: dict):
-    """The task object for a cell: its dataclass built from the settings it has fields for."""
+    """The task object for a cell: its dataclass built from the settings it has fields for,
+    then its dotted settings set in its nested configs."""
+    from vbgs.mapping import with_dotted  # JAX: imported when a cell is built
+
     kind = TASKS[settings["task"]]
     cls, _ = kind.load()
     values = dict(settings)
     values[kind.dataset_field] = values.pop("dataset")
     values = kind.translate(values)
     names = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{k: v for k, v in values.items() if k in names})
+    task = cls(**{k: v for k, v in values.items() if k in names})
+    for name, value in sorted(values.items()):
+        if "." in name and is_nested(settings["task"], name):
+            task = with_dotted(task, name, value)
+    return task
 
 
 def run_task(settings: dict) -> dict:

@@ -50,7 +50,7 @@ from experiments.tasks.continual import (
     stream_segments,
 )
 from experiments.tasks.change_scores import FIELDS as CHANGE_FIELDS
-from experiments.tasks.change_scores import change_scores
+from experiments.tasks.change_scores import change_scores, frames_before_change
 from experiments.tasks.init_schemes import oracle_start
 from experiments.progress import progress as progress_bar
 from vbgs.compilation import compile_seconds
@@ -243,7 +243,11 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
     n_early = max(1, int(round(EARLY_FRACTION * len(order))))
     checkpoints = set(np.linspace(n_early, len(order), CURVE_POINTS).round().astype(int))
     segments = stream_segments(scene, order, task.cl_segments) if task.cl_segments else None
+    # a changing world: the test views rendered once more just before its first changed
+    # frame arrives (experiments.tasks.change_scores: the unchanged pixels' retention)
+    change_step = frames_before_change(scene.changes, order)
     curve, frame_seconds, compiling, rows, cl_seconds = [], [], 0.0, [], 0.0
+    before = None
     for step, frame, background in stream_frames(task, scene, order, progress=progress,
                                                  arrive=arrive):
         t0, c0 = time.perf_counter(), compile_seconds()
@@ -251,6 +255,8 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
             frame_seconds.append(time.perf_counter() - t0)
             compiling += compile_seconds() - c0
         diagnose(learner, frame)
+        if step == change_step:
+            before = evaluate(learner.splats(), scene.test, background, learner.blur).renders
         cl_views = segments.views_at(step) if segments else []
         if step in checkpoints or cl_views:
             t0 = time.perf_counter()
@@ -278,7 +284,7 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
         uncovered=final.uncovered, images={"target": [f.rgb for f in scene.test], "render": final.renders},
         oracle_start=oracle_start(task.init), seconds_compiling=compiling,
         continual=continual_scores(segments, rows, cl_seconds) if segments else None,
-        changes=change_scores(scene, final.renders))
+        changes=change_scores(scene, final.renders, before))
 
 
 PROGRESS_BLOCK = 50  # static protocol: steps between progress-bar updates

@@ -48,11 +48,14 @@ def warn_forgotten(details: dict, task) -> None:
     n = details.get("components_forgotten", 0)
     if not n:
         return
-    print(f"note: {n} components were forgotten: later frames saw through them "
+    colour = task.evidence.recolour_sigmas > 0  # --recolour-sigmas: colour counts too
+    print(f"note: {n} components were forgotten: later frames saw through them"
+          f"{' or showed them in another colour' if colour else ''} "
           f"{task.evidence.forget_after} frames in a row, so the map took what they showed "
           f"as gone and grew what stands there now; on a world that did not change this "
-          f"removes thin structures the depth misses (posts, branches), and "
-          f"--forget-after 0 keeps everything (the JSON's components_forgotten)",
+          f"removes thin structures the depth misses (posts, branches)"
+          f"{' and, by colour, rims between differently coloured faces' if colour else ''}, "
+          f"and --forget-after 0 keeps everything (the JSON's components_forgotten)",
           file=sys.stderr)
 
 

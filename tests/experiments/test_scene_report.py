@@ -13,6 +13,20 @@ def test_forgotten_components_are_said_with_the_count_and_the_way_back(capsys):
     warn_forgotten({"components_forgotten": 0}, SceneTask())  # nothing forgotten: silent
     warn_forgotten({}, SceneTask())  # a learner without a map: silent
     assert capsys.readouterr().err == ""
+    assert "another colour" not in _forgotten(capsys, SceneTask())
+
+
+def _forgotten(capsys, task) -> str:
+    warn_forgotten({"components_forgotten": 3}, task)
+    return capsys.readouterr().err
+
+
+def test_forgetting_by_colour_is_said_when_colour_counts(capsys):
+    from vbgs.mapping import with_dotted
+
+    err = _forgotten(capsys, with_dotted(SceneTask(), "evidence.recolour_sigmas", 4.0))
+    assert "saw through them or showed them in another colour" in err
+    assert "rims between differently coloured faces" in err
 
 
 def test_all_warnings_of_a_clean_run_are_silent_and_of_a_poor_one_speak(capsys):

@@ -233,3 +233,37 @@ def test_a_splat_scale_is_a_number_or_auto():
                                   "components": 100, "splat_scale": ["auto", 1.35, 1]}]}
     cells = expand(parse_config(doc, "ok.toml")).cells
     assert [c.as_dict()["splat_scale"] for c in cells] == ["auto", 1.35, 1]
+
+
+def test_a_nested_constant_is_a_dotted_setting():
+    """``evidence.forget_after = [6, 0]`` (a TOML dotted key) sweeps the map's constant:
+    each value a cell, set in the task's nested config; dropped for the gradient baseline,
+    which has no such map; a value the config refuses is refused before any cell runs."""
+    import tomllib
+
+    from experiments.sweep.tasks import build_task
+
+    doc = tomllib.loads('name = "t"\n[[grid]]\ntask = "scene"\ndataset = "object-change"\n'
+                        'method = ["vbgs", "gradient"]\nevidence.forget_after = [6, 0]\n'
+                        'evidence.recolour_sigmas = 4\n')
+    cells = [c.as_dict() for c in expand(parse_config(doc)).cells]
+    vbgs = sorted((c for c in cells if c["method"] == "vbgs"),
+                  key=lambda c: c["evidence.forget_after"])
+    assert [c["evidence.forget_after"] for c in vbgs] == [0, 6]
+    task = build_task(vbgs[0])
+    assert task.evidence.forget_after == 0 and task.evidence.recolour_sigmas == 4
+    gradient = [c for c in cells if c["method"] == "gradient"]
+    assert len(gradient) == 1 and not any("." in k for k in gradient[0])
+    with pytest.raises(ConfigError, match="evidence.forget_after"):
+        parse_config({"name": "t", "grid": [{"task": "scene", "dataset": "object",
+                                             "evidence": {"forget_after": "six"}}]})
+    with pytest.raises(ConfigError, match="evidence.forget_aftr"):
+        parse_config({"name": "t", "grid": [{"task": "scene", "dataset": "object",
+                                             "evidence": {"forget_aftr": 3}}]})
+
+
+def test_the_changing_study_config_plans_each_learner():
+    cells = [c.as_dict() for c in expand(load_config(CONFIGS / "continual_changing.toml")).cells]
+    learners = {(c["method"], c.get("replay", "none"), c.get("evidence.forget_after"),
+                 c.get("evidence.recolour_sigmas"), c.get("from_frame", 0)) for c in cells}
+    assert len(cells) == 4 * len(learners) == 36

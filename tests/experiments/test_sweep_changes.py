@@ -1,0 +1,61 @@
+"""A sweep on scenes that change: tables.md gains the changed / unchanged pixels' PSNR and
+the unchanged pixels' retention, and changing.png draws them per learner. No cell is
+computed here: records are stored by hand."""
+
+import json
+
+import pandas as pd
+
+from experiments.sweep.cells import store_record
+from experiments.sweep.plots import _learner
+from experiments.sweep.report import write_report
+
+
+def _record(key: str, settings: dict, changed: float, unchanged: float) -> dict:
+    result = {"psnr": (changed + unchanged) / 2, "ssim": 0.5, "components_used": 100,
+              "seconds": 1.0, "replay_bytes": 0, "psnr_changed": changed,
+              "psnr_unchanged": unchanged, "unchanged_retention": -0.5,
+              "psnr_first_state": 15.0}
+    return {"key": key, "status": "ok", "version": "test", "result": result,
+            "settings": {"task": "scene", "dataset": "object-change", "seed": 0, **settings}}
+
+
+def test_a_changing_sweep_reports_changed_and_unchanged_pixels(tmp_path):
+    cells = [({"method": "vbgs", "evidence.forget_after": 6}, 20.0, 29.0),
+             ({"method": "vbgs", "evidence.forget_after": 0}, 11.0, 28.0),
+             ({"method": "gradient", "replay": "fifo:8"}, 14.0, 24.0)]
+    keys = []
+    for i, (settings, changed, unchanged) in enumerate(cells):
+        keys.append(f"{i:016x}")
+        store_record(tmp_path, _record(keys[-1], settings, changed, unchanged))
+    (tmp_path / "plan.json").write_text(json.dumps(
+        {"name": "t", "cells": [{"key": k} for k in keys]}))
+    summary = write_report(tmp_path)
+    tables = (tmp_path / "tables.md").read_text()
+    for column in ("changed px (dB)", "unchanged px (dB)", "unchanged retention (dB)",
+                   "first state (dB)"):
+        assert column in tables
+    assert (tmp_path / "changing.png").is_file()
+    assert str(tmp_path / "changing.png") in summary["figures"]
+
+
+def test_a_learner_is_named_in_words():
+    cols = ["method", "replay", "from_frame", "evidence.forget_after",
+            "evidence.recolour_sigmas"]
+    row = pd.Series({"method": "vbgs", "replay": "none", "from_frame": 0,
+                     "evidence.forget_after": 6.0, "evidence.recolour_sigmas": 4.0})
+    assert _learner(row, cols) == "VBGS, forget after 6, colour 4 sigmas"
+    row = pd.Series({"method": "vbgs", "replay": "none", "from_frame": 15,
+                     "evidence.forget_after": 0, "evidence.recolour_sigmas": 0})
+    assert _learner(row, cols) == "VBGS, fresh map from frame 15, no forgetting"
+    row = pd.Series({"method": "gradient", "replay": "fifo:8", "from_frame": 0,
+                     "evidence.forget_after": float("nan")})
+    assert _learner(row, cols) == "gradient, replay fifo:8"
+
+
+def test_a_sweep_without_changing_scenes_draws_no_change_bars(tmp_path):
+    from experiments.sweep.plots import plot_changes
+
+    df = pd.DataFrame([{"task": "scene", "dataset": "object", "psnr": 20.0}])
+    path, note = plot_changes(df, ["task", "dataset"], tmp_path / "changing.png")
+    assert path is None and "psnr_changed" in note
