@@ -40,9 +40,10 @@ of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noi
 itself is chosen in ``results/tuning/denoise/``: radius 1, 25.29). Test views, fit-scene's
 defaults (``results/sensors/``): object 23.76 -> 24.30 dB (exact 25.97), room 21.83 ->
 21.83 (22.59), walk 14.01 -> 13.94 (its far ground lies beyond the Kinect's range). The
-RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``): validation object 15.28 -> 19.00
-dB, room 17.10 -> 19.50; at radius 2 21.36 and 20.53 (``results/tuning/denoise/realsense/``:
-a noise of several footprints wants the wider window). Cost, jitted (the window's offsets unrolled into one fused pass):
+RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``), validation views at today's code
+(``results/tuning/denoise/realsense/``): object 15.23 -> 18.62 dB, room 17.27 -> 19.47 at
+radius 1; at radius 2 21.29 and 20.53, a noise of several footprints wanting the wider
+window (the default radius is the Kinect's; one radius per sensor is not yet chosen). Cost, jitted (the window's offsets unrolled into one fused pass):
 15 ms a frame at 640 x 480 at radius 1, 26 ms at radius 2, on a quiet 2-core CPU (the
 NumPy version it replaced: 180 and 360 ms with the cores shared), against some 0.25 s for
 the rest of a budgeted frame. End to end it saves time: ``python -m experiments.run
