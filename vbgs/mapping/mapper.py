@@ -380,8 +380,7 @@ def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, wei
         reach = state.stepper.reach * 2.0**levels
     before = state.mixture.posterior
     if camera is not None and pixel is not None:  # a thinned frame searched on its lattice
-        camera, pixel = on_lattice(camera, pixel, stride(int(camera.width), int(camera.height),
-                                                         config.budget.points))
+        camera, pixel = on_lattice(camera, pixel, _stride(camera, config))
     mixture, step = state.stepper(state.mixture, xyz, rgb, ray, reach, weight, camera, pixel)
     return state._replace(mixture=mixture), before, step.elbo, step.learned
 
@@ -462,8 +461,8 @@ def pixel_grid(pixel, camera, footprint, config: Config) -> PixelGrid | None:
     when any is missing (bare points)."""
     if pixel is None or camera is None or footprint is None:
         return None
-    w, h = int(camera.width), int(camera.height)
-    return PixelGrid(np.asarray(pixel), (h, w), stride(w, h, config.budget.points),
+    return PixelGrid(np.asarray(pixel), (int(camera.height), int(camera.width)),
+                     _stride(camera, config),
                      np.asarray(footprint), np.asarray(camera.pose, np.float64)[:3, 3])
 
 
@@ -510,12 +509,17 @@ def _within_budget(state: MapState, frame: Frame, config: Config
     the offset drawn under the state's key, split only when the frame is thinned) and
     the kept points' weights; the frame's own depth and None within the budget."""
     b = config.budget
-    cam = frame.camera
-    if stride(int(cam.width), int(cam.height), b.points) == 1:
+    if _stride(frame.camera, config) == 1:
         return state, frame.depth, None
     key, sub = jax.random.split(state.key)
     depth, weight = thin(frame.depth, b.points, key=sub, weighted=b.weighted)
     return state._replace(key=key), depth, weight
+
+
+def _stride(camera, config: Config) -> int:
+    """The lattice a frame of ``camera``'s size is thinned to under ``budget.points``
+    (:func:`vbgs.mapping.budget.stride`; 1: learned whole)."""
+    return stride(int(camera.width), int(camera.height), config.budget.points)
 
 
 def _unexplained(state: MapState, xyz, footprint, config: Config
