@@ -46,7 +46,7 @@ from experiments.tasks.settings import (
     STREAM,
     valid_splat_scale,
 )
-from experiments.sweep.tasks import TASKS, TaskUnavailable, nested_default
+from experiments.sweep.tasks import TASKS, TaskUnavailable, field_default, nested_default
 
 
 class ConfigError(ValueError):
@@ -258,11 +258,7 @@ def _nested_heads() -> set[str]:
             fields = kind.fields() if kind.available() else {}
         except TaskUnavailable:
             continue
-        for name, f in fields.items():
-            default = f.default if f.default is not MISSING else (
-                f.default_factory() if f.default_factory is not MISSING else None)
-            if is_dataclass(default):
-                heads.add(name)
+        heads.update(name for name, f in fields.items() if is_dataclass(field_default(f)))
     return heads
 
 

@@ -122,23 +122,29 @@ def task_fields(task: str) -> set[str]:
     return (set(kind.fields()) - {kind.dataset_field}) | {"dataset"}
 
 
+def field_default(f: dataclasses.Field):
+    """A dataclass field's default (its factory's product; None when it has neither)."""
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    return f.default_factory() if f.default_factory is not dataclasses.MISSING else None
+
+
 def nested_default(task: str, name: str):
     """The default of the dotted setting ``name`` (``evidence.forget_after``) of ``task``:
     a leaf of a field that holds a nested config. KeyError when ``name`` is not one."""
+    from vbgs.mapping.config import get_dotted  # the task's fields imported JAX already
+
     head, dot, rest = name.partition(".")
     f = TASKS[task].fields().get(head)
     if not dot or f is None:
         raise KeyError(name)
-    config = f.default if f.default is not dataclasses.MISSING else (
-        f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
-    for part in rest.split("."):
-        if not dataclasses.is_dataclass(config) or part not in {
-                g.name for g in dataclasses.fields(config)}:
-            raise KeyError(name)
-        config = getattr(config, part)
-    if dataclasses.is_dataclass(config):  # a config, not one of its constants
+    try:
+        value = get_dotted(field_default(f), rest)
+    except ValueError:
+        raise KeyError(name) from None
+    if dataclasses.is_dataclass(value):  # a config, not one of its constants
         raise KeyError(name)
-    return config
+    return value
 
 
 def is_nested(task: str, name: str) -> bool:
