@@ -10,8 +10,9 @@ copy of the learner gets the task with that setting (``dataclasses.replace``) an
 learner gathers for a render setting (:data:`GATHERED`, the colour fit) depend on the
 other render settings: while it is gathered, the stream is learned once per
 combination of the other grid settings. So a grid
-parameter must be a task field the learner reads at render time: fields that change
-the fit itself (:data:`FIT_FIELDS`) are refused. The grid is given by name
+parameter is a task field the learner reads at render time (:data:`RENDER_FIELDS`), or
+one of how the fit runs that is learned once per value (:data:`RELEARNED`: the
+candidate search); fields that change what is learned or scored are refused. The grid is given by name
 (``--grid splat_scale=0.5,0.7,1.0 opacity=0.5,0.9``), so a new render setting needs
 no change here.
 
@@ -53,14 +54,15 @@ from experiments.provenance import code_version, first_line
 from vbgs.data.streams import stream_order
 from vbgs.mapping import dotted_names, get_dotted, with_dotted
 
-# Task fields that change what is learned (or what is scored): a re-render cannot tune them.
-# opacity_rule too: a learner gathers opacity evidence while learning only under its rule.
-FIT_FIELDS = frozenset({
-    "scene", "format", "method", "components", "frames", "n_test", "n_val", "size", "order",
-    "assign", "estep", "candidates", "init", "seed", "depth_model", "depth_kind",
-    "depth_preset", "depth_align", "background", "replay", "steps_per_frame", "steps",
-    "protocol", "prior", "growth", "evidence", "budget", "baseline", "opacity_rule",
-})
+# Task fields the learner reads when it turns what it learned into splats: a grid of them
+# re-renders one learned stream. Every other task field changes what is learned or what
+# is scored, and is refused unless it is one of RELEARNED below.
+RENDER_FIELDS = frozenset({"opacity", "splat_scale", "splat_blur", "colour_rule",
+                           "colour_ridge"})
+# Task fields of how the fit runs, not of what it is shown or scored on: the stream is
+# learned once per value, as for a nested method constant (the candidate search and its
+# count, the E-step's form).
+RELEARNED = frozenset({"search", "candidates", "estep"})
 
 # Render settings whose data a learner gathers while learning, under one value only (the
 # VBGS learner gathers the colour least squares only under colour_rule "fit"; the
@@ -81,6 +83,12 @@ def is_nested_setting(name: str) -> bool:
     """True for a grid name that names a method constant of a nested config
     (``prior.cov_scale``, ``growth.reach_cells``, ``evidence.pass_sigmas``)."""
     return name.partition(".")[0] in NESTED and "." in name
+
+
+def is_relearned(name: str) -> bool:
+    """True for a grid name whose every value is learned anew: a nested method constant,
+    or a task field of :data:`RELEARNED`."""
+    return is_nested_setting(name) or name in RELEARNED
 
 
 def nested_names(task) -> list[str]:
@@ -126,12 +134,15 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
         if is_nested_setting(name) and name not in known_prior:
             raise ValueError(f"--grid: {name!r} is not a method constant; write one of "
                              f"{', '.join(sorted(known_prior))}")
+        tunable = sorted((RENDER_FIELDS | RELEARNED) & known)
         if name not in known and not is_nested_setting(name):
-            raise ValueError(f"--grid: {name!r} is not a task setting; render settings: "
-                             f"{', '.join(sorted(known - FIT_FIELDS))}")
-        if name in FIT_FIELDS:
-            raise ValueError(f"--grid: {name!r} changes the fit, not the render, so one stream "
-                             f"cannot tune it; compare it with `python -m experiments.run sweep`")
+            raise ValueError(f"--grid: {name!r} is not a task setting; settings: "
+                             f"{', '.join(tunable)} or a dotted method constant")
+        if name in known and name not in RENDER_FIELDS | RELEARNED:
+            raise ValueError(f"--grid: {name!r} changes what is learned or scored, so "
+                             f"validation views cannot tune it; tunable here: "
+                             f"{', '.join(tunable)} (and dotted method constants); compare "
+                             f"it with `python -m experiments.run sweep`")
         if name in grid:
             raise ValueError(f"--grid: {name!r} is given twice; list all its values in one entry")
         if is_nested_setting(name):
@@ -199,7 +210,7 @@ def tune(task, scene, grid: dict[str, list], *, progress: bool = False) -> list[
     gather = {name: value for name, value in GATHERED.items()
               if name in grid or getattr(task, name, None) == value}
     relearn = {name: values for name, values in grid.items()
-               if is_nested_setting(name)
+               if is_relearned(name)
                or (gather and name not in gather and name not in SOLVE_ONLY)}
     rows = []
     for fixed in settings(relearn):  # [{}] when nothing is relearned: one stream in all

@@ -61,7 +61,9 @@ def test_every_method_constant_is_reached_by_its_dotted_name():
     (["prior.cov_scale=big"], "cannot read 'big' as float"),
     (["opacity"], "write NAME=V1,V2"),
     (["colour=1,2"], "'colour' is not a task setting"),
-    (["components=100,200"], "'components' changes the fit, not the render"),
+    (["components=100,200"], "'components' changes what is learned or scored"),
+    (["sensor=exact,kinect"], "'sensor' changes what is learned or scored"),
+    (["simulate_sensor=exact,kinect"], "'simulate_sensor' changes what is learned"),
     (["opacity=0.5", "opacity=0.9"], "'opacity' is given twice"),
     (["opacity=high"], "cannot read 'high' as float"),
 ])
@@ -106,6 +108,23 @@ def test_a_prior_value_equals_a_fresh_stream_under_that_prior():
         learner.learn(frame, background)
     fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
     assert by_value[0.2] == pytest.approx(fresh.psnr, abs=1e-4)
+
+
+def test_the_candidate_search_is_learned_once_per_value():
+    """``search`` changes which components a point is scored against: each value is a
+    stream of its own (not a re-render of one), equal to a learner streamed anew with it."""
+    task = replace(TINY, init="stream", components=400)
+    scene = load_task_scene(task)
+    rows = tune(task, scene, {"search": ["kdtree", "projective"]})
+    by_value = {r["search"]: r["val_psnr"] for r in rows}
+    assert by_value["kdtree"] != by_value["projective"]
+    fresh_task = replace(task, search="projective")
+    learner = VbgsLearner(fresh_task, scene)
+    order = stream_order(len(scene.train), task.order, seed=task.seed)
+    for _, frame, background in stream_frames(fresh_task, scene, order):
+        learner.learn(frame, background)
+    fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
+    assert by_value["projective"] == pytest.approx(fresh.psnr, abs=1e-4)
 
 
 def test_the_gradient_baseline_is_tuned_static_by_its_dotted_constants():
@@ -178,7 +197,7 @@ def test_tune_command_writes_its_table_headed_by_the_command(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--grid", "frames=2,3"], "'frames' changes the fit, not the render"),
+    (["--grid", "frames=2,3"], "'frames' changes what is learned or scored"),
     (["--val-views", "0"], "--val-views must be at least 1"),
 ])
 def test_tune_refuses_bad_input_before_any_work(extra, message, tmp_path, capsys, monkeypatch):
