@@ -15,12 +15,13 @@ from vbgs.io_atomic import write_atomic
 UNLEARNED_WARNING = 0.01
 
 
-def warn_unlearned(share: float, task) -> None:
+def warn_unlearned(share: float, task, search: str | None = None) -> None:
     """Say on stderr, in words, when a stream left part of its points unlearned (its
-    budget of components spent before new ground arrived): the picture then misses it."""
+    budget of components spent before new ground arrived): the picture then misses it.
+    ``search``: the candidate search the frames took (None: the task's)."""
     if share <= UNLEARNED_WARNING:
         return
-    if task.search == "projective":  # its own cause comes first
+    if (search or task.search) == "projective":  # its own cause comes first
         print(f"warning: {share:.1%} of the training points were not learned: the "
               f"projective search listed no component near them (a tile is a fixed number "
               f"of pixels, so frames spanning a wide range of depths lose points), so the "
@@ -36,7 +37,7 @@ def warn_unlearned(share: float, task) -> None:
 def warn_all(details: dict, task, uncovered: float) -> None:
     """Every warning of a finished scene run (:func:`warn_unlearned`,
     :func:`warn_capped`, :func:`warn_forgotten`, :func:`warn_uncovered`)."""
-    warn_unlearned(details.get("points_unlearned", 0.0), task)
+    warn_unlearned(details.get("points_unlearned", 0.0), task, details.get("search_used"))
     warn_capped(details, task)
     warn_forgotten(details, task)
     warn_uncovered(uncovered, details)

@@ -52,10 +52,11 @@ ASSIGN = Choice(("prior", "posterior"), "prior",
                 "responsibilities under the prior or the current posterior")
 STREAM = Choice(("none", "patches"), "none", "image fit on all pixels, or a stream of patches")
 ESTEP = Choice(("dense", "sparse"), "sparse", "E-step over all components, or the few nearby")
-SEARCH = Choice(("kdtree", "projective"), "kdtree",
+SEARCH = Choice(("auto", "kdtree", "projective"), "auto",
                 "VBGS: how a frame's points find their nearby components: a KD-tree over "
                 "the map's means, or by projection at the frame's pose, on the device "
-                "(vbgs.inference.projective)")
+                "(vbgs.inference.projective); auto: by projection for frames larger "
+                "than 320x240")
 FORMAT = Choice(("blender", "replica", "tum"), None,
                 "dataset layout of a scene folder (detected from the folder if left out)")
 PROTOCOL = Choice(("continual", "static"), "continual",

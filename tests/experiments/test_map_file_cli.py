@@ -72,3 +72,5 @@ def test_the_unlearned_warning_names_the_search_s_own_cause(search, cause, capsy
     assert cause in capsys.readouterr().err
     warn_unlearned(0.001, SceneTask(search=search))  # under the threshold: nothing said
     assert capsys.readouterr().err == ""
+    warn_unlearned(0.095, SceneTask(search="auto"), search)  # the search the frames took
+    assert cause in capsys.readouterr().err

@@ -29,7 +29,15 @@ from vbgs.sensors import SENSOR_NAMES, WHITE_NOISE_SENSORS
 
 ASSIGN = ("prior", "posterior")
 ESTEP = ("dense", "sparse")
-SEARCH = ("kdtree", "projective")
+SEARCH = ("auto", "kdtree", "projective")
+# search "auto": the projective search for frames of more than this many pixels, the
+# KD-tree up to it. A frame's points run the KD-tree's host queries point by point, where
+# projection bins the map once a frame on the device; the two pick the same validation
+# PSNR at 640 x 480 (results/tuning/search/, made by the command in it), where the
+# projective search takes a third less time a frame. Up to 320 x 240, fit-scene's 128 px
+# among them, frames keep the KD-tree: its candidates are every point's nearest means
+# wherever they lie, where a tile lists a fixed number (far ground loses points).
+PROJECTIVE_PIXELS = 320 * 240
 OPACITY_RULES = ("evidence", "constant")
 COLOUR_RULES = ("posterior", "fit")
 
@@ -304,7 +312,9 @@ class Config:
     search: how a frame's points find their sparse candidates: the ``kdtree`` over the
         means (the reference), or by ``projective`` association, the map's components
         binned by where they fall in the frame (:mod:`vbgs.inference.projective`, on the
-        device); bare points without a camera always take the KD-tree;
+        device); ``auto`` (the default) takes the projective search for frames of more
+        than :data:`PROJECTIVE_PIXELS` pixels (:func:`frame_search`); bare points without
+        a camera always take the KD-tree;
     local_iters: under posterior assignment, the most E-steps of a batch's local
         coordinate ascent (:func:`vbgs.inference.model.local_cavi`: components grown for
         the batch start at their prior and a single E-step would score them so against
@@ -326,7 +336,7 @@ class Config:
     assign: str = "prior"
     estep: str = "sparse"
     candidates: int = DEFAULT_CANDIDATES
-    search: str = "kdtree"
+    search: str = "auto"
     local_iters: int = 1
     reseed: bool = False
     prior: PriorConfig = SURFACE_PRIOR
@@ -408,3 +418,15 @@ def with_dotted(config: Any, name: str, value) -> Any:
     if not rest:
         return dataclasses.replace(config, **{head: value})
     return dataclasses.replace(config, **{head: with_dotted(getattr(config, head), rest, value)})
+
+
+def frame_search(search: str, camera) -> str:
+    """The candidate search (``kdtree`` or ``projective``) a frame of ``camera`` (None:
+    bare points) takes under ``Config.search`` = ``search``: ``auto`` resolved by the
+    frame's size (:data:`PROJECTIVE_PIXELS`)."""
+    if camera is None:
+        return "kdtree"
+    if search == "auto":
+        big = int(camera.width) * int(camera.height) > PROJECTIVE_PIXELS
+        return "projective" if big else "kdtree"
+    return search

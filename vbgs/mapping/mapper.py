@@ -101,7 +101,7 @@ import vbgs.mapping.saturation as saturation
 import vbgs.mapping.change as change
 import vbgs.mapping.splits as splits
 from vbgs.mapping.budget import on_lattice, stride, thin
-from vbgs.mapping.config import Config
+from vbgs.mapping.config import Config, frame_search
 from vbgs.mapping.denoise import noise_left, smoothed
 from vbgs.mapping.holes import fill_holes
 from vbgs.mapping.measurement import depth_sigmas, depth_variance, frame_points
@@ -373,7 +373,7 @@ def _learn(state: MapState, slots, xyz, rgb, config: Config, ray, footprint, wei
     if config.slow_path:
         state, before, elbo = _learn_slowly(state, xyz, rgb, config)
         return state, before, elbo, None
-    state = _sync_stepper(state, slots, config)
+    state = _sync_stepper(state, slots, config, frame_search(config.search, camera))
     reach = None  # each point's own, when far ground has coarse cells
     levels = grow.point_levels(state.rule, footprint) if state.growing else None
     if levels is not None and state.stepper.reach is not None:
@@ -701,15 +701,19 @@ def _measured(mixture: model.State, config: Config) -> model.State:
                                                     prior.alpha.dtype, noisy=True))
 
 
-def _sync_stepper(state: MapState, slots: np.ndarray, config: Config) -> MapState:
-    """The stepper for the state's reference: built on the first frame, grown (a new
-    stepper sharing the compiled step) after the frame's growth filled ``slots``."""
+def _sync_stepper(state: MapState, slots: np.ndarray, config: Config,
+                  search: str = "kdtree") -> MapState:
+    """The stepper for the state's reference: built on the first frame (with the
+    candidate ``search`` its frames take, :func:`vbgs.mapping.config.frame_search`),
+    grown (a new stepper sharing the compiled step) after the frame's growth filled
+    ``slots``."""
     prior = state.mixture.prior
+    projecting = search == "projective"
     if state.stepper is None or state.stepper.prior.n_components != prior.n_components:
         reach, search, spacing = None, "auto", None
         if state.growing and config.estep == "sparse":
             reach = grow.reach_of(state.rule, config.growth.reach_cells)
-        if config.search == "projective" and config.estep == "sparse" and prior.dim == 3:
+        if projecting and config.estep == "sparse" and prior.dim == 3:
             search = "projective"
             spacing = state.rule.cell if state.growing else grow.mean_spacing(prior)
         step = Stepper(prior, assign=config.assign, config=config.prior, estep=config.estep,

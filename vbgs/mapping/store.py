@@ -70,7 +70,11 @@ def load(path, config: Config) -> MapState:
     state = state._replace(stepper=None)
     if saved is None or state.mixture is None:
         return state
-    state = _sync_stepper(state, np.zeros(0, np.int64), config)
+    search = saved.get("search")  # maps saved before it was kept: the config's
+    if search is None:
+        search = "projective" if config.search == "projective" else "kdtree"
+    state = _sync_stepper(state, np.zeros(0, np.int64), config,
+                          "projective" if search == "projective" else "kdtree")
     step = state.stepper
     if saved["reference"] is not None and step.fixed is not None:
         step.fixed = step.fixed._replace(reference=saved["reference"])
@@ -88,6 +92,7 @@ def _pack(value, name: str, arrays: dict) -> dict:
         return {"stepper": {
             "reference": None if fixed is None else _pack(fixed.reference, name + ".r", arrays),
             "size": int(value.size),
+            "search": value.search,
             "tiling": None if value.tiling is None else list(value.tiling)}}
     if isinstance(value, jax.Array) and jnp.issubdtype(value.dtype, jax.dtypes.prng_key):
         arrays[name] = np.asarray(jax.random.key_data(value))

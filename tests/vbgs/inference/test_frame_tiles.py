@@ -152,3 +152,44 @@ def test_stepper_refuses_pixels_that_are_not_the_points():
         step(model.start(prior), xyz, rgb, camera=cam, pixel=np.arange(4))
     with pytest.raises(ValueError, match="flat pixel index"):
         step(model.start(prior), xyz, rgb, camera=cam, pixel=np.array([0, 1, 2, 3, 48]))
+
+
+def test_points_no_tile_lists_are_learned_from_the_kdtree():
+    """A wall whose components all lie on its left third: the tiles of the right two
+    thirds list none of them (their pools hold only nearby tiles' components), where the
+    KD-tree's nearest means lie within reach. Those points are searched again in the
+    KD-tree and learned (Stepper._missed): every point learned, and what they add is
+    exactly what the KD-tree stepper learns from them alone (statistics are sums under
+    prior assignment)."""
+    import jax
+
+    from vbgs.inference.stepper import Stepper
+    from vbgs.render.camera import from_fov, look_at, unproject
+
+    w, h = 48, 32
+    cam = from_fov(w, h, 1.2, look_at((0.0, -2.0, 0.5), (0.0, 0.0, 0.5)))
+    u, v = np.meshgrid(np.linspace(0, 1, w), np.linspace(0, 1, h))
+    rgb = np.stack([u, v, 0.5 * (u + v)], -1).astype(np.float32)
+    depth = np.full((h, w), 2.0, np.float32)
+    xyz, col = unproject(cam, rgb, depth)
+    left = xyz[:, 0] < np.quantile(xyz[:, 0], 0.3)
+    prior = model.init(xyz[left], col[left], 12, key=jax.random.key(1), scheme="data")
+    pixel = np.flatnonzero(depth)
+
+    def step(search, pts, cols, fallback=True, **kw):
+        st = Stepper(prior, estep="sparse", n_candidates=12, search=search, spacing=0.05,
+                     reach=10.0)
+        if not fallback:
+            st._missed = lambda state, info, within, *a: (state, info, within)
+        return st(model.start(prior), pts, cols, **kw)
+
+    tiled, info = step("projective", xyz, col, camera=cam, pixel=pixel)
+    alone, only = step("projective", xyz, col, False, camera=cam, pixel=pixel)
+    assert info.learned.all() and only.learned.mean() < 0.5  # most were missed
+    missed = ~only.learned
+    kd, _ = step("kdtree", xyz[missed], col[missed])
+    for a, b, c in zip(jax.tree.leaves(tiled.stats), jax.tree.leaves(alone.stats),
+                       jax.tree.leaves(kd.stats), strict=True):
+        np.testing.assert_allclose(np.asarray(a) - np.asarray(b), np.asarray(c),
+                                   rtol=1e-4, atol=2e-3)
+    assert np.isfinite(float(info.elbo))

@@ -119,19 +119,25 @@ def test_a_point_with_no_component_near_is_not_learned():
     assert info.learned[:20].all() and not info.learned[20]
 
 
-def test_a_point_with_no_component_listed_takes_no_responsibility_without_a_reach():
-    """With no reach (a fixed reference), a point whose pool is empty still adds nothing:
-    its statistics would otherwise go to component 0 (every entry of its list is -1)."""
+def test_a_point_with_no_component_listed_takes_the_kdtree_nearest_without_a_reach():
+    """With no reach (a fixed reference), a point whose pool is empty is learned as the
+    KD-tree would learn it, from its nearest means (never from the -1 entries of its
+    empty list, whose statistics would go to component 0): what it adds equals the
+    KD-tree stepper's statistics of that point alone."""
     cam, prior, xyz, rgb = _few_components()
     pj = Stepper(prior, estep="sparse", n_candidates=C, search="projective", spacing=0.6)
     pj.tiling = projective.Tiling(32, 32, 4, 16, C)
-    pts = np.concatenate([xyz[:20], [[5.0, 5.0, 2.0]]]).astype(np.float32)
+    far = np.array([[5.0, 5.0, 2.0]], np.float32)
+    pts = np.concatenate([xyz[:20], far]).astype(np.float32)
     cols = np.concatenate([rgb[:20], rgb[:1]])
     with_far, _ = pj(model.start(prior), pts, cols, camera=cam)
     without, _ = pj(model.start(prior), pts[:20], cols[:20], camera=cam)
-    for u, w in zip(jax.tree.leaves(with_far.stats), jax.tree.leaves(without.stats),
-                    strict=True):
-        np.testing.assert_allclose(np.asarray(u), np.asarray(w), rtol=1e-6, atol=1e-6)
+    kd = Stepper(prior, estep="sparse", n_candidates=C, search="kdtree")
+    alone, _ = kd(model.start(prior), far, rgb[:1])
+    for u, w, a in zip(jax.tree.leaves(with_far.stats), jax.tree.leaves(without.stats),
+                       jax.tree.leaves(alone.stats), strict=True):
+        np.testing.assert_allclose(np.asarray(u) - np.asarray(w), np.asarray(a), rtol=1e-5,
+                                   atol=1e-5)
 
 
 def test_projective_stream_of_a_fixed_reference_is_order_free(scene):
@@ -158,7 +164,7 @@ def test_bad_settings_are_refused():
     _, prior, _, _ = _few_components()
     with pytest.raises(ValueError, match="projective search .* spacing"):
         Stepper(prior, estep="sparse", search="projective")
-    with pytest.raises(ValueError, match="search must be one of kdtree, projective"):
+    with pytest.raises(ValueError, match="search must be one of auto, kdtree, projective"):
         mapping.Config(search="octree")
 
 

@@ -134,3 +134,30 @@ def test_thinned_frame_learned_on_its_lattice_by_projection():
     sub = counts(*budget.on_lattice(f.camera, pixel, 2), "projective")
     np.testing.assert_allclose(sub.sum(), len(pts), rtol=1e-5)
     assert np.abs(sub - every).max() <= np.abs(full - every).max() + 0.5
+
+
+def test_auto_search_projects_frames_larger_than_320x240():
+    """``search="auto"`` (the default): the KD-tree for frames up to 320 x 240 (fit-scene's
+    128 px frames keep their records), the projective search above, bare points always
+    the KD-tree; an explicit choice is kept."""
+    from vbgs.mapping.config import PROJECTIVE_PIXELS, frame_search
+
+    pose = look_at((0.0, -2.0, 0.5), (0.0, 0.0, 0.5))
+    assert PROJECTIVE_PIXELS == 320 * 240
+    assert frame_search("auto", from_fov(320, 240, 1.2, pose)) == "kdtree"
+    assert frame_search("auto", from_fov(322, 240, 1.2, pose)) == "projective"
+    assert frame_search("auto", None) == "kdtree"
+    assert frame_search("kdtree", from_fov(640, 480, 1.2, pose)) == "kdtree"
+    assert frame_search("projective", from_fov(48, 32, 1.2, pose)) == "projective"
+    assert Config().search == "auto"
+
+    def learned_by(w, h):
+        cam = from_fov(w, h, 1.2, pose)
+        rgb = np.full((h, w, 3), 0.5, np.float32)
+        state = init(Config(components=2000), key=jax.random.key(0))
+        state, _ = update(state, Frame(rgb, np.full((h, w), 2.0, np.float32), cam), Config(
+            components=2000))
+        return state.stepper.search
+
+    assert learned_by(48, 32) == "kdtree"
+    assert learned_by(400, 300) == "projective"
