@@ -314,8 +314,9 @@ class Stepper:
                                    self.estep, self.colour_noise)
                 old_alpha = prior.alpha
             grown.fixed = self.fixed._replace(reference=reference)
-            if self._tree is not None:
-                grown._tree = candidates.means_tree(prior.space.mean)
+            if self._tree is not None:  # the projective search's is built when needed
+                grown._tree = (None if self.search == "projective"
+                               else candidates.means_tree(prior.space.mean))
         grown.prior = prior
         return grown
 
@@ -451,8 +452,10 @@ class Stepper:
         """Of the points ``x[missed]`` that the projective search listed no component
         for, those whose nearest mean of the reference (a KD-tree over them) lies within
         their reach ``limit[missed]``, and their candidates ``[m, C]``."""
-        tree = candidates.means_tree(self.prior.space.mean)
-        nearest, cand = candidates.query_with_distance(tree, x[missed], self.n_candidates)
+        if self._tree is None:  # kept while the reference is (until it grows)
+            self._tree = candidates.means_tree(self.prior.space.mean)
+        nearest, cand = candidates.query_with_distance(self._tree, x[missed],
+                                                       self.n_candidates)
         near = nearest <= limit[missed]
         return missed[near], cand[near]
 
