@@ -111,7 +111,7 @@ def _nearest(means: np.ndarray, idx: np.ndarray, moved: np.ndarray, last: _Kept 
         went = idx[moved[idx]]  # components that moved (or arrived)
         still = np.flatnonzero(~redo)
         if len(went) and len(still):
-            dist, _ = means_tree(means[moved[idx]]).query(means[still], k=1)
+            dist, _ = means_tree(means[moved[idx]]).query(means[still], k=1, workers=-1)
             redo[still[dist <= last.reach[idx[still]]]] = True
         keep = idx[~redo]
         near[keep], reach[keep] = last.near[keep], last.reach[keep]
