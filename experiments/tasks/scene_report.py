@@ -34,11 +34,14 @@ def warn_unlearned(share: float, task, search: str | None = None) -> None:
           f"points_unlearned says how much)", file=sys.stderr)
 
 
-def warn_all(details: dict, task, uncovered: float) -> None:
+def warn_all(details: dict, task, uncovered: float,
+             early: tuple[float, float] | None = None) -> None:
     """Every warning of a finished scene run (:func:`warn_unlearned`,
-    :func:`warn_capped`, :func:`warn_forgotten`, :func:`warn_uncovered`)."""
+    :func:`warn_capped`, :func:`warn_budget_spent`, :func:`warn_forgotten`,
+    :func:`warn_uncovered`); ``early``: the first views' PSNR when seen and at the end."""
     warn_unlearned(details.get("points_unlearned", 0.0), task, details.get("search_used"))
     warn_capped(details, task)
+    warn_budget_spent(details, task, early)
     warn_forgotten(details, task)
     warn_uncovered(uncovered, details)
 
@@ -68,6 +71,27 @@ def warn_capped(details: dict, task) -> None:
               f"{details['components_capacity']} components; from then on the cheapest "
               f"neighbours were merged to make room for new ground, so the count is the "
               f"ceiling's, not the data's; give a higher ceiling (auto:MAX)", file=sys.stderr)
+
+
+def warn_budget_spent(details: dict, task, early: tuple[float, float] | None) -> None:
+    """Say on stderr when a fixed number of components was spent and neighbours were
+    merged to make room for new ground (vbgs.inference.merge), and what that cost the
+    views seen first: their PSNR when seen against at the end (``early``)."""
+    rounds = details.get("merge_rounds", 0)
+    if not rounds or isinstance(task.components, str):  # auto: warn_capped says it
+        return
+    cost = ""
+    if early is not None and None not in early:
+        when, end = early
+        change = (f"lost {when - end:.2f} dB" if end < when else
+                  f"gained {end - when:.2f} dB meanwhile")
+        cost = (f"; the views seen first scored {when:.2f} dB when seen and {end:.2f} dB at "
+                f"the end ({change}")
+        cost += ", the JSON's early_psnr_when_seen and early_psnr_at_end)"
+    print(f"note: all {task.components} components were in use, so {rounds} rounds merged "
+          f"{details.get('components_merged', 0)} neighbours the data tell apart least to "
+          f"make room for new ground{cost}; more --components keeps more detail",
+          file=sys.stderr)
 
 
 # A share of the test views' surface pixels drawn as background above this is said.

@@ -376,7 +376,8 @@ class _SceneRun:
             depth_report = {**depth_report, **self.arrivals.report()}
         details = self.learner.details(result)
         if warn:
-            warn_all(details, task, result.uncovered)
+            warn_all(details, task, result.uncovered,
+                     (result.early_psnr_when_seen, result.early_psnr_at_end))
         return replace(result, depth=depth_report, details=details,
                        depth_l1=None if self.rgb_only_tests else result.depth_l1,
                        settings={**result.settings, **what_ran(task, self.scene)})

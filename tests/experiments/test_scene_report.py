@@ -36,3 +36,21 @@ def test_all_warnings_of_a_clean_run_are_silent_and_of_a_poor_one_speak(capsys):
     err = capsys.readouterr().err
     assert "were not learned" in err and "3 components were forgotten" in err
     assert "drawn as background" in err
+
+
+def test_a_spent_budget_is_said_with_what_it_cost_the_first_views(capsys):
+    from experiments.tasks.scene_report import warn_budget_spent
+
+    details = {"merge_rounds": 4, "components_merged": 1600}
+    warn_budget_spent(details, SceneTask(components=20000), (26.10, 25.60))
+    err = capsys.readouterr().err
+    assert "all 20000 components were in use, so 4 rounds merged 1600 neighbours" in err
+    assert "26.10 dB when seen and 25.60 dB at the end (lost 0.50 dB" in err
+    warn_budget_spent(details, SceneTask(components=20000), (22.71, 23.61))
+    assert "(gained 0.90 dB meanwhile" in capsys.readouterr().err
+    warn_budget_spent({"merge_rounds": 0}, SceneTask(), (1.0, 2.0))  # room to spare: silent
+    warn_budget_spent(details, SceneTask(components="auto"), (1.0, 2.0))  # auto: its own
+    assert capsys.readouterr().err == ""
+    warn_budget_spent(details, SceneTask(), None)  # no early views: the merges alone
+    err = capsys.readouterr().err
+    assert "rounds merged" in err and "when seen" not in err
