@@ -59,6 +59,13 @@ class StepInfo(NamedTuple):
 
 # Headroom left when the padded size grows (see Stepper.padded_size).
 GROWTH = 1.25
+# A tiled frame's points that no tile lists a component within reach for are searched
+# again in a KD-tree over the reference's means (Stepper._missed) when they are more than
+# this share of the frame: the tree over every mean costs a frame some 20 ms at 100k
+# components, far more than a few points can add. The room at 640 x 480 under the Kinect
+# misses 1e-5 of its points (none of them within reach of any mean), the walk 3e-2 (the
+# far ground, learned from the tree's nearest: results/tuning/search/).
+MISSED_SHARE = 1e-3
 # The smallest padded size of a stepper whose padding follows its batches (a smaller
 # one would only add compilations for batches that cost little either way).
 FOLLOW_MIN = 4096
@@ -408,14 +415,14 @@ class Stepper:
             projective.view(camera, self._origin, x.dtype), limit, rays)
         within = np.asarray(within)[:n]
         stepped = state._replace(posterior=posterior, stats=stats)
-        if self.assign == "prior" and not within.all():
+        if self.assign == "prior" and (~within).sum() > MISSED_SHARE * n:
             stepped, info, within = self._missed(stepped, info, within, x, c, w, rays, limit)
         return stepped, StepInfo(*info, within if reaching else None)
 
     def _missed(self, state: State, info: Info, within: np.ndarray, x, c, w, rays, limit
                 ) -> tuple[State, Info, np.ndarray]:
         """The points of a tiled frame whose tiles listed no component within their reach
-        (``within [n]`` False) searched again in a KD-tree over the reference's means and
+        (``within [n]`` False; more than :data:`MISSED_SHARE` of them) searched again in a KD-tree over the reference's means and
         learned where it finds one within reach: a tile lists a fixed number of
         components, so far ground, where one tile spans many spacings, loses points that
         the KD-tree's nearest means would take (the walk at 640 x 480: 3% of its
@@ -477,8 +484,9 @@ class Stepper:
         points ``x [size, 3]`` seen by ``camera``: candidates ``[size, C]``, the weights
         with points beyond reach (or with no component listed near them) at 0, and which
         points are within reach (``[size]``; None without a reach). Under prior
-        assignment a point listed nothing within reach takes the KD-tree's nearest means
-        where they are within it (:meth:`_missed`'s rule). The tiling is fixed by the
+        assignment the points listed nothing within reach (more than
+        :data:`MISSED_SHARE` of them) take the KD-tree's nearest means where they are
+        within it (:meth:`_missed`'s rule). The tiling is fixed by the
         first frame (its median depth)."""
         q = self.prior if self.assign == "prior" else state.posterior
         self._fix_tiling(x, n, camera)
@@ -491,10 +499,11 @@ class Stepper:
             limit[:n] = self.reach if reach is None else np.asarray(reach, x.dtype)
         # a point with no component listed (d2 inf) is never learned, reach or none
         within = jnp.isfinite(d2) & (d2 <= jnp.asarray(limit) ** 2)
-        if self.assign == "prior":  # the missed the KD-tree finds (as _missed does)
+        if self.assign == "prior":  # the missed that the KD-tree finds, as _missed
             within = np.asarray(within).copy()
-            missed, rows = self._nearest_means(x, np.flatnonzero(~within[:n]), limit)
-            if len(missed):
+            missed = np.flatnonzero(~within[:n])
+            if len(missed) > MISSED_SHARE * n:
+                missed, rows = self._nearest_means(x, missed, limit)
                 cand = np.array(cand)  # a list's spare entries -1, as the search's
                 cand[missed] = -1
                 cand[missed, :rows.shape[1]], within[missed] = rows, True

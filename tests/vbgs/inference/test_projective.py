@@ -140,6 +140,23 @@ def test_a_point_with_no_component_listed_takes_the_kdtree_nearest_without_a_rea
                                    atol=1e-5)
 
 
+def test_a_few_missed_points_are_left_without_building_the_tree():
+    """At most MISSED_SHARE of a frame's points missed by every list: they stay unlearned
+    and no KD-tree is built (one over every mean costs more than they can add)."""
+    from vbgs.inference.stepper import MISSED_SHARE
+
+    cam, prior, xyz, rgb = _few_components()
+    many = int(np.ceil(1.0 / MISSED_SHARE))
+    pts = np.concatenate([np.tile(xyz, (many // len(xyz) + 1, 1))[:many],
+                          [[5.0, 5.0, 2.0]]]).astype(np.float32)
+    cols = np.tile(rgb[:1], (len(pts), 1))
+    pj = Stepper(prior, estep="sparse", n_candidates=C, search="projective", spacing=0.6,
+                 reach=10.0)
+    pj.tiling = projective.Tiling(32, 32, 4, 16, C)
+    _, info = pj(model.start(prior), pts, cols, camera=cam)
+    assert info.learned[:-1].all() and not info.learned[-1] and pj._tree is None
+
+
 def test_projective_stream_of_a_fixed_reference_is_order_free(scene):
     """Under prior assignment with a fixed reference the candidates depend on the
     reference and the frame only: the frames in reverse order give the same posterior."""
