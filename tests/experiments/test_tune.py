@@ -20,6 +20,16 @@ TUNE = ["tune", "--scene", "object", "--components", "150", "--frames", "3", "--
         "--val-views", "2"]
 
 
+def fresh_validation(task, scene):
+    """The validation scores of a VBGS learner streamed anew under ``task`` (the slow
+    reference a tuned row is held to)."""
+    learner = VbgsLearner(task, scene)
+    order = stream_order(len(scene.train), task.order, seed=task.seed)
+    for _, frame, background in stream_frames(task, scene, order):
+        learner.learn(frame, background)
+    return evaluate_validation(learner.splats(), scene, background, learner.blur)
+
+
 def test_parse_grid_types_values_by_the_task_field():
     grid = parse_grid(["splat_scale=0.5,1", "opacity=0.9"], TINY)
     assert grid == {"splat_scale": [0.5, 1.0], "opacity": [0.9]}
@@ -82,11 +92,7 @@ def test_each_rerender_equals_a_fresh_stream_with_that_setting():
     # not the task's own setting
     row = next(r for r in rows if r["splat_scale"] == 1.2 and r["splat_blur"] == 0.05)
     task = replace(TINY, splat_scale=1.2, splat_blur=0.05, opacity=0.4)
-    learner = VbgsLearner(task, scene)
-    order = stream_order(len(scene.train), task.order, seed=task.seed)
-    for _, frame, background in stream_frames(task, scene, order):
-        learner.learn(frame, background)
-    fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
+    fresh = fresh_validation(task, scene)
     assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
     assert row["val_ssim"] == pytest.approx(fresh.ssim, abs=1e-5)
     assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # settings change the picture
@@ -102,11 +108,7 @@ def test_a_prior_value_equals_a_fresh_stream_under_that_prior():
     by_value = {r["prior.cov_scale"]: r["val_psnr"] for r in rows}
     assert abs(by_value[0.2] - by_value[0.5]) > 0.01
     task = replace(TINY, prior=replace(TINY.prior, cov_scale=0.2), splat_scale=1.2)
-    learner = VbgsLearner(task, scene)
-    order = stream_order(len(scene.train), task.order, seed=task.seed)
-    for _, frame, background in stream_frames(task, scene, order):
-        learner.learn(frame, background)
-    fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
+    fresh = fresh_validation(task, scene)
     assert by_value[0.2] == pytest.approx(fresh.psnr, abs=1e-4)
 
 
@@ -119,11 +121,7 @@ def test_the_candidate_search_is_learned_once_per_value():
     by_value = {r["search"]: r["val_psnr"] for r in rows}
     assert by_value["kdtree"] != by_value["projective"]
     fresh_task = replace(task, search="projective")
-    learner = VbgsLearner(fresh_task, scene)
-    order = stream_order(len(scene.train), task.order, seed=task.seed)
-    for _, frame, background in stream_frames(fresh_task, scene, order):
-        learner.learn(frame, background)
-    fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
+    fresh = fresh_validation(fresh_task, scene)
     assert by_value["projective"] == pytest.approx(fresh.psnr, abs=1e-4)
 
 
@@ -217,12 +215,7 @@ def test_colour_rule_is_gathered_while_streaming_and_each_rule_equals_a_fresh_st
     base = replace(TINY, colour_rule="posterior")
     rows = tune(base, scene, {"colour_rule": ["fit", "posterior"]})
     for row in rows:
-        task = replace(TINY, colour_rule=row["colour_rule"])
-        learner = VbgsLearner(task, scene)
-        order = stream_order(len(scene.train), task.order, seed=task.seed)
-        for _, frame, background in stream_frames(task, scene, order):
-            learner.learn(frame, background)
-        fresh = evaluate_validation(learner.splats(), scene, background, learner.blur)
+        fresh = fresh_validation(replace(TINY, colour_rule=row["colour_rule"]), scene)
         assert row["val_psnr"] == pytest.approx(fresh.psnr, abs=1e-4)
     assert abs(rows[0]["val_psnr"] - rows[1]["val_psnr"]) > 0.01  # the rule changes the picture
 
