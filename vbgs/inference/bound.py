@@ -68,9 +68,7 @@ def batch_bound(before: model.Mixture, after: model.Mixture, xyz, rgb, *,
     # op by op, outside the E-step's compiled function: compiled next to it, the LU of
     # q_{t-1}'s scales ran beside q_t's and both LAPACK calls waited on the 2-core thread
     # pool for good (a 128 px, 20k component fit-scene hung; see vbgs/__init__.py)
-    # over the components the batch changed: the rest are exactly 0 (model.kl)
-    kl = float(model.kl(after, before, config.colour_noise,
-                        model.changed_rows(after, before)))
+    kl = float(model.kl(after, before, config.colour_noise))
     return BatchBound(ell, kl, ell - kl, int(len(xyz)))
 
 

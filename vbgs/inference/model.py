@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import partial, reduce
+from functools import partial
 from typing import Literal, NamedTuple
 
 import jax
@@ -547,28 +547,13 @@ def m_step(prior: Mixture, stats: Stats) -> Mixture:
     )
 
 
-def kl(q: Mixture, p: Mixture, colour_noise: float, rows=None) -> jnp.ndarray:
-    """``KL(q || p)`` summed over all factors and components; ``rows [k]`` bool: the
-    components whose factors are summed (None: all), the others' being known to be 0
-    (:func:`changed_rows`: a component's KL to itself is 0, but float32 rounds each
-    component's difference of large terms to a few nats either way, and summed over many
-    components that noise can outweigh the few that changed)."""
-    space = expfam.niw_kl(q.space, p.space)
-    colour = expfam.colour_kl(q.colour, p.colour, colour_noise)
-    if rows is not None:
-        space, colour = jnp.where(rows, space, 0.0), jnp.where(rows, colour, 0.0)
-    return space.sum() + colour.sum() + expfam.dirichlet_kl(q.alpha, p.alpha)
-
-
-@jax.jit
-def changed_rows(q: Mixture, p: Mixture) -> jnp.ndarray:
-    """``[k]`` bool: the components whose spatial or colour factor differs between ``q``
-    and ``p`` in any parameter (the rows :func:`kl` must sum)."""
-    leaves = zip(jax.tree_util.tree_leaves((q.space, q.colour)),
-                 jax.tree_util.tree_leaves((p.space, p.colour)), strict=True)
-    k = q.n_components
-    return reduce(jnp.logical_or, ((a != b).reshape(k, -1).any(1)
-                                  for a, b in leaves))
+def kl(q: Mixture, p: Mixture, colour_noise: float) -> jnp.ndarray:
+    """``KL(q || p)`` summed over all factors and components."""
+    return (
+        expfam.niw_kl(q.space, p.space).sum()
+        + expfam.colour_kl(q.colour, p.colour, colour_noise).sum()
+        + expfam.dirichlet_kl(q.alpha, p.alpha)
+    )
 
 
 # ------------------------------------------------------------------ update and fit
