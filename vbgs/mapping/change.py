@@ -11,6 +11,29 @@ components are seen through from every view that looks at the place; a surface t
 is still there is hit. A frame that hits a component, with any of its rays, shows it
 there; a frame in which it is occluded or out of view says nothing.
 
+**Its far side, along each ray.** Where a component ends along a ray is a question
+about the Gaussian restricted to that ray. With ``c`` the camera centre, ``r`` the
+ray's direction scaled to unit camera depth and ``P = Σ⁻¹``, the density along
+``c + t r`` is a Gaussian in ``t`` (camera depth) with mean
+``t* = rᵀ P (μ - c) / rᵀ P r`` and variance ``1 / rᵀ P r``; the sensor's variance of a
+reading there adds to it (the hit band's ``sensor_var``), so noise is not change. A
+ray has passed the component when its reading lies beyond ``t*`` by more than
+``pass_sigmas`` of that standard deviation. For a surface component (flat along its
+normal) ``t*`` is where the ray crosses its plane, wherever in the footprint the ray
+falls, and the band is its thickness seen along the ray: the ground a removed crate
+stood on, seen past the crate's lowest components, lies beyond them, where the
+opacity band (the component's whole extent along the camera axis, ``PASS_SIGMAS``
+marginal sigmas) takes it as a hit and kept them for good, drawing the crate's
+footprint on the ground. The opacity evidence keeps its band; only the see-through
+test reads the component along the ray, and only for a component holding
+``evidence.shaped_points`` points or more (``SHAPED_POINTS``): with fewer its shape is
+the growth's guess, not the surface's, and at the rim where two faces meet (a
+platform's corner) a few-point component's plane points past the edge to the other
+face. Below that it is judged against its extent along the camera axis as before.
+The count is a constraint, as ``forget_after`` is: the fewest points at which the
+static streams forget nothing more than before (``results/tuning/shaped/`` scores the
+changing scenes' validation views at each).
+
 **The test, per component and in closed form.** Two hypotheses, *still there* and
 *gone*. Under *gone* every frame that looks is a see-through; under *still there* a
 see-through is the rare misreading of a pixel grid (a thin pole that one frame's pixels
@@ -88,7 +111,17 @@ MIN_HITS = 5.0
 MIN_COLOUR_HITS = 3
 MIN_COLOUR_FRAMES = 2
 
+# A component holding at least this many points has a shape learned from them, along
+# which its see-through is judged (a few points leave the growth's guess of it; module
+# docstring: the fewest at which no static stream forgets).
+SHAPED_POINTS = 5.0
+
 _m_step = jax.jit(model.m_step)
+
+
+def shaped(stats, points: float = SHAPED_POINTS) -> jax.Array:
+    """``[k]`` bool: the components whose statistics hold ``points`` points or more."""
+    return stats.count >= points
 
 
 class Doubt(NamedTuple):
