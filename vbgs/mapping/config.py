@@ -166,7 +166,8 @@ class EvidenceConfig:
     shaped_points: a component holding at least this many points is seen through when
         the rays pass beyond it along its own shape (the Gaussian taken along each ray),
         one with fewer when they pass beyond its extent along the camera axis
-        (:mod:`vbgs.mapping.change`; 0, the default: every component; inf: none).
+        (:mod:`vbgs.mapping.change`; 0, the default: every component; inf: none;
+        exact depth only: a measured sensor's tails keep the extent's band).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
