@@ -33,8 +33,9 @@ with the band, no more (object and room nothing, the walk the same two component
 pixel wide at 20 m). Under a measured sensor the band stays: along the ray the band
 narrows to the sensor's sigma, and its tails (a Kinect's flying pixels at edges,
 quantised disparity) then read as free space several frames in a row (the static object
-under the Kinect forgot 31 components, a 64 px stream of it one); a measured depth is
-judged against the component's extent along the camera axis, as before.
+under the Kinect forgot tens of components where it forgot two with the band); a
+measured depth is judged against the component's extent along the camera axis, as
+before.
 
 **The test, per component and in closed form.** Two hypotheses, *still there* and
 *gone*. Under *gone* every frame that looks is a see-through; under *still there* a
