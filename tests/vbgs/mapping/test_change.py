@@ -67,7 +67,7 @@ def test_a_removed_object_loses_its_mass_within_a_few_frames(changed):
     lap = changed.changes[0]
     assert held[lap - 1] == kept[lap - 1] > 100  # the crate was learned (same stream so far)
     after = lap + change.FORGET_AFTER + 3  # a few frames that see through it
-    assert held[after] < 0.02 * held[lap - 1]  # measured 16 of 2065 points' worth
+    assert held[after] < 0.02 * held[lap - 1]  # measured 26 of 2071 points' worth
     assert held[-1] < 0.02 * held[lap - 1]
     assert kept[-1] > 0.9 * kept[lap - 1]  # without forgetting it stays
 
@@ -124,7 +124,7 @@ def test_a_moved_object_appears_at_its_new_place(changed):
             mask = changed_pixels(first, view)
             errors.append(((image - np.asarray(view.rgb)) ** 2).mean(-1)[mask])
         scores[after] = psnr_of_mse(float(np.concatenate(errors).mean()))
-    assert scores[change.FORGET_AFTER] > scores[0] + 2.0, scores  # measured 13.62 against 11.08
+    assert scores[change.FORGET_AFTER] > scores[0] + 2.0, scores  # measured 13.89 against 11.07
 
 
 def test_a_repainted_world_is_learned_in_its_new_colours():
@@ -152,7 +152,7 @@ def test_a_repainted_world_is_learned_in_its_new_colours():
                        - np.asarray(repainted(v).rgb)) ** 2).mean()) for v in scene.test]
         scores[after], forgotten[after] = psnr_of_mse(float(np.mean(mse))), state.n_forgotten
     assert forgotten[0] == 0 and forgotten[change.FORGET_AFTER] > 1000, (forgotten, scores)
-    # measured 16.23 dB against 14.47: six frames of the twelve after the change relearn
+    # measured 16.21 dB against 14.47: six frames of the twelve after the change relearn
     assert scores[change.FORGET_AFTER] > scores[0] + 1.3, scores
 
 
