@@ -20,11 +20,13 @@ reading there adds to it (the hit band's ``sensor_var``), so noise is not change
 ray has passed the component when its reading lies beyond ``t*`` by more than
 ``pass_sigmas`` of that standard deviation. For a surface component (flat along its
 normal) ``t*`` is where the ray crosses its plane, wherever in the footprint the ray
-falls, and the band is its thickness seen along the ray: the ground a removed crate
-stood on, seen past the crate's lowest components, lies beyond them, where the
-opacity band (the component's whole extent along the camera axis, ``PASS_SIGMAS``
-marginal sigmas) takes it as a hit and kept them for good, drawing the crate's
-footprint on the ground. The opacity evidence keeps its band; only the see-through
+falls, and the band is its thickness seen along the ray. The opacity band (the
+component's whole extent along the camera axis, ``PASS_SIGMAS`` marginal sigmas) takes
+a surface that lies behind a removed component, but within that extent, as a hit, and
+keeps the component; along the ray it lies beyond. The components that touched the
+ground a removed object stood on are still hit there (the ground is within their own
+thickness): their ghost of its footprint goes only with colour evidence. The opacity
+evidence keeps its band; only the see-through
 test reads the component along the ray. ``evidence.shaped_points``
 (``SHAPED_POINTS``) leaves components holding fewer points to the band (inf: every one, the test as it was): on the changing scenes'
 validation views fewer is better, 0 (every component along the ray) the best of 0 to
