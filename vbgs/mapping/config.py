@@ -19,7 +19,7 @@ from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AU
                              parse_components)
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
-from vbgs.mapping.change import FORGET_AFTER
+from vbgs.mapping.change import FORGET_AFTER, SHAPED_POINTS
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
@@ -170,7 +170,12 @@ class EvidenceConfig:
     recolour_sigmas: a frame whose rays that hit a component show a mean colour farther
         than this many colour sigmas (``prior.colour_noise``) from what earlier frames'
         rays showed on it counts against it as a see-through does (a repainted surface;
-        0, the default: colour tells no change, :mod:`vbgs.mapping.change` says why).
+        0, the default: colour tells no change, :mod:`vbgs.mapping.change` says why);
+    shaped_points: a component holding at least this many points is seen through when
+        the rays pass beyond it along its own shape (the Gaussian taken along each ray),
+        one with fewer when they pass beyond its extent along the camera axis
+        (:mod:`vbgs.mapping.change`; 0, the default: every component; inf: none;
+        exact depth only: a measured sensor's tails keep the extent's band).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
@@ -178,6 +183,7 @@ class EvidenceConfig:
     prior_passes: float = opacity.PRIOR_PASSES
     forget_after: int = FORGET_AFTER
     recolour_sigmas: float = 0.0
+    shaped_points: float = SHAPED_POINTS
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):
@@ -190,6 +196,10 @@ class EvidenceConfig:
         if isinstance(r, bool) or not isinstance(r, int | float) or not 0 <= r < math.inf:
             raise ValueError(f"evidence.recolour_sigmas must be a number >= 0 (0: colour "
                              f"tells no change), got {r!r}")
+        p = self.shaped_points
+        if isinstance(p, bool) or not isinstance(p, int | float) or not p >= 0:
+            raise ValueError(f"evidence.shaped_points must be a number of points >= 0 "
+                             f"(inf: never judged along the shape), got {p!r}")
 
 
 @dataclass(frozen=True)

@@ -286,7 +286,9 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
             *geometry, frame.camera, frame.depth, pass_sigmas=e.pass_sigmas,
             sensor_var=variance, empty=empty,
             through_empty=None if empty is None else np.zeros_like(empty),
-            rgb=frame.rgb if reads_colour else None)
+            rgb=frame.rgb if reads_colour else None,
+            shaped=change.shaped(state.mixture.stats, e.shaped_points)
+            if state.growing and sensor.exact else None)  # a sensor's tails: the band
         state = _forget(state._replace(evidence=opacity.added(state.evidence, seen)),
                         seen, state.evidence, tol, config)
     if config.render.colour_rule == "fit":

@@ -36,6 +36,7 @@ import numpy as np
 
 from vbgs.render.background import empty_pixels
 from vbgs.render.camera import Camera
+from vbgs.render.pixels import PIXEL_CENTRE_OFFSET
 from vbgs.render.raster import BLUR_VARIANCE, NEAR, project
 from vbgs.render.splats import Splats
 
@@ -90,7 +91,8 @@ class FrameEvidence(NamedTuple):
     hits: jax.Array  # [k] rays that hit it
     passes: jax.Array  # [k] rays that passed through it
     seen_through: jax.Array  # [k] bool: every sample ray, each at least THROUGH_PIXELS
-    #                          from the centre, passed through it (vbgs.mapping.change)
+    #                          from the centre, passed through it (vbgs.mapping.change;
+    #                          beyond its Gaussian along the ray where ``shaped``)
     shown: jax.Array  # [k, 3] the mean colour of the frame at the sample rays that hit it
     n_shown: jax.Array  # [k] int: how many hit samples that mean is over (0: no colour read)
 
@@ -109,8 +111,8 @@ def added(evidence: Evidence, frame: FrameEvidence) -> Evidence:
 
 
 def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = PASS_SIGMAS,
-                   sensor_var=None, empty=None, through_empty=None, rgb=None
-                   ) -> FrameEvidence:
+                   sensor_var=None, empty=None, through_empty=None, rgb=None,
+                   shaped=None) -> FrameEvidence:
     """One frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
     (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
@@ -125,7 +127,10 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     ``through_empty [h, w]``: the pixels without depth the see-through test takes as
     free space (None: ``empty``; a sensor's missing pixels, out of its range, say
     nothing about what stands there). ``rgb [h, w, 3]``: the frame's colours, of which
-    the mean over each component's hit samples is returned (None: no colour read)."""
+    the mean over each component's hit samples is returned (None: no colour read).
+    ``shaped [k]`` bool: the components whose see-through is judged along each ray's
+    own Gaussian (:func:`_far_along_ray`, :mod:`vbgs.mapping.change`), the others
+    against the hit band (None: none)."""
     k = np.shape(means)[0]
     sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
     empty = empty_pixels(depth) if empty is None else empty
@@ -134,15 +139,44 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
         jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
         jnp.asarray(empty), jnp.asarray(through_empty),
         None if rgb is None else jnp.asarray(rgb, jnp.float32),
+        jnp.zeros(k, bool) if shaped is None else jnp.asarray(shaped, bool),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
     ))
 
 
+def _far_along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, shaped,
+                   far_side):
+    """``far(uv [s, k, 2]) -> [s, k]``: the camera depth beyond which the ray through the
+    centre of the pixel at ``uv`` (the ray its depth was read along) has passed each
+    component: the Gaussian taken along the ray itself
+    (module docstring of :mod:`vbgs.mapping.change`), its mean depth there
+    ``t* = rᵀ Σ⁻¹ (μ - c) / rᵀ Σ⁻¹ r`` and its standard deviation
+    ``sqrt(1 / rᵀ Σ⁻¹ r + sensor_var)``, ``r`` the ray scaled to unit camera depth;
+    ``far_side [k]`` (the hit band's) where not ``shaped``. The covariance is inverted
+    at unit trace (a thin component's float32 inverse)."""
+    scale = jnp.maximum(jnp.trace(covs, axis1=-2, axis2=-1), 1e-30)[:, None, None]
+    precision = jnp.linalg.inv(covs / scale + 1e-6 * jnp.eye(3)) / scale  # [k, 3, 3]
+    offset = means - pose[:3, 3]  # [k, 3]
+
+    def far(uv):
+        centre_uv = jnp.floor(uv) + PIXEL_CENTRE_OFFSET  # the read pixel's: its depth's ray
+        ray_cam = jnp.stack([(centre_uv[..., 0] - cx) / fx, (centre_uv[..., 1] - cy) / fy,
+                             jnp.ones(uv.shape[:-1])], -1)  # [s, k, 3]
+        ray = jnp.einsum("ij,skj->ski", pose[:3, :3], ray_cam)
+        pr = jnp.einsum("kij,skj->ski", precision, ray)
+        curvature = jnp.maximum((ray * pr).sum(-1), 1e-30)  # rᵀ Σ⁻¹ r
+        centre = (pr * offset[None]).sum(-1) / curvature
+        spread = jnp.sqrt(1.0 / curvature + sensor_var[None])
+        return jnp.where(shaped[None], centre + pass_sigmas * spread, far_side[None])
+
+    return far
+
+
 @jax.jit
-def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, means, covs, fx, fy,
-                  cx, cy, pose, depth):
+def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, means, covs,
+                  fx, fy, cx, cy, pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring), whether it was seen
     through ``[k]`` (the five samples taken at least ``THROUGH_PIXELS`` apart all passed)
     and the mean colour ``[k, 3]`` of ``rgb`` at the samples that hit, with their number
@@ -165,8 +199,8 @@ def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, means, cov
     near_side = proj.depth - pass_sigmas * sigma_z
     far_side = proj.depth + pass_sigmas * sigma_z
 
-    def sample(du, dv, empty):  # the centre and du, dv [k] px either side: hit, passed
-        zero = jnp.zeros(k)
+    def sample(du, dv, empty, far=None):  # the centre and du, dv [k] px either side:
+        zero = jnp.zeros(k)               # hit, passed (beyond ``far(uv)`` when given)
         offsets = jnp.stack([jnp.stack([zero, zero], -1), jnp.stack([du, zero], -1),
                              jnp.stack([-du, zero], -1), jnp.stack([zero, dv], -1),
                              jnp.stack([zero, -dv], -1)])  # [N_SAMPLES, k, 2]
@@ -179,14 +213,17 @@ def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, means, cov
         has_depth = jnp.isfinite(observed) & (observed > 0)
         shows_nothing = empty[row, col]
         hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
-        passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > far_side)))
+        beyond = far_side if far is None else far(uv)
+        passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > beyond)))
         return hit, passed, row, col
 
     hit, passed, row, col = sample(sigma_u, sigma_v, empty)
     per_sample = area / N_SAMPLES
     wide = jnp.float32(THROUGH_PIXELS)
     _, through, _, _ = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
-                              through_empty)
+                              through_empty, _far_along_ray(means, covs, sensor_var, pose,
+                                                            fx, fy, cx, cy, pass_sigmas, shaped,
+                                                            far_side))
     n_hit = hit.sum(0)
     if rgb is not None:  # the colours the hits show
         shown = (rgb[row, col] * hit[..., None]).sum(0) / jnp.maximum(n_hit, 1)[:, None]

@@ -3,6 +3,7 @@ within a few frames that see through it, what moved appears at its new place, an
 static stream, noisy or exact, forgets nothing."""
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -16,9 +17,10 @@ from vbgs.sensors import simulate
 SIZE, FRAMES, K = 64, 24, 4000  # twelve frames a lap
 
 
-def config(forget_after=change.FORGET_AFTER, sensor=SensorConfig(), recolour=0.0):
+def config(forget_after=change.FORGET_AFTER, sensor=SensorConfig(), recolour=0.0,
+           shaped=change.SHAPED_POINTS):
     return mapping.Config(components=K, sensor=sensor, evidence=EvidenceConfig(
-        forget_after=forget_after, recolour_sigmas=recolour))
+        forget_after=forget_after, recolour_sigmas=recolour, shaped_points=shaped))
 
 
 def stream(frames, cfg, background=None, each=None):
@@ -65,9 +67,43 @@ def test_a_removed_object_loses_its_mass_within_a_few_frames(changed):
     lap = changed.changes[0]
     assert held[lap - 1] == kept[lap - 1] > 100  # the crate was learned (same stream so far)
     after = lap + change.FORGET_AFTER + 3  # a few frames that see through it
-    assert held[after] < 0.02 * held[lap - 1]  # measured 16 of 2065 points' worth
+    assert held[after] < 0.02 * held[lap - 1]  # measured 26 of 2071 points' worth
     assert held[-1] < 0.02 * held[lap - 1]
     assert kept[-1] > 0.9 * kept[lap - 1]  # without forgetting it stays
+
+
+def test_the_far_side_along_a_ray_is_the_surface_it_crosses():
+    """A flat component (a disc in the plane z = 2, seen down the camera's z axis from
+    the origin, tilted 60 degrees about x): a ray off its centre passes its far side
+    where it crosses the tilted plane, plus pass_sigmas of its thickness seen along the
+    ray and the sensor's noise; the camera axis band is its whole extent."""
+    from vbgs.render.opacity import _far_along_ray
+
+    tilt = np.deg2rad(60.0)
+    normal = np.array([0.0, np.sin(tilt), np.cos(tilt)])
+    thickness, extent = 0.001, 0.2
+    cov = extent**2 * (np.eye(3) - np.outer(normal, normal)) + thickness**2 * np.outer(
+        normal, normal)
+    mean = np.array([0.0, 0.0, 2.0])
+    pose = np.eye(4)
+    f, c = 100.0, 50.0
+    u, v = c, 60.2  # read at pixel (50, 60), its centre's ray (0.005, 0.105, 1)
+    ray = np.array([(np.floor(u) + 0.5 - c) / f, (np.floor(v) + 0.5 - c) / f, 1.0])
+    cross = mean @ normal / (ray @ normal)  # where the ray meets the plane (camera depth)
+    along = thickness / abs(ray @ normal)  # the thickness along the ray, per unit depth
+    for sensor_var in (0.0, 0.01**2):
+        far = _far_along_ray(jnp.asarray(mean[None], jnp.float32),
+                             jnp.asarray(cov[None], jnp.float32),
+                             jnp.asarray([sensor_var], jnp.float32), jnp.asarray(pose, jnp.float32),
+                             f, f, c, c, 4.0, jnp.asarray([True]), jnp.asarray([9.0]))
+        got = float(far(jnp.asarray([[[u, v]]], jnp.float32))[0, 0])
+        expect = cross + 4.0 * np.sqrt(along**2 + sensor_var)
+        assert abs(got - expect) < 1e-3 * expect, (got, expect)
+    unshaped = _far_along_ray(jnp.asarray(mean[None], jnp.float32),
+                              jnp.asarray(cov[None], jnp.float32), jnp.zeros(1),
+                              jnp.asarray(pose, jnp.float32), f, f, c, c, 4.0,
+                              jnp.asarray([False]), jnp.asarray([9.0]))
+    assert float(unshaped(jnp.asarray([[[u, v]]], jnp.float32))[0, 0]) == 9.0
 
 
 def test_a_moved_object_appears_at_its_new_place(changed):
@@ -88,7 +124,7 @@ def test_a_moved_object_appears_at_its_new_place(changed):
             mask = changed_pixels(first, view)
             errors.append(((image - np.asarray(view.rgb)) ** 2).mean(-1)[mask])
         scores[after] = psnr_of_mse(float(np.concatenate(errors).mean()))
-    assert scores[change.FORGET_AFTER] > scores[0] + 2.0, scores  # measured 13.62 against 11.08
+    assert scores[change.FORGET_AFTER] > scores[0] + 2.0, scores  # measured 13.89 against 11.07
 
 
 def test_a_repainted_world_is_learned_in_its_new_colours():
@@ -116,7 +152,7 @@ def test_a_repainted_world_is_learned_in_its_new_colours():
                        - np.asarray(repainted(v).rgb)) ** 2).mean()) for v in scene.test]
         scores[after], forgotten[after] = psnr_of_mse(float(np.mean(mse))), state.n_forgotten
     assert forgotten[0] == 0 and forgotten[change.FORGET_AFTER] > 1000, (forgotten, scores)
-    # measured 16.23 dB against 14.47: six frames of the twelve after the change relearn
+    # measured 16.21 dB against 14.47: six frames of the twelve after the change relearn
     assert scores[change.FORGET_AFTER] > scores[0] + 1.3, scores
 
 
@@ -155,6 +191,8 @@ def test_a_bad_setting_is_refused():
         EvidenceConfig(forget_after=-1)
     with pytest.raises(ValueError, match="forget_after"):
         EvidenceConfig(forget_after=2.5)
+    with pytest.raises(ValueError, match="shaped_points"):
+        EvidenceConfig(shaped_points=-1.0)
 
 
 def test_forgetting_is_a_new_prior_not_a_frames_evidence(changed):
