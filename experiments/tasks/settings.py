@@ -66,15 +66,17 @@ PROTOCOL = Choice(("continual", "static"), "continual",
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")
-# The fit scores 0.15 dB more on validation views (rule: the best mean over the object and
-# the room; results/tuning/colour/mean.md, the code version in its first line: 24.76
-# against 24.61 dB) at about twice the seconds per frame (fit-scene, object, 128 px,
-# 20k: 0.39 against 0.20, measured on the aliased frames). Off by default: the gain is
-# just over 0.1 dB, and turning it on would re-make every VBGS result at twice the time.
+# The fit scores more on validation views (results/tuning/colour/mean.md: 24.76 against
+# 24.61 dB over the object and the room; colour_walk: 22.15 against 21.78; colour_kinect,
+# the object under the Kinect: 24.97 against 24.84) at 1.6 to 4 times the seconds a frame
+# (results/tuning/colour_cost/: the walk 0.2841 against 0.1746 s, the Kinect object 0.3783
+# against 0.0923 s, single runs on a loaded machine). Off by default: a frame's time is
+# what a stream at a sensor's rate cannot spare, and turning it on would re-make every
+# VBGS result.
 COLOUR_RULE = Choice(("posterior", "fit"), "posterior",
                      "VBGS splat colours: the posterior colour means, or fitted to the "
-                     "training pixels (fit: +0.15 dB on validation views, about twice the "
-                     "time per frame)")
+                     "training pixels (fit: 0.1-0.4 dB more on validation views, at 1.6 to "
+                     "4 times the time per frame)")
 DEPTH_KIND = Choice(DEPTH_KINDS, "inverse", "what the depth model outputs")
 DEPTH_REFERENCE = Choice(DEPTH_REFERENCES, "auto",
                          "what aligns the depth model's output to metric depth, read from "
