@@ -139,7 +139,7 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
         jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
         jnp.asarray(empty), jnp.asarray(through_empty),
         None if rgb is None else jnp.asarray(rgb, jnp.float32),
-        jnp.zeros(k, bool) if shaped is None else jnp.asarray(shaped, bool),
+        None if shaped is None else jnp.asarray(shaped, bool),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
@@ -220,10 +220,10 @@ def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, me
     hit, passed, row, col = sample(sigma_u, sigma_v, empty)
     per_sample = area / N_SAMPLES
     wide = jnp.float32(THROUGH_PIXELS)
+    far = None if shaped is None else _far_along_ray(  # None: the band alone (no inverse)
+        means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, shaped, far_side)
     _, through, _, _ = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
-                              through_empty, _far_along_ray(means, covs, sensor_var, pose,
-                                                            fx, fy, cx, cy, pass_sigmas, shaped,
-                                                            far_side))
+                              through_empty, far)
     n_hit = hit.sum(0)
     if rgb is not None:  # the colours the hits show
         shown = (rgb[row, col] * hit[..., None]).sum(0) / jnp.maximum(n_hit, 1)[:, None]
