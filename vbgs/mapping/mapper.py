@@ -710,17 +710,17 @@ def _sync_stepper(state: MapState, slots: np.ndarray, config: Config,
     grown (a new stepper sharing the compiled step) after the frame's growth filled
     ``slots``."""
     prior = state.mixture.prior
-    projecting = search == "projective"
     if state.stepper is None or state.stepper.prior.n_components != prior.n_components:
-        reach, search, spacing = None, "auto", None
+        reach, stepper_search, spacing = None, "auto", None
         if state.growing and config.estep == "sparse":
             reach = grow.reach_of(state.rule, config.growth.reach_cells)
-        if projecting and config.estep == "sparse" and prior.dim == 3:
-            search = "projective"
+        if search == "projective" and config.estep == "sparse" and prior.dim == 3:
+            stepper_search = "projective"
             spacing = state.rule.cell if state.growing else grow.mean_spacing(prior)
         step = Stepper(prior, assign=config.assign, config=config.prior, estep=config.estep,
                        n_candidates=config.candidates, grows=state.growing, reach=reach,
-                       follow=config.budget.saturation > 0, search=search, spacing=spacing)
+                       follow=config.budget.saturation > 0, search=stepper_search,
+                       spacing=spacing)
     elif len(slots):
         step = state.stepper.grow(prior, slots)
     else:

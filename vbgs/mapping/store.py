@@ -70,9 +70,7 @@ def load(path, config: Config) -> MapState:
     state = state._replace(stepper=None)
     if saved is None or state.mixture is None:
         return state
-    search = saved.get("search")  # maps saved before it was kept: the config's
-    if search is None:
-        search = "projective" if config.search == "projective" else "kdtree"
+    search = saved.get("search") or config.search  # maps saved before it was kept
     state = _sync_stepper(state, np.zeros(0, np.int64), config,
                           "projective" if search == "projective" else "kdtree")
     step = state.stepper
