@@ -153,8 +153,7 @@ class VbgsLearner:
         if self.state.growing and self.config.estep == "sparse":
             extra["points_unlearned"] = self.state.points_unlearned
         if self.state.stepper is not None:  # the candidate search the frames took
-            extra["search_used"] = ("projective" if self.state.stepper.search == "projective"
-                                    else "kdtree")
+            extra["search_used"] = self.state.stepper.search
         if self.state.growing:  # seen through frames in a row: gone (vbgs.mapping.change)
             extra["components_forgotten"] = self.state.n_forgotten
             # rounds of merges that made room for new ground, and the components merged
