@@ -177,6 +177,15 @@ def _step(state: State, x, c, w, fixed: Fixed | None, cand, config: StepConfig, 
     return model.m_step(state.prior, stats), stats, Info(elbo, lse)
 
 
+@jax.jit
+def _with_missed(info: Info, more: Info, at, kl) -> Info:
+    """A tiled frame's ``info`` with its missed points' step ``more`` added: the ELBO
+    summed (the KL ``kl`` counted once) and their point log-likelihoods put at their
+    entries ``at [m]`` (past the end: padding, dropped)."""
+    return Info(info.elbo + more.elbo + kl,
+                info.point_loglik.at[at].set(more.point_loglik, mode="drop"))
+
+
 @partial(jax.jit, static_argnames=("config", "tiling"))
 def _tile_step(state: State, x, c, w, pixel, fixed: Fixed | None, config: StepConfig,
                tiling: projective.Tiling, v: projective.View, limit, ray=None):
@@ -297,6 +306,7 @@ class Stepper:
         self.reach = reach
         self.spacing = spacing
         self.tiling: projective.Tiling | None = None  # fixed by the first frame
+        self._spare = FOLLOW_MIN  # the padded size of a tiled frame's missed points
 
     def grow(self, prior: Mixture, rows) -> Stepper:
         """A stepper for the grown reference ``prior``, which differs from this one's only
@@ -400,6 +410,7 @@ class Stepper:
             raise ValueError(f"pixel must give each of the {n} points its flat pixel index "
                              f"in the {camera.width} x {camera.height} frame")
         size = len(x)
+        first = self.tiling is None
         self._fix_tiling(x, n, camera)
         flat = np.full(size, -1, np.int32)
         flat[:n] = pixel
@@ -415,6 +426,10 @@ class Stepper:
             projective.view(camera, self._origin, x.dtype), limit, rays)
         within = np.asarray(within)[:n]
         stepped = state._replace(posterior=posterior, stats=stats)
+        if first and self.assign == "prior":  # compiled with the first frame, unused
+            _, more, at = self._missed_step(stepped, x, c, w, rays, np.zeros(0, np.int64),
+                                            None)
+            _with_missed(info, more, at, self.fixed.kl)
         if self.assign == "prior" and (~within).sum() > MISSED_SHARE * n:
             stepped, info, within = self._missed(stepped, info, within, x, c, w, rays, limit)
         return stepped, StepInfo(*info, within if reaching else None)
@@ -422,37 +437,47 @@ class Stepper:
     def _missed(self, state: State, info: Info, within: np.ndarray, x, c, w, rays, limit
                 ) -> tuple[State, Info, np.ndarray]:
         """The points of a tiled frame whose tiles listed no component within their reach
-        (``within [n]`` False; more than :data:`MISSED_SHARE` of them) searched again in a KD-tree over the reference's means and
-        learned where it finds one within reach: a tile lists a fixed number of
-        components, so far ground, where one tile spans many spacings, loses points that
-        the KD-tree's nearest means would take (the walk at 640 x 480: 3% of its
-        points). Prior assignment only: the missed points are scored against the same
+        (``within [n]`` False; more than :data:`MISSED_SHARE` of them) searched again in
+        a KD-tree over the reference's means and learned where it finds one within
+        reach: a tile lists a fixed number of components, so far ground, where one tile
+        spans many spacings, loses points that the KD-tree's nearest means would take
+        (the walk at 640 x 480: 3% of its points). Prior assignment only: the missed points are scored against the same
         fixed reference, so the frame's statistics are those of one pass with these
-        candidates (the candidate rule still reads only the prior and the frame). Their
-        batch is padded to a power of two (:data:`FOLLOW_MIN` at least): a few
-        compilations per stream. Returns the state with them added, the info (ELBO
-        summed, their point log-likelihoods in place) and the points learned now."""
+        candidates (the candidate rule still reads only the prior and the frame).
+        Returns the state with them added (:meth:`_missed_step`), the info (ELBO summed,
+        their point log-likelihoods in place) and the points learned now."""
         missed, cand = self._nearest_means(x, np.flatnonzero(~within), limit)
         if len(missed) == 0:
             return state, info, within
+        state, more, at = self._missed_step(state, x, c, w, rays, missed, cand)
+        within = within.copy()
+        within[missed] = True
+        return state, _with_missed(info, more, at, self.fixed.kl), within
+
+    def _missed_step(self, state: State, x, c, w, rays, missed: np.ndarray, cand
+                     ) -> tuple[State, Info, np.ndarray]:
+        """:meth:`_missed`'s step: the points ``x[missed]`` with their candidates ``cand
+        [m, C]`` learned against the fixed reference, in a batch padded to the stepper's
+        spare size (:data:`FOLLOW_MIN`, doubled when a frame misses more: one compilation
+        per stream, made with the first frame, so that no frame of a stream waits for
+        one). Returns the state, the step's info and each padded entry's point ``[size]``
+        (``len(x)``: padding)."""
         m = len(missed)
-        size = max(FOLLOW_MIN, 1 << (m - 1).bit_length())
-        at = np.full(size, len(x), np.int32)  # padding: past the end, dropped
+        if m > self._spare:
+            self._spare = 1 << (m - 1).bit_length()
+        at = np.full(self._spare, len(x), np.int32)  # padding: past the end, dropped
         at[:m] = missed
         take = np.minimum(at, len(x) - 1)
         w2 = np.where(at < len(x), w[take], 0.0).astype(w.dtype)
-        cand2 = np.zeros((size, self.n_candidates), np.int32)
-        cand2[:m] = cand
-        config = StepConfig(self.assign, self.estep, self.colour_noise, self._chunk(size),
-                            None, False)
+        cand2 = np.zeros((self._spare, self.n_candidates), np.int32)
+        if m:
+            cand2[:m] = cand
+        config = StepConfig(self.assign, self.estep, self.colour_noise,
+                            self._chunk(self._spare), None, False)
         posterior, stats, more = _step(state, x[take], c[take], w2, self.fixed, cand2,
                                        config, None if rays is None else rays[take],
                                        np.int32(m))
-        info = Info(info.elbo + more.elbo + self.fixed.kl,  # the KL counted once
-                    info.point_loglik.at[at].set(more.point_loglik, mode="drop"))
-        within = within.copy()
-        within[missed] = True
-        return state._replace(posterior=posterior, stats=stats), info, within
+        return state._replace(posterior=posterior, stats=stats), more, at
 
     def _nearest_means(self, x: np.ndarray, missed: np.ndarray, limit: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:

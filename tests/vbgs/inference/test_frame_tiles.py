@@ -193,3 +193,31 @@ def test_points_no_tile_lists_are_learned_from_the_kdtree():
         np.testing.assert_allclose(np.asarray(a) - np.asarray(b), np.asarray(c),
                                    rtol=1e-4, atol=2e-3)
     assert np.isfinite(float(info.elbo))
+
+
+def test_a_frame_that_misses_points_compiles_nothing_after_the_first():
+    """The missed points' step is compiled with a stream's first frame: a later frame
+    that misses points (here the second; the first missed none) waits for no
+    compilation, and its points are learned."""
+    import jax
+
+    from vbgs.inference import stepper as stepper_module
+    from vbgs.render.camera import from_fov, look_at, unproject
+
+    w, h = 48, 32
+    cam = from_fov(w, h, 1.2, look_at((0.0, -2.0, 0.5), (0.0, 0.0, 0.5)))
+    u, v = np.meshgrid(np.linspace(0, 1, w), np.linspace(0, 1, h))
+    rgb = np.stack([u, v, 0.5 * (u + v)], -1).astype(np.float32)
+    xyz, col = unproject(cam, rgb, np.full((h, w), 2.0, np.float32))
+    left = np.flatnonzero(xyz[:, 0] < np.quantile(xyz[:, 0], 0.3))
+    prior = model.init(xyz[left], col[left], 12, key=jax.random.key(1), scheme="data")
+    step = stepper_module.Stepper(prior, estep="sparse", n_candidates=12,
+                                  search="projective", spacing=0.05, reach=10.0,
+                                  max_points=len(xyz))
+    state, first = step(model.start(prior), xyz[left], col[left], camera=cam, pixel=left)
+    assert first.learned.all()
+    compiled = stepper_module._step._cache_size(), stepper_module._with_missed._cache_size()
+    _, second = step(state, xyz, col, camera=cam, pixel=np.arange(len(xyz)))
+    assert second.learned.all()
+    assert (stepper_module._step._cache_size(),
+            stepper_module._with_missed._cache_size()) == compiled
