@@ -107,7 +107,8 @@ def _nearest(means: np.ndarray, idx: np.ndarray, moved: np.ndarray, last: _Kept 
     near, reach = np.full((k, c), -1, np.int64), np.zeros(k)
     redo = np.ones(len(idx), bool)
     if last is not None:
-        redo = moved[idx] | moved[np.maximum(last.near[idx], 0)].any(1) | (last.near[idx] < 0).any(1)
+        gone = np.append(moved, True)  # a neighbour -1 (none) reads the last: redone
+        redo = moved[idx] | gone[last.near[idx]].any(1)
         went = idx[moved[idx]]  # components that moved (or arrived)
         still = np.flatnonzero(~redo)
         if len(went) and len(still):

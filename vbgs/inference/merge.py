@@ -82,6 +82,9 @@ from vbgs.inference.precision import logdet3
 
 # Each component may merge with one of its this many nearest components (by mean).
 NEIGHBOURS = 4
+# cheapest_disjoint sorts the pairs cheaper than the HEAD * n-th first (a cost rule: the
+# room's rounds at 640 x 480 take n disjoint pairs from the cheapest 1.5 n).
+HEAD = 4
 
 
 def _moments(space: expfam.NIW, rows: np.ndarray):
@@ -146,7 +149,16 @@ def choose_pairs(posterior: Mixture, counts: np.ndarray, active: np.ndarray, n: 
 
 def cheapest_disjoint(pairs: np.ndarray, cost: np.ndarray, k: int, n: int) -> np.ndarray:
     """Up to ``n`` disjoint pairs of ``pairs [p, 2]`` (slots of ``k``), cheapest ``cost
-    [p]`` first (ties in the pairs' order)."""
+    [p]`` first (ties in the pairs' order). The greedy choice reads its order only as far
+    as it takes ``n`` pairs, so the pairs cheaper than the ``HEAD * n``-th cheapest are
+    sorted first (a partition, not a sort of all ``p``: 10 against 35 ms for 3000 of
+    the room's 200k pairs at 640 x 480), and all of them only when those do not hold
+    ``n`` disjoint pairs."""
+    if HEAD * n < len(cost):
+        head = np.flatnonzero(cost < np.partition(cost, HEAD * n)[HEAD * n])
+        chosen = _disjoint(pairs, head[np.argsort(cost[head], kind="stable")], k, n)
+        if len(chosen) == n:  # what the whole order gives: it starts with the head's
+            return chosen
     return _disjoint(pairs, np.argsort(cost, kind="stable"), k, n)
 
 
@@ -175,13 +187,13 @@ def _disjoint(pairs: np.ndarray, order: np.ndarray, k: int, n: int | None = None
               ) -> np.ndarray:
     """Up to ``n`` (None: any number) pairs of ``pairs [p, 2]`` taken greedily in
     ``order``: a pair is taken unless an earlier one took one of its components."""
-    used = np.zeros(k, bool)
+    used = bytearray(k)
     chosen = []
-    for i in order:  # greedy: a loop, but it stops at n
-        pa, pb = pairs[i]
+    ends = pairs[order].tolist()  # Python ints: numpy scalars cost 3 times more a step
+    for i, (pa, pb) in zip(order.tolist(), ends, strict=True):  # greedy: stops at n
         if used[pa] or used[pb]:
             continue
-        used[pa] = used[pb] = True
+        used[pa] = used[pb] = 1
         chosen.append(i)
         if len(chosen) == n:
             break

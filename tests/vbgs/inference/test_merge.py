@@ -91,6 +91,32 @@ def test_choose_pairs_takes_disjoint_pairs_cheapest_first():
     assert none.shape == (0, 2)  # one active component: nothing to merge
 
 
+@pytest.mark.parametrize("n", [1, 7, 60, 200, 400])
+def test_cheapest_disjoint_equals_the_greedy_over_the_whole_sorted_order(n):
+    """The head-first choice (a partition, the whole order only when the head lacks
+    ``n`` disjoint pairs) against the greedy written out over every pair in stable
+    order: the same pairs, ties (costs rounded to a few values) and infinite costs
+    included; from n = 200 the 300 slots hold fewer than n disjoint pairs (the whole
+    order read)."""
+    rng = np.random.default_rng(n)
+    k = 300
+    pairs = np.unique(np.sort(rng.integers(0, k, (1500, 2)), 1), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    cost = np.round(rng.exponential(1.0, len(pairs)), 1)
+    cost[rng.random(len(pairs)) < 0.05] = np.inf
+    used, want = set(), []
+    for i in np.argsort(cost, kind="stable"):
+        a, b = pairs[i]
+        if a in used or b in used:
+            continue
+        used |= {a, b}
+        want.append(i)
+        if len(want) == n:
+            break
+    got = merge.cheapest_disjoint(pairs, cost, k, n)
+    assert np.array_equal(got, pairs[np.asarray(want, np.int64)].reshape(-1, 2))
+
+
 def test_neighbour_pairs_are_the_active_components_with_their_nearest_once():
     """Against the pairs written out from all distances: the tree search and the sorted
     dedup of the packed pairs give each pair once, in order."""
