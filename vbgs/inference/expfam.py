@@ -131,26 +131,6 @@ def niw_posterior(prior: NIW, stats: Stats) -> NIW:
     return NIW(mean, kappa, prior.dof + n, scale)
 
 
-def trace_solve(a: jnp.ndarray, b: jnp.ndarray) -> jnp.ndarray:
-    """``tr(a^-1 b)`` ``[k]`` for symmetric ``a, b [k, d, d]`` (d = 2 or 3), through the
-    adjugate: ``tr(adj(a) b) / det(a)``, elementwise (no LAPACK call)."""
-    d = a.shape[-1]
-    if d == 2:
-        adj = jnp.stack([jnp.stack([a[:, 1, 1], -a[:, 0, 1]], -1),
-                         jnp.stack([-a[:, 1, 0], a[:, 0, 0]], -1)], -2)
-    elif d == 3:
-        def cof(i, j):
-            r = [x for x in range(3) if x != i]
-            c = [x for x in range(3) if x != j]
-            minor = a[:, r[0], c[0]] * a[:, r[1], c[1]] - a[:, r[0], c[1]] * a[:, r[1], c[0]]
-            return (-1) ** (i + j) * minor
-        adj = jnp.stack([jnp.stack([cof(j, i) for j in range(3)], -1) for i in range(3)], -2)
-    else:
-        raise ValueError(f"trace_solve takes 2x2 or 3x3 matrices, got {d}x{d}")
-    det = jnp.sum(a[:, 0, :] * adj[:, :, 0], -1)  # expansion along the first row
-    return jnp.einsum("kij,kji->k", adj, b) / det
-
-
 def niw_expected_precision(q: NIW) -> jnp.ndarray:
     """``E[Sigma^-1] = nu Psi^-1``, ``[k, d, d]``."""
     return q.dof[:, None, None] * jnp.linalg.inv(q.scale)

@@ -22,6 +22,8 @@ show what the protection buys (see ``tests/vbgs/inference/test_precision.py``).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -64,3 +66,45 @@ def logdet3(s, floor: float = 0.0):
            - s[..., 0, 1] * (s[..., 1, 0] * s[..., 2, 2] - s[..., 1, 2] * s[..., 2, 0])
            + s[..., 0, 2] * (s[..., 1, 0] * s[..., 2, 1] - s[..., 1, 1] * s[..., 2, 0]))
     return xp.log(xp.maximum(xp.abs(det), floor))
+
+
+
+class LDL3(NamedTuple):
+    """``s = L D L^T`` of symmetric 3x3 matrices ``s [..., 3, 3]``: ``L`` unit lower
+    triangular with entries ``l10, l20, l21`` and ``D = diag(d0, d1, d2)``, each
+    ``[...]``. One array per entry: elementwise arithmetic over a trailing axis of 3
+    vectorises badly on CPUs (the along-ray test of 100k components' five rays took 80
+    ms in ``[..., 3]`` arrays, 2.5 ms in these)."""
+
+    l10: jnp.ndarray
+    l20: jnp.ndarray
+    l21: jnp.ndarray
+    d0: jnp.ndarray
+    d1: jnp.ndarray
+    d2: jnp.ndarray
+
+
+def ldl3(s: jnp.ndarray) -> LDL3:
+    """:class:`LDL3` of ``s [..., 3, 3]``, elementwise (JAX): with
+    :func:`unit_lower_solve3`, ``u^T s^-1 v = sum_i (L^-1 u)_i (L^-1 v)_i / d_i``.
+
+    Why not an inverse: a batched LAPACK inverse of 3x3 matrices costs far more than
+    their arithmetic (about 100 ms of CPU for 100000), and the adjugate's inverse,
+    elementwise too, loses a nearly singular (thin) matrix's quadratic forms: at unit
+    trace, one axis 1e-6 of the others, ``r^T s^-1 r`` came out up to 16 times off where
+    this is within 1.2% of float64, as LAPACK's float32 inverse (0.9%). Precision:
+    symmetric positive definite ``s`` factor stably without pivoting; an indefinite one
+    gives a negative ``d_i``, and the caller decides what that means."""
+    l10, l20 = s[..., 1, 0] / s[..., 0, 0], s[..., 2, 0] / s[..., 0, 0]
+    d1 = s[..., 1, 1] - l10 * s[..., 1, 0]
+    t21 = s[..., 2, 1] - l20 * s[..., 1, 0]
+    l21 = t21 / d1
+    return LDL3(l10, l20, l21, s[..., 0, 0], d1, s[..., 2, 2] - l20 * s[..., 2, 0] - l21 * t21)
+
+
+def unit_lower_solve3(f: LDL3, v0, v1, v2) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """The entries of ``L^-1 v`` for the unit lower triangular ``L`` of ``f`` and the
+    vectors with entries ``v0, v1, v2`` (each broadcast against ``f``'s), by forward
+    substitution."""
+    y1 = v1 - f.l10 * v0
+    return v0, y1, v2 - f.l20 * v0 - f.l21 * y1

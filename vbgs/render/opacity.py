@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from vbgs.inference.precision import ldl3, unit_lower_solve3
 from vbgs.render.background import empty_pixels
 from vbgs.render.camera import Camera
 from vbgs.render.pixels import PIXEL_CENTRE_OFFSET
@@ -155,19 +156,22 @@ def _far_along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, s
     ``t* = rᵀ Σ⁻¹ (μ - c) / rᵀ Σ⁻¹ r`` and its standard deviation
     ``sqrt(1 / rᵀ Σ⁻¹ r + sensor_var)``, ``r`` the ray scaled to unit camera depth;
     ``far_side [k]`` (the hit band's) where not ``shaped``. The covariance is inverted
-    at unit trace (a thin component's float32 inverse)."""
-    scale = jnp.maximum(jnp.trace(covs, axis1=-2, axis2=-1), 1e-30)[:, None, None]
-    precision = jnp.linalg.inv(covs / scale + 1e-6 * jnp.eye(3)) / scale  # [k, 3, 3]
-    offset = means - pose[:3, 3]  # [k, 3]
+    through its LDLᵀ factors at unit trace, elementwise
+    (:func:`vbgs.inference.precision.ldl3`: stable for a thin component in float32)."""
+    scale = jnp.maximum(jnp.trace(covs, axis1=-2, axis2=-1), 1e-30)  # [k]
+    f = ldl3(covs / scale[:, None, None] + 1e-6 * jnp.eye(3))
+    weight = [1.0 / (d * scale) for d in (f.d0, f.d1, f.d2)]  # Σ⁻¹ = L⁻ᵀ diag(weight) L⁻¹
+    offset = unit_lower_solve3(f, *(means - pose[:3, 3]).T)  # L⁻¹ (μ - c), entries [k]
+    rot = pose[:3, :3]
 
     def far(uv):
         centre_uv = jnp.floor(uv) + PIXEL_CENTRE_OFFSET  # the read pixel's: its depth's ray
-        ray_cam = jnp.stack([(centre_uv[..., 0] - cx) / fx, (centre_uv[..., 1] - cy) / fy,
-                             jnp.ones(uv.shape[:-1])], -1)  # [s, k, 3]
-        ray = jnp.einsum("ij,skj->ski", pose[:3, :3], ray_cam)
-        pr = jnp.einsum("kij,skj->ski", precision, ray)
-        curvature = jnp.maximum((ray * pr).sum(-1), 1e-30)  # rᵀ Σ⁻¹ r
-        centre = (pr * offset[None]).sum(-1) / curvature
+        u, v = (centre_uv[..., 0] - cx) / fx, (centre_uv[..., 1] - cy) / fy  # [s, k]
+        ray = unit_lower_solve3(f, *(rot[i, 0] * u + rot[i, 1] * v + rot[i, 2]
+                                     for i in range(3)))  # L⁻¹ r, r at unit camera depth
+        curvature = jnp.maximum(sum(y * y * w for y, w in zip(ray, weight, strict=True)),
+                                1e-30)  # rᵀ Σ⁻¹ r
+        centre = sum(y * o * w for y, o, w in zip(ray, offset, weight, strict=True)) / curvature
         spread = jnp.sqrt(1.0 / curvature + sensor_var[None])
         return jnp.where(shaped[None], centre + pass_sigmas * spread, far_side[None])
 
