@@ -37,6 +37,10 @@ def test_task_scene_loads_the_walk_with_validation_views():
     scene = load_task_scene(SceneTask(scene="walk", frames=3, n_test=2, n_val=2, size=16))
     assert scene.name == "walk" and scene.background == WALK_SKY
     assert (len(scene.train), len(scene.test), len(scene.val)) == (3, 2, 2)
+    # the longer walk is a built-in name too, its frames at the walk's step
+    long = load_task_scene(SceneTask(scene="walk-long", frames=3, n_test=2, n_val=2, size=16))
+    assert long.name == "walk-long" and long.background == WALK_SKY
+    assert "walk-long" in TASKS["scene"].dataset_names()
 
 
 def test_sweep_accepts_a_walk_cell(tmp_path):

@@ -19,6 +19,13 @@ primitives, so colour and z-depth are exact up to float32 rounding:
   ``WALK_EYE`` = 1.5 and never comes back: later frames see ground the first ones
   saw far away or not at all. Pixels that hit nothing (the sky, a fifth to
   two fifths of each frame) have depth 0 (invalid) and rgb ``WALK_SKY`` (light blue).
+* ``"walk-long"``: the same street continued for ``WALK_LONG_LENGTH`` (about 108) units:
+  200 frames step as far apart as the walk's 60 (``WALK_LENGTH / 59``), so a 200-frame
+  stream keeps meeting new ground. Its first ``WALK_BLOCK`` units are the walk's
+  street, object for object; the houses, trees, rocks and posts repeat every
+  ``WALK_BLOCK`` units (each repeat jittered afresh, the house photos rotated), the
+  path weaves and the gaze wanders at the walk's rate per unit, and the far buildings
+  and the end of the ground stand as far beyond the longer path's end.
 
 World axes: z up, units are metres-like scene units. Training views follow a
 continuous path (frame i and i + 1 are neighbouring views, so streaming order
@@ -56,6 +63,10 @@ ROOM_LOOK_TARGET = np.array([0.0, 0.0, 0.8])  # the walkthrough looks about this
 WALK_FOV_X = np.deg2rad(75.0)
 WALK_SKY = (0.62, 0.78, 0.95)  # light blue: the colour of every ray that hits nothing
 WALK_LENGTH = 32.0  # the path runs from x = 0 to x = WALK_LENGTH and never comes back
+WALK_FRAMES = 60  # the walk's default frames: WALK_LENGTH / (WALK_FRAMES - 1) units a step
+WALK_LONG_FRAMES = 200  # "walk-long": this many frames at the walk's step
+WALK_LONG_LENGTH = WALK_LENGTH * (WALK_LONG_FRAMES - 1) / (WALK_FRAMES - 1)  # 107.93
+WALK_BLOCK = 40.0  # the street's houses, trees, rocks and posts repeat this often (x)
 WALK_WEAVE, WALK_WEAVE_PERIODS = 0.6, 1.25  # the path swings this far left/right (y), so often
 WALK_EYE = 1.5  # eye height of the walk
 WALK_WANDER, WALK_WANDER_PERIODS = 0.35, 2.0  # gaze yaw about the path's heading (rad), so often
@@ -324,11 +335,22 @@ WALK_FAR = (
 WALK_GROUND = ((-4.0, 66.0), 26.0, 1.8)  # ground x range, half width, half width of the road
 
 
-def walk_primitives(seed: int = 0) -> list:
-    """Primitives of the ``"walk"`` scene; ``seed`` jitters every object's place (and a
-    house's yaw) along the street."""
+def walk_primitives(seed: int = 0, length: float = WALK_LENGTH) -> list:
+    """Primitives of the ``"walk"`` scene (of ``"walk-long"`` with ``length =
+    WALK_LONG_LENGTH``); ``seed`` jitters every object's place (and a house's yaw) along
+    the street.
+
+    A path ``length`` units long gets the street's objects repeated every ``WALK_BLOCK``
+    units until they pass its end by as much as the walk's do (8 units), the ground
+    and the far buildings moved out by ``length - WALK_LENGTH``. The walk's own
+    primitives are drawn first, in its order and from its random stream, so at
+    ``length = WALK_LENGTH`` they are the walk's to the bit and on a longer path its
+    first block is the walk's street."""
     rng = np.random.default_rng(seed)
+    beyond = length - WALK_LENGTH  # how much further the path goes than the walk's
     (x0, x1), half_width, road = WALK_GROUND
+    x1 = x1 + beyond
+    blocks = int(np.ceil((length + WALK_BLOCK - WALK_LENGTH) / WALK_BLOCK))  # 1 for the walk
     length = x1 - x0
     grass = Surface("grass", (0.75, 1.0, 0.6), (length / 5.0, (half_width - road) / 5.0))
     prims = [  # the ground: a gravel road along x between two grass verges, all at z = 0
@@ -337,49 +359,68 @@ def walk_primitives(seed: int = 0) -> list:
         Quad((x0, half_width, 0.0), (length, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
         Quad((x0, -road, 0.0), (length, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
     ]
-    for x, side, (hx, hy, hz), photo, tint in WALK_HOUSES:
+    prims += _walk_block(rng, 0)
+    for x, y, (hx, hy, hz), photo in WALK_FAR:
+        dx, dy = rng.uniform(-1.0, 1.0, 2)
+        facade = Surface(photo, (0.85, 0.85, 0.95), (1.0, 2.0))
+        prims += box((x + beyond + dx, y + dy, hz), (hx, hy, hz), 0.0, facade, facade)[:4]
+    for block in range(1, blocks):  # a longer path's street, after the walk's draws
+        prims += _walk_block(rng, block)
+    return prims
+
+
+def _walk_block(rng: np.random.Generator, block: int) -> list:
+    """The street's houses, trees, rocks and lamp posts moved ``block * WALK_BLOCK``
+    units along x, each jittered by ``rng``; the house photos rotated by ``block``."""
+    shift = block * WALK_BLOCK
+    photos = [h[3] for h in WALK_HOUSES]
+    prims = []
+    for i, (x, side, (hx, hy, hz), _, tint) in enumerate(WALK_HOUSES):
+        photo = photos[(i + block) % len(photos)]
         dx, dy = rng.uniform(-0.6, 0.6), rng.uniform(0.0, 0.8)
         yaw = rng.uniform(-0.15, 0.15)
         brick = Surface("brick", tint, (2.0, 1.0))
         street = Surface(photo, repeat=(1.0, 1.0))
         walls = [brick, street if side < 0 else brick, brick, street if side > 0 else brick]
-        prims += box((x + dx, side * (5.5 + hy + dy), hz), (hx, hy, hz), yaw, walls, brick)[:4]
+        prims += box((x + shift + dx, side * (5.5 + hy + dy), hz), (hx, hy, hz), yaw, walls,
+                     brick)[:4]
     for x, side in WALK_TREES:
         dx, dy = rng.uniform(-0.6, 0.6, 2)
-        tx, ty = x + dx, side * (3.3 + 0.3 * dy)
+        tx, ty = x + shift + dx, side * (3.3 + 0.3 * dy)
         prims += [
             Cylinder((tx, ty), 0.18, 0.0, 2.2, Surface("camera", (0.65, 0.45, 0.3), (2.0, 1.0))),
             Sphere((tx, ty, 2.9), 1.0, Surface("grass", (0.5, 0.9, 0.4), (3.0, 2.0))),
         ]
     for x, side, r in WALK_ROCKS:
         dx, dy = rng.uniform(-0.6, 0.6, 2)
-        prims.append(Sphere((x + dx, side * (3.0 + 0.4 * dy), 0.5 * r), r,
+        prims.append(Sphere((x + shift + dx, side * (3.0 + 0.4 * dy), 0.5 * r), r,
                             Surface("gravel", (0.8, 0.78, 0.75), (2.0, 1.0))))
     for x, side in WALK_LAMPS:
         dx = rng.uniform(-0.6, 0.6)
         prims += [
-            Cylinder((x + dx, side * 2.4), 0.08, 0.0, 2.8, Surface("rocket", (0.5, 0.5, 0.55))),
-            Sphere((x + dx, side * 2.4, 2.95), 0.2, Surface("colorwheel")),
+            Cylinder((x + shift + dx, side * 2.4), 0.08, 0.0, 2.8,
+                     Surface("rocket", (0.5, 0.5, 0.55))),
+            Sphere((x + shift + dx, side * 2.4, 2.95), 0.2, Surface("colorwheel")),
         ]
-    for x, y, (hx, hy, hz), photo in WALK_FAR:
-        dx, dy = rng.uniform(-1.0, 1.0, 2)
-        facade = Surface(photo, (0.85, 0.85, 0.95), (1.0, 2.0))
-        prims += box((x + dx, y + dy, hz), (hx, hy, hz), 0.0, facade, facade)[:4]
     return prims
 
 
-def _walk_path(s):
-    """Point ``(x, y)`` and heading (radians from +x) of the path at fraction ``s``."""
-    phase = 2 * np.pi * WALK_WEAVE_PERIODS * s
-    x, y = WALK_LENGTH * s, WALK_WEAVE * np.sin(phase)
-    slope = WALK_WEAVE * 2 * np.pi * WALK_WEAVE_PERIODS / WALK_LENGTH * np.cos(phase)  # dy/dx
+def _walk_path(s, length: float = WALK_LENGTH):
+    """Point ``(x, y)`` and heading (radians from +x) of the path ``length`` units long
+    at fraction ``s``: it weaves ``WALK_WEAVE_PERIODS`` times every ``WALK_LENGTH`` units."""
+    periods = WALK_WEAVE_PERIODS * (length / WALK_LENGTH)
+    phase = 2 * np.pi * periods * s
+    x, y = length * s, WALK_WEAVE * np.sin(phase)
+    slope = WALK_WEAVE * 2 * np.pi * periods / length * np.cos(phase)  # dy/dx
     return x, y, np.arctan(slope)
 
 
-def _walk_pose(s: float, lateral: float, height: float, yaw: float) -> np.ndarray:
-    """Camera at fraction ``s`` of the path, ``lateral`` units to its left, at ``height``;
-    gaze along the path turned ``yaw`` radians to the left, dipped ``WALK_PITCH``."""
-    x, y, heading = _walk_path(s)
+def _walk_pose(s: float, lateral: float, height: float, yaw: float,
+               length: float = WALK_LENGTH) -> np.ndarray:
+    """Camera at fraction ``s`` of the path ``length`` units long, ``lateral`` units to its
+    left, at ``height``; gaze along the path turned ``yaw`` radians to the left, dipped
+    ``WALK_PITCH``."""
+    x, y, heading = _walk_path(s, length)
     eye = np.array([x - lateral * np.sin(heading), y + lateral * np.cos(heading), height])
     a = heading + yaw
     gaze = np.array([np.cos(a) * np.cos(WALK_PITCH), np.sin(a) * np.cos(WALK_PITCH),
@@ -387,58 +428,72 @@ def _walk_pose(s: float, lateral: float, height: float, yaw: float) -> np.ndarra
     return look_at(eye, eye + gaze)
 
 
-def walk_poses(n_train: int = 60, n_test: int = 8, seed: int = 0):
-    """Camera-to-world poses ``(train, test)`` of the ``"walk"`` scene (see :func:`walk_scene`)."""
+def walk_poses(n_train: int = 60, n_test: int = 8, seed: int = 0,
+               length: float = WALK_LENGTH):
+    """Camera-to-world poses ``(train, test)`` of the ``"walk"`` scene (see :func:`walk_scene`),
+    on a path ``length`` units long (the gaze wanders at the walk's rate per unit)."""
     rng = np.random.default_rng([seed, 3])
     phase = rng.uniform(0.0, 2 * np.pi)
     s = np.arange(n_train) / max(n_train - 1, 1)  # [n_train] from the start to the end
-    yaw = WALK_WANDER * np.sin(2 * np.pi * WALK_WANDER_PERIODS * s + phase)
-    train = [_walk_pose(f, 0.0, WALK_EYE, w) for f, w in zip(s, yaw, strict=True)]
-    return train, _walk_views(rng, n_test)
+    periods = WALK_WANDER_PERIODS * (length / WALK_LENGTH)
+    yaw = WALK_WANDER * np.sin(2 * np.pi * periods * s + phase)
+    train = [_walk_pose(f, 0.0, WALK_EYE, w, length) for f, w in zip(s, yaw, strict=True)]
+    return train, _walk_views(rng, n_test, length)
 
 
-def _walk_views(rng: np.random.Generator, n: int) -> list[np.ndarray]:
-    """``n`` poses off the path: one in each of ``n`` equal stretches of it (so they
-    cover the whole path), 0.2-0.6 units to its left or right, eye height 1.5 +- 0.3,
-    gaze within +-0.5 rad of the path's heading. They come in the order of stretches
-    0, 2, 4, ..., then 1, 3, 5, ...: the first half of them spans the whole path too
-    (``fit-scene --save`` draws the first four)."""
+def _walk_views(rng: np.random.Generator, n: int, length: float = WALK_LENGTH
+                ) -> list[np.ndarray]:
+    """``n`` poses off the path ``length`` units long: one in each of ``n`` equal stretches
+    of it (so they cover the whole path), 0.2-0.6 units to its left or right, eye height
+    1.5 +- 0.3, gaze within +-0.5 rad of the path's heading. They come in the order of
+    stretches 0, 2, 4, ..., then 1, 3, 5, ...: the first half of them spans the whole
+    path too (``fit-scene --save`` draws the first four)."""
     s = (np.arange(n) + rng.uniform(0.0, 1.0, n)) / max(n, 1)
     lateral = rng.choice([-1.0, 1.0], n) * rng.uniform(0.2, 0.6, n)
     height = WALK_EYE + rng.uniform(-0.3, 0.3, n)
     yaw = rng.uniform(-0.5, 0.5, n)
-    poses = [_walk_pose(*v) for v in zip(s, lateral, height, yaw, strict=True)]
+    poses = [_walk_pose(*v, length) for v in zip(s, lateral, height, yaw, strict=True)]
     return [poses[i] for i in np.r_[0:n:2, 1:n:2]]
 
 
-def walk_val_poses(n_val: int = N_VAL, seed: int = 0) -> list[np.ndarray]:
+def walk_val_poses(n_val: int = N_VAL, seed: int = 0, length: float = WALK_LENGTH
+                   ) -> list[np.ndarray]:
     """Validation poses of the ``"walk"`` scene: drawn as its test views are, from the
     rng stream ``[seed, 3, VAL_STREAM]`` (the test views use ``[seed, 3]``)."""
-    return _walk_views(np.random.default_rng([seed, 3, VAL_STREAM]), n_val)
+    return _walk_views(np.random.default_rng([seed, 3, VAL_STREAM]), n_val, length)
 
 
 def walk_scene(size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
-               n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
+               n_val: int = N_VAL, samples: int = SAMPLES, length: float = WALK_LENGTH,
+               name: str = "walk") -> Scene:
     """Open walk down a street (see module docstring); the sky has no depth.
 
-    Training views walk once forward along the path, ``WALK_LENGTH`` units from x = 0,
-    never coming back, at eye height ``WALK_EYE``, gaze wandering up to
-    ``WALK_WANDER`` rad left and right of the path's heading; test views are spread
-    along the whole path, off it by 0.2-0.6 units, eye heights 1.2-1.8 and gaze up to
-    +-0.5 rad from the heading; the ``n_val`` validation views are drawn the same way
-    from another random stream.
+    Training views walk once forward along the path, ``length`` units from x = 0
+    (``WALK_LENGTH``; ``"walk-long"``: ``WALK_LONG_LENGTH``), never coming back, at eye
+    height ``WALK_EYE``, gaze wandering up to ``WALK_WANDER`` rad left and right of the
+    path's heading; test views are spread along the whole path, off it by 0.2-0.6
+    units, eye heights 1.2-1.8 and gaze up to +-0.5 rad from the heading; the ``n_val``
+    validation views are drawn the same way from another random stream.
     """
-    prims = walk_primitives(seed)
-    return _open_scene("walk", prims, (*walk_poses(n_train, n_test, seed),
-                                       walk_val_poses(n_val, seed)),
+    prims = walk_primitives(seed, length)
+    return _open_scene(name, prims, (*walk_poses(n_train, n_test, seed, length),
+                                     walk_val_poses(n_val, seed, length)),
                        size, WALK_FOV_X, WALK_SKY, samples)
+
+
+def walk_long_scene(size=128, n_train: int = WALK_LONG_FRAMES, n_test: int = 8,
+                    seed: int = 0, n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
+    """The walk's street continued for ``WALK_LONG_LENGTH`` units (see the module
+    docstring): ``n_train`` frames along it, ``WALK_LONG_FRAMES`` at the walk's step."""
+    return walk_scene(size, n_train, n_test, seed, n_val, samples, WALK_LONG_LENGTH,
+                      "walk-long")
 
 
 def render_views(name: str, poses, size=128, seed: int = 0, samples: int = SAMPLES
                  ) -> list[Frame]:
     """Frames of synthetic scene ``name`` seen from the given camera-to-world ``poses``
     (``samples`` rays per pixel side, see :data:`SAMPLES`)."""
-    fov, background = _VIEWING[name.removesuffix("-change")]
+    fov, background = _VIEWING[name.removesuffix("-change").removesuffix("-long")]
     return _frames(scene_primitives(name, seed), poses, size, fov, background, samples)
 
 
@@ -470,15 +525,17 @@ def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed
 
 
 SCENES = {"object": object_scene, "room": room_scene, "walk": walk_scene,
+          "walk-long": walk_long_scene,
           "object-change": partial(changing_scene, "object"),
           "room-change": partial(changing_scene, "room")}
 PRIMITIVES = {"object": object_primitives, "room": room_primitives, "walk": walk_primitives,
+              "walk-long": lambda seed=0: walk_primitives(seed, WALK_LONG_LENGTH),
               "object-change": lambda seed=0: object_primitives(seed, changed=True),
               "room-change": lambda seed=0: room_primitives(seed, changed=True)}
 
 
 def make_scene(name: str, **kw) -> Scene:
-    """Build the synthetic scene ``name`` ("object", "room" or "walk") with keyword arguments ``kw``."""
+    """Build the synthetic scene ``name`` (a key of :data:`SCENES`) with keyword arguments ``kw``."""
     if name not in SCENES:
         raise ValueError(f"unknown synthetic scene {name!r}; known scenes: {', '.join(SCENES)}")
     return SCENES[name](**kw)
