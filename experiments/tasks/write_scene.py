@@ -17,10 +17,11 @@ measurement model by default. What the files keep (:func:`vbgs.data.blender.writ
   OpenGL axis flip is exact).
 
 Measured at fit-scene's defaults with a Kinect (results/sensors/folder): the folder
-against memory, object +0.006 dB, room -0.030 dB. On the room, the in-memory frames
-with colour rounded to 8 bits alone score -0.005 dB, depth rounded to 1 mm alone
--0.008, both -0.030 (the folder's figure to 0.0005 dB): the gap is the rounding, felt
-through a growing map's order-dependent choices, not a camera or split mismatch.
+against memory, object -0.029 dB, room +0.038 dB. At an earlier code, where the room's
+folder scored -0.030 dB against memory, the in-memory frames with colour rounded to 8
+bits alone scored -0.005 dB, depth rounded to 1 mm alone -0.008, both -0.030 (the
+folder's figure to 0.0005 dB; one-off runs, no results file): the gap is the rounding,
+felt through a growing map's order-dependent choices, not a camera or split mismatch.
 """
 
 from __future__ import annotations

@@ -38,8 +38,9 @@ smoothing 24.60 dB; a radius of 2 with the noise left at the reading's 24.98, at
 of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noise)
 24.70; radius 1 at 0.33 of it 25.22 (one-off runs patching the learner; the radius
 itself is chosen in ``results/tuning/denoise/``: radius 1, 25.29). Test views, fit-scene's
-defaults (``results/sensors/``): object 23.76 -> 24.30 dB (exact 25.97), room 21.83 ->
-21.83 (22.59), walk 14.01 -> 13.94 (its far ground lies beyond the Kinect's range). The
+defaults (``results/sensors/``): object 24.33 dB (exact 25.91), room 21.87 (22.61), walk
+13.94 (its far ground lies beyond the Kinect's range); without the averaging, at an
+earlier code (one-off runs), 23.76, 21.83 and 14.01. The
 RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``), validation views at today's code
 (``results/tuning/denoise/realsense/``): object 15.23 -> 18.62 dB, room 17.27 -> 19.47 at
 radius 1; at radius 2 21.29 and 20.53, a noise of several footprints wanting the wider
