@@ -33,8 +33,11 @@ RENDER_FIGURE_WIDTH = 14.0  # inches: about 1500 px at the figures' 110 dpi
 
 def _line_columns(df: pd.DataFrame, style: list[str]) -> list[str]:
     names = [*LINE_STYLE, *sorted(c for c in style if "." in c)]
+    # a setting some cells leave unset is one more value (pandas 3's astype(str) keeps a
+    # missing value missing, so nunique() alone drew a fresh map and the map it stands
+    # beside, whose settings differ only in from_frame, as one line)
     return [c for c in names if c in style and c in df
-            and df[c].astype(str).nunique() > 1]
+            and df[c].astype(str).nunique(dropna=False) > 1]
 
 
 def _plain(value):

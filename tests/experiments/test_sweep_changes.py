@@ -59,3 +59,18 @@ def test_a_sweep_without_changing_scenes_draws_no_change_bars(tmp_path):
     df = pd.DataFrame([{"task": "scene", "dataset": "object", "psnr": 20.0}])
     path, note = plot_changes(df, ["task", "dataset"], tmp_path / "changing.png")
     assert path is None and "psnr_changed" in note
+
+
+
+def test_a_setting_only_some_cells_name_tells_their_lines_apart():
+    """A fresh map (``from_frame = 15``) beside the map whose settings are the same but
+    leave from_frame unset: two lines, two labels. pandas' string conversion keeps a
+    missing value missing, and counting distinct values without it took from_frame for
+    a constant: both forgetting curves were drawn as one zigzag line."""
+    from experiments.sweep.plots import _labels, _line_columns
+
+    base = {"task": "scene", "dataset": "object-change", "method": "vbgs", "seed": 0}
+    df = pd.DataFrame([base, {**base, "from_frame": 15}])
+    cols = _line_columns(df, list(df.columns))
+    assert cols == ["from_frame"]
+    assert _labels(df, cols).tolist() == ["", "from_frame=15"]
