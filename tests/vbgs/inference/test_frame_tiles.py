@@ -154,6 +154,25 @@ def test_stepper_refuses_pixels_that_are_not_the_points():
         step(model.start(prior), xyz, rgb, camera=cam, pixel=np.array([0, 1, 2, 3, 48]))
 
 
+def _left_third_wall():
+    """A 48 x 32 frame of a textured wall 2 units in front of the camera and a prior of
+    12 components fitted to its left third: the camera, the frame's points ``[n, 3]``
+    (one a pixel, row-major), their colours, which lie on the left third ``[n]`` bool,
+    and the prior."""
+    import jax
+
+    from vbgs.render.camera import from_fov, look_at, unproject
+
+    w, h = 48, 32
+    cam = from_fov(w, h, 1.2, look_at((0.0, -2.0, 0.5), (0.0, 0.0, 0.5)))
+    u, v = np.meshgrid(np.linspace(0, 1, w), np.linspace(0, 1, h))
+    rgb = np.stack([u, v, 0.5 * (u + v)], -1).astype(np.float32)
+    xyz, col = unproject(cam, rgb, np.full((h, w), 2.0, np.float32))
+    left = xyz[:, 0] < np.quantile(xyz[:, 0], 0.3)
+    prior = model.init(xyz[left], col[left], 12, key=jax.random.key(1), scheme="data")
+    return cam, xyz, col, left, prior
+
+
 def test_points_no_tile_lists_are_learned_from_the_kdtree():
     """A wall whose components all lie on its left third: the tiles of the right two
     thirds list none of them (their pools hold only nearby tiles' components), where the
@@ -164,17 +183,9 @@ def test_points_no_tile_lists_are_learned_from_the_kdtree():
     import jax
 
     from vbgs.inference.stepper import Stepper
-    from vbgs.render.camera import from_fov, look_at, unproject
 
-    w, h = 48, 32
-    cam = from_fov(w, h, 1.2, look_at((0.0, -2.0, 0.5), (0.0, 0.0, 0.5)))
-    u, v = np.meshgrid(np.linspace(0, 1, w), np.linspace(0, 1, h))
-    rgb = np.stack([u, v, 0.5 * (u + v)], -1).astype(np.float32)
-    depth = np.full((h, w), 2.0, np.float32)
-    xyz, col = unproject(cam, rgb, depth)
-    left = xyz[:, 0] < np.quantile(xyz[:, 0], 0.3)
-    prior = model.init(xyz[left], col[left], 12, key=jax.random.key(1), scheme="data")
-    pixel = np.flatnonzero(depth)
+    cam, xyz, col, left, prior = _left_third_wall()
+    pixel = np.arange(len(xyz))  # every pixel of the wall has depth
 
     def step(search, pts, cols, fallback=True, **kw):
         st = Stepper(prior, estep="sparse", n_candidates=12, search=search, spacing=0.05,
@@ -199,18 +210,10 @@ def test_a_frame_that_misses_points_compiles_nothing_after_the_first():
     """The missed points' step is compiled with a stream's first frame: a later frame
     that misses points (here the second; the first missed none) waits for no
     compilation, and its points are learned."""
-    import jax
-
     from vbgs.inference import stepper as stepper_module
-    from vbgs.render.camera import from_fov, look_at, unproject
 
-    w, h = 48, 32
-    cam = from_fov(w, h, 1.2, look_at((0.0, -2.0, 0.5), (0.0, 0.0, 0.5)))
-    u, v = np.meshgrid(np.linspace(0, 1, w), np.linspace(0, 1, h))
-    rgb = np.stack([u, v, 0.5 * (u + v)], -1).astype(np.float32)
-    xyz, col = unproject(cam, rgb, np.full((h, w), 2.0, np.float32))
-    left = np.flatnonzero(xyz[:, 0] < np.quantile(xyz[:, 0], 0.3))
-    prior = model.init(xyz[left], col[left], 12, key=jax.random.key(1), scheme="data")
+    cam, xyz, col, left, prior = _left_third_wall()
+    left = np.flatnonzero(left)
     step = stepper_module.Stepper(prior, estep="sparse", n_candidates=12,
                                   search="projective", spacing=0.05, reach=10.0,
                                   max_points=len(xyz))
