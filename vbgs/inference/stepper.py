@@ -441,9 +441,10 @@ class Stepper:
         a KD-tree over the reference's means and learned where it finds one within
         reach: a tile lists a fixed number of components, so far ground, where one tile
         spans many spacings, loses points that the KD-tree's nearest means would take
-        (the walk at 640 x 480: 3% of its points). Prior assignment only: the missed points are scored against the same
-        fixed reference, so the frame's statistics are those of one pass with these
-        candidates (the candidate rule still reads only the prior and the frame).
+        (the walk at 640 x 480: 3% of its points). Prior assignment only: the missed
+        points are scored against the same fixed reference, so the frame's statistics are
+        those of one pass with these candidates (the candidate rule still reads only the
+        prior and the frame).
         Returns the state with them added (:meth:`_missed_step`), the info (ELBO summed,
         their point log-likelihoods in place) and the points learned now."""
         missed, cand = self._nearest_means(x, np.flatnonzero(~within), limit)
