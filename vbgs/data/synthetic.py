@@ -351,13 +351,13 @@ def walk_primitives(seed: int = 0, length: float = WALK_LENGTH) -> list:
     (x0, x1), half_width, road = WALK_GROUND
     x1 = x1 + beyond
     blocks = int(np.ceil((length + WALK_BLOCK - WALK_LENGTH) / WALK_BLOCK))  # 1 for the walk
-    length = x1 - x0
-    grass = Surface("grass", (0.75, 1.0, 0.6), (length / 5.0, (half_width - road) / 5.0))
+    ground = x1 - x0  # the ground's length along x
+    grass = Surface("grass", (0.75, 1.0, 0.6), (ground / 5.0, (half_width - road) / 5.0))
     prims = [  # the ground: a gravel road along x between two grass verges, all at z = 0
-        Quad((x0, road, 0.0), (length, 0.0, 0.0), (0.0, -2 * road, 0.0),
-             Surface("gravel", (0.6, 0.6, 0.65), (length / (2 * road), 1.0))),
-        Quad((x0, half_width, 0.0), (length, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
-        Quad((x0, -road, 0.0), (length, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
+        Quad((x0, road, 0.0), (ground, 0.0, 0.0), (0.0, -2 * road, 0.0),
+             Surface("gravel", (0.6, 0.6, 0.65), (ground / (2 * road), 1.0))),
+        Quad((x0, half_width, 0.0), (ground, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
+        Quad((x0, -road, 0.0), (ground, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
     ]
     prims += _walk_block(rng, 0)
     for x, y, (hx, hy, hz), photo in WALK_FAR:
