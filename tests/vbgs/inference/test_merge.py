@@ -104,8 +104,14 @@ def test_cheapest_disjoint_equals_the_greedy_over_the_whole_sorted_order(n):
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     cost = np.round(rng.exponential(1.0, len(pairs)), 1)
     cost[rng.random(len(pairs)) < 0.05] = np.inf
+    got = merge.cheapest_disjoint(pairs, cost, k, n)
+    assert np.array_equal(got, _greedy(pairs, np.argsort(cost, kind="stable"), n))
+
+
+def _greedy(pairs, order, n=None):
+    """The greedy written out: each pair in ``order`` unless an earlier one took an end."""
     used, want = set(), []
-    for i in np.argsort(cost, kind="stable"):
+    for i in order:
         a, b = pairs[i]
         if a in used or b in used:
             continue
@@ -113,8 +119,23 @@ def test_cheapest_disjoint_equals_the_greedy_over_the_whole_sorted_order(n):
         want.append(i)
         if len(want) == n:
             break
-    got = merge.cheapest_disjoint(pairs, cost, k, n)
-    assert np.array_equal(got, pairs[np.asarray(want, np.int64)].reshape(-1, 2))
+    return pairs[np.asarray(want, np.int64)].reshape(-1, 2)
+
+
+@pytest.mark.parametrize("n", [None, 3, 40])
+def test_the_greedy_rounds_hand_a_long_chain_to_the_pair_by_pair_loop(n):
+    """A path of pairs each dearer than the one before settles one pair a round: past
+    ``ROUNDS`` rounds the rest is taken one by one, and the answer is still the
+    greedy's (every other pair of the path, first ``n``); a random order over the same
+    path too."""
+    m = 5 * merge.ROUNDS
+    path = np.stack([np.arange(m), np.arange(1, m + 1)], 1)
+    ordered = merge._disjoint(path, np.arange(m), m + 1, n)
+    assert np.array_equal(ordered, _greedy(path, np.arange(m), n))
+    assert np.array_equal(ordered[:, 0], np.arange(0, m, 2)[:n])
+    shuffled = np.random.default_rng(0).permutation(m)
+    assert np.array_equal(merge._disjoint(path, shuffled, m + 1, n),
+                          _greedy(path, shuffled, n))
 
 
 def test_neighbour_pairs_are_the_active_components_with_their_nearest_once():
