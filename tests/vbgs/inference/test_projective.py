@@ -197,3 +197,31 @@ def test_tiles_are_few_enough_at_a_sensors_size():
     assert projective.tile_size(from_fov(128, 128, 1.0, pose), dense, 2.0) == projective.MIN_TILE
     # a coarse spacing still sets larger tiles (the frame's quarter at most)
     assert projective.tile_size(from_fov(640, 480, 1.0, pose), 0.5, 2.0) > 8
+
+
+def test_tile_lists_are_each_tiles_nearest_in_depth_order():
+    """The lists against a sort written out over (tile, depth, slot): a tile crowded past
+    ``L`` keeps its nearest, equal depths list the lower slot first, and components
+    behind the camera, outside the tiled area or inactive are listed nowhere."""
+    rng = np.random.default_rng(3)
+    tiling = projective.Tiling(width=24, height=16, tile=4, list_length=5, n_candidates=3)
+    k = 400
+    u = np.concatenate([rng.uniform(-10.0, 34.0, k - 40), np.full(40, 9.5)])  # 40 in one tile
+    v = np.concatenate([rng.uniform(-10.0, 26.0, k - 40), np.full(40, 6.5)])
+    z = np.round(rng.uniform(0.5, 3.0, k), 1).astype(np.float32)  # many equal depths
+    front = rng.random(k) < 0.9
+    active = rng.random(k) < 0.9
+    seen = projective.Projected(jnp.asarray(u, jnp.float32), jnp.asarray(v, jnp.float32),
+                                jnp.asarray(np.where(front, z, 1.0)), jnp.asarray(front))
+    lists, count = projective.tile_lists(seen, jnp.asarray(active), tiling)
+    tx, ty = np.floor(u / 4).astype(int) + 1, np.floor(v / 4).astype(int) + 1
+    listed = (front & active & (tx >= 0) & (tx < tiling.tiles_x) & (ty >= 0)
+              & (ty < tiling.tiles_y))
+    tile = ty * tiling.tiles_x + tx
+    for t in range(tiling.tiles_x * tiling.tiles_y):
+        here = np.flatnonzero(listed & (tile == t))
+        want = here[np.lexsort((here, z[here]))][:5]
+        assert int(count[t]) == len(want)
+        assert np.array_equal(np.asarray(lists[t]), np.pad(want, (0, 5 - len(want)),
+                                                           constant_values=-1))
+    assert int(count[tiling.tiles_x * 2 + 3]) == 5  # the crowded tile, cut at L
