@@ -27,16 +27,17 @@ on validation views (``results/tuning/budget``: the room at 640 x 480, 100k comp
 18 frames, 2 validation views): every point 22.30 dB; 20k points a frame (stride 4)
 22.34 dB unweighted, 19.36 dB weighted; 80k (stride 2) 23.03 dB unweighted, 22.71 dB
 weighted. The budget bounds the cost; it cannot go far below a few points per
-component and frame. Measured again (the same room and validation views,
-``tune --grid budget.points=...``; the stream has changed since; later speed-ups
-leave every figure as it was): every point 23.11 dB;
-stride 2 (N = 80000) 23.04; stride 3 (40000 and 60000) 22.72; stride 4 (20000) 22.29;
-10000 20.92; 5000 19.78. Stride 2 is the only thinning within 0.2 dB of every point;
-with ``budget.saturation`` 64 or 128 on top, 22.98 and 23.03 (alone: 16, 32, 64, 128,
-256 give 22.48, 22.67, 22.80, 22.97, 23.02); none is cheaper than stride 2 alone (CPU
-seconds a frame on 2 cores: stride 2 0.47, with saturation 64 0.50, saturation 128
-alone 1.22; the hashed counts and the batch-sized compilations cost more than the 6
-and 17% of the points they skip).
+component and frame. Measured again on today's stream (the same room and validation
+views, ``results/tuning/budget/room640_points_5k_40k.md`` and ``_60k_120k.md``, each
+naming its command and code): every point 23.07 dB; stride 2 (N = 80000) 22.99;
+stride 3 (40000 and 60000) 22.66; stride 4 (20000) 22.31; 10000 20.92; 5000 19.76.
+Stride 2 is the only thinning within 0.2 dB of every point; with ``budget.saturation``
+64 or 128 on top, 22.96 and 22.99 (``room640_points80k_saturation.md``; alone, at every
+point, ``results/tuning/saturation/``: 16, 32, 64, 128, 256 give 22.34, 22.55, 22.68,
+23.02, 23.03). None was cheaper than stride 2 alone (CPU seconds a frame on 2 cores, at
+an earlier code: stride 2 0.47, with saturation 64 0.50, saturation 128 alone 1.22; the
+hashed counts and the batch-sized compilations cost more than the 6 and 17% of the
+points they skip).
 
 Scoring each pixel against the map to skip those already explained would need a
 projection of the components or the E-step itself, the expensive work this is meant to

@@ -35,22 +35,18 @@ it); a frame whose every point is skipped still learns one (the step needs a bat
 The compiled step's padding then follows the batch (``Stepper(follow=True)``: one
 compilation per octave of batch size, not one padded size that only grows).
 
-``N`` was chosen on validation views (``results/tuning/saturation``: the room at
-640 x 480, 100k components, 18 frames, 2 validation views): every point 22.29 dB;
-N = 32: 22.19 dB, N = 64: 22.01, N = 128: 22.43 (the spread between the three is the
-stream's own randomness: which points seed components). 32 is the smallest tried within
-0.2 dB of every point; on that room it skips 61% of the points and halves the CPU time of
-a frame (1.42-1.46 -> 0.64-0.67 s of process time, frames 3-18, seeds 0 and 1; a shared
-2-core machine). It is not the default: ``N = 0`` keeps every point, bit for bit as
-before; 128 px frames give a cell few points a frame, and there it skipped 32% of the
+``N`` is off by default (``N = 0`` keeps every point, bit for bit as before). On
+validation views (``results/tuning/saturation/room640_16_64.*`` and ``room640_128_256.*``:
+the room at 640 x 480, 100k components, 18 frames, 2 validation views, every point
+otherwise learned; each table names its command and code) every point gives 23.07 dB
+(``results/tuning/budget/room640_points_5k_40k.md``); N = 16: 22.34, 32: 22.55, 64:
+22.68, 128: 23.02, 256: 23.03. The smallest within 0.2 dB is 128, which skipped 17% of
+the points for about no CPU saved (1.22 against 1.29 s a frame, at an earlier code); a
+point budget of 80000 (stride 2, :mod:`vbgs.mapping.budget`) holds 22.99 dB, at 0.47 s
+then. 128 px frames give a cell few points a frame: there N = 32 skipped 32% of the
 object's points for no time saved (each new octave of batch size compiles) and cost
-0.37 dB; ``--budget-saturation 32`` asks for it on a sensor's frames.
-
-Those figures predate the current stream; on it (``results/tuning/saturation/room640_16_64.*``
-and ``room640_128_256.*``, the same room and views): every point 23.11 dB; N = 16: 22.48, 32: 22.67, 64: 22.80,
-128: 22.97, 256: 23.02. The smallest within 0.2 dB is now 128, which skips 17% of the
-points for about no CPU saved (1.22 against 1.29 s a frame); a point budget of 80000
-(stride 2, :mod:`vbgs.mapping.budget`) holds 23.04 dB at 0.47 s.
+0.37 dB (an earlier code's one-off run). ``--budget-saturation N`` asks for it on a
+sensor's frames.
 """
 
 from __future__ import annotations
