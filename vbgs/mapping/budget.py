@@ -23,10 +23,11 @@ Unbiased sums do not make a better posterior when a component gets only a point 
 of a frame: a weighted point counts ``s^2`` points of scatter that was never seen, and
 the component's covariance collapses onto it. Unweighted (:data:`WEIGHTED`, the
 default), the thinned frame counts as fewer points and the prior keeps its say. Chosen
-on validation views (``results/tuning/budget``: the room at 640 x 480, 100k components,
-18 frames, 2 validation views): every point 22.30 dB; 20k points a frame (stride 4)
-22.34 dB unweighted, 19.36 dB weighted; 80k (stride 2) 23.03 dB unweighted, 22.71 dB
-weighted. The budget bounds the cost; it cannot go far below a few points per
+on validation views (``results/tuning/budget/room640.md``: the room at 640 x 480, 100k
+components, 18 frames, 2 validation views): every point 23.07 dB; 20k points a frame
+(stride 4) 22.31 dB unweighted, 19.49 dB weighted; 80k (stride 2) 22.99 dB unweighted,
+22.96 dB weighted (depth error 0.035 against 0.056). The budget bounds the cost; it
+cannot go far below a few points per
 component and frame. Measured again on today's stream (the same room and validation
 views, ``results/tuning/budget/room640_points_5k_40k.md`` and ``_60k_120k.md``, each
 naming its command and code): every point 23.07 dB; stride 2 (N = 80000) 22.99;
