@@ -6,9 +6,10 @@ Two rules, by what the line a figure stands on says about its source:
 
 - **Named source (strict).** When a line names results files, every figure on that line
   must be held by a value in *those* files, not in any other. A name is ``results/PATH``
-  anywhere on the line (a link's target too), or a backticked path (``PATH``) that exists
-  under ``results/`` as given (``stream_rate/sensor/``) or as the tail of one or more paths
-  there (``walk640_default20.json``, ``before/``: every path it ends stands for it); a
+  anywhere on the line (a link's target too), or a backticked path (``PATH`` with a ``/``
+  or a data file's suffix, so ``kinect`` is a word) that exists under ``results/`` as given
+  (``stream_rate/sensor/``) or as the tail of one or more paths there
+  (``walk640_default20.json``, ``before/``: every path it ends stands for it); a
   folder stands for the files under it, ``*`` globs and ``{a,b}`` expands. A name that
   holds no data (a picture, a path that does not exist, the hand-written indexes
   ``results/COMMANDS.md`` and ``results/UNSTAMPED.txt``) is no source.
@@ -85,7 +86,7 @@ def resolve(name: str, backticked: bool) -> tuple[str, ...]:
     if name.startswith("results/"):
         tails = False
         name = name[len("results/"):]
-    elif backticked:
+    elif backticked and ("/" in name or name.endswith(DATA)):  # `kinect` is a word, not a name
         tails = True
     else:
         return ()
@@ -182,6 +183,7 @@ def test_names_resolve_to_the_files_they_stand_for():
     assert sources("`walk640_default20.json`")  # a tail of a path under results/
     assert sources("`results/COMMANDS.md`") == ()  # the index of commands is no source
     assert sources("`vbgs/mapping/mapper.py`") == ()
+    assert sources("`kinect`") == () and sources("`kinect/`")  # a word; a folder's tail
 
 
 def test_the_readme_stays_short():
