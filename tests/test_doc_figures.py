@@ -2,24 +2,33 @@
 file: some value rounds to it. A figure that no file holds (or that was measured once and
 never kept) fails here; drop it or commit the file and its command (``results/COMMANDS.md``).
 
-Two rules, by what the line a figure stands on says about its source:
+Two rules, by what the page says about a figure's source:
 
-- **Named source (strict).** When a line names results files, every figure on that line
-  must be held by a value in *those* files, not in any other. A name is ``results/PATH``
-  anywhere on the line (a link's target too), or a backticked path (``PATH`` with a ``/``
-  or a data file's suffix, so ``kinect`` is a word) that exists under ``results/`` as given
+- **Named source (strict).** A figure's source is the results files named on its own
+  line; where its line names none, those named in the rest of its unit: its table row,
+  its list item (the item's first line and the lines that continue it), its paragraph
+  (lines up to a blank line, a heading, a table or a list item); a heading and a line of
+  a code block are units of one line. Where it has a source, the figure must be held by a
+  value in *those* files, not in any other. A name is ``results/PATH`` anywhere in the
+  text (a link's target too), or a backticked path (``PATH`` with a ``/`` or a data
+  file's suffix, so ``kinect`` is a word) that exists under ``results/`` as given
   (``stream_rate/sensor/``) or as the tail of one or more paths there
-  (``walk640_default20.json``, ``before/``: every path it ends stands for it); a
-  folder stands for the files under it, ``*`` globs and ``{a,b}`` expands. A name that
-  holds no data (a picture, a path that does not exist, the hand-written indexes
+  (``walk640_default20.json``, ``before/``: every path it ends stands for it); a folder
+  stands for the files under it, ``*`` globs and ``{a,b}`` expands. A name that holds no
+  data (a picture, a path that does not exist, the hand-written indexes
   ``results/COMMANDS.md`` and ``results/UNSTAMPED.txt``) is no source.
-- **No named source (loose).** A line that names no results file keeps the loose rule:
-  some value in some file under ``results/`` rounds to the figure. It catches figures
-  with no file at all, not misquotations.
+- **Settings (loose).** A figure in code, a code span (``--opacity 0.5``) or a line of a
+  code block, is a setting or a command's argument, not a quoted result: it keeps the
+  loose rule below.
+- **No named source (loose).** A figure whose line and unit name no results file keeps
+  the loose rule: some value in some file under ``results/`` rounds to it. It catches
+  figures with no file at all, not misquotations.
 
-The unit is the line (a table row is one) and not the paragraph: a paragraph often names
-several files, and their union would vouch for a figure the page sets beside the wrong
-one. A page that states a figure names its file on the figure's own line.
+The line comes first because a paragraph often names several files, one for each of its
+figures: their union would vouch for a figure set beside the wrong one. The unit comes
+next because a sentence wraps: a file named on the line above or below names the source
+of a figure in the same sentence. A page that quotes figures from several files in one
+paragraph names each file on its figures' line.
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ NOT_A_SOURCE = {"COMMANDS.md", "UNSTAMPED.txt"}  # indexes written by hand, not 
 CONSTANTS = {"2410.03592", "65.5", "6553.5"}
 NAMED = re.compile(r"results/[\w.*{},/-]*")
 BACKTICKED = re.compile(r"`([^`\s]+)`")
+CODE_SPAN = re.compile(r"`[^`]+`")
 
 
 def numbers(text: str) -> set[float]:
@@ -118,12 +128,43 @@ def sources(text: str) -> tuple[str, ...]:
     return tuple(sorted(found))
 
 
-def held(figure: str, values) -> bool:
-    """Whether some value (sorted) rounds to ``figure`` at its decimals."""
-    half = 0.5 * 10.0 ** -len(figure.split(".")[1])
-    x = float(figure)
-    i = bisect.bisect_left(values, x - half)
-    return i < len(values) and values[i] <= x + half
+ITEM = re.compile(r"^\s*(?:[-*+]|\d+\.)\s")
+
+
+def units(text: str) -> list[tuple[bool, list[tuple[int, str]]]]:
+    """The page's lines grouped into units (see the docstring), each line with its number;
+    each unit with whether it is a line of a code block."""
+    out: list[tuple[bool, list[tuple[int, str]]]] = []
+    current: list[tuple[int, str]] = []
+    fenced = False
+    for n, line in enumerate(text.splitlines(), 1):
+        stripped = line.strip()
+        fence = stripped.startswith("```")
+        alone = fenced or stripped.startswith(("#", "|"))
+        if current and (not stripped or alone or fence or ITEM.match(line)):
+            out.append((False, current))
+            current = []
+        if fence:
+            fenced = not fenced
+        elif alone:
+            out.append((fenced, [(n, line)]))
+        elif stripped:
+            current.append((n, line))
+    if current:
+        out.append((False, current))
+    return out
+
+
+def held(figure: str, values, percent: bool = False) -> bool:
+    """Whether some value (sorted) rounds to ``figure`` at its decimals; a percentage
+    (``percent``) is also held by a fraction that rounds to it (0.022 holds 2.2%)."""
+    decimals = len(figure.split(".")[1])
+    for x, half in [(float(figure), 0.5 * 10.0 ** -decimals)] + (
+            [(float(figure) / 100, 0.5 * 10.0 ** -(decimals + 2))] if percent else []):
+        i = bisect.bisect_left(values, x - half)
+        if i < len(values) and values[i] <= x + half:
+            return True
+    return False
 
 
 @pytest.fixture(scope="module")
@@ -138,18 +179,32 @@ def values() -> list[float]:
 def unheld(text: str, values: list[float]) -> list[tuple[int, str, tuple[str, ...]]]:
     """The figures of a page that their rule rejects: (line, figure, named files)."""
     missing = []
-    for n, line in enumerate(text.splitlines(), 1):
-        named = sources(line)
-        pool = sorted({v for rel in named for v in file_values(rel)}) if named else values
-        missing += [(n, m.group(0), named) for m in FIGURE.finditer(line)
-                    if m.group(0) not in CONSTANTS and not held(m.group(0), pool)]
+    for code, unit in units(text):
+        around = sources(" ".join(line for _, line in unit))
+        for n, line in unit:
+            named = sources(line) or around
+            pool = sorted({v for rel in named for v in file_values(rel)}) if named else values
+            spans = [m.span() for m in CODE_SPAN.finditer(line)]
+            for m in FIGURE.finditer(line):
+                # a figure in code (`--opacity 0.5`, a code block) is a setting: loose rule
+                setting = code or any(a < m.start() < b for a, b in spans)
+                if m.group(0) not in CONSTANTS and not held(
+                        m.group(0), values if setting else pool,
+                        line[m.end():].lstrip().startswith("%")):
+                    missing.append((n, m.group(0), () if setting else named))
     return missing
+
+
+def _where(named: tuple[str, ...]) -> str:
+    if not named:
+        return "in no results file"
+    more = f" and {len(named) - 3} more" if len(named) > 3 else ""
+    return f"not in {', '.join(named[:3])}{more}"
 
 
 @pytest.mark.parametrize("page", PAGES)
 def test_every_figure_is_in_its_results_file(page, values):
-    missing = [f"{page}:{n}: {figure}" + (f" (not in {', '.join(named)})" if named else
-                                            " (in no results file)")
+    missing = [f"{page}:{n}: {figure} ({_where(named)})"
                for n, figure, named in unheld((ROOT / page).read_text(), values)]
     assert not missing, "figures their results files do not hold:\n" + "\n".join(missing)
 
@@ -171,8 +226,27 @@ def test_a_named_file_must_hold_the_figure_another_file_does_not_vouch(values):
     assert [n for n, _, _ in unheld("a\nreaches 25.91 dB (`quick/tables.md`)", values)] == [2]
     # the same figure with no file named: the loose rule, any file
     assert not unheld("The object reaches 25.91 dB.", values)
-    # the unit is the line: a name on the next line does not apply
-    assert not unheld("The object reaches 25.91 dB\n(see `results/quick/tables.md`).", values)
+    # a name on the next line of the paragraph applies; one in the next paragraph does not
+    assert unheld("The object reaches 25.91 dB\n(see `results/quick/tables.md`).", values)
+    assert not unheld("The object reaches 25.91 dB.\n\nSee `results/quick/tables.md`.", values)
+    assert not unheld("- The object: 25.91 dB.\n- `results/quick/tables.md`", values)
+    # the line's own name comes first: the paragraph's other names do not vouch for it
+    assert unheld("25.91 dB (`quick/tables.md`)\n(`results/example/object.json`)", values)
+    assert not unheld("25.91 dB\n(`results/example/object.json`)", values)
+
+
+def test_a_setting_in_code_is_not_held_to_the_named_file(values):
+    named = "(`results/example/object.json`)"
+    assert not unheld(f"`--opacity 0.75` is the old rule {named}", values)
+    assert unheld(f"--opacity 0.75 is the old rule {named}", values)
+    assert not unheld("```bash\nrun --out results/example/object.json --opacity 0.75\n```", values)
+
+
+def test_a_percentage_is_held_by_its_fraction(values):
+    # results/splat_scale/default_walk_50000.json: "uncovered": 0.02237...
+    assert not unheld("2.2% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
+    assert unheld("2.2 uncovered (`results/splat_scale/default_walk_50000.json`)", values)
+    assert unheld("2.3% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
 
 
 def test_names_resolve_to_the_files_they_stand_for():
