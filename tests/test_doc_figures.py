@@ -24,6 +24,10 @@ Two rules, by what the page says about a figure's source:
   the loose rule: some value in some file under ``results/`` rounds to it. It catches
   figures with no file at all, not misquotations.
 
+Since a name that resolves to nothing would leave its figures to the loose rule without a
+word, every ``results/PATH`` a page names must exist (a glob must match; a placeholder such
+as ``S_K.json`` is written as a glob), except as a command's argument.
+
 The line comes first because a paragraph often names several files, one for each of its
 figures: their union would vouch for a figure set beside the wrong one. The unit comes
 next because a sentence wraps: a file named on the line above or below names the source
@@ -247,6 +251,46 @@ def test_a_percentage_is_held_by_its_fraction(values):
     assert not unheld("2.2% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
     assert unheld("2.2 uncovered (`results/splat_scale/default_walk_50000.json`)", values)
     assert unheld("2.3% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
+
+
+# A page's own ``results/`` that is not ours: Replica's layout (docs/datasets.md)
+LAYOUT = {"results/frame*.jpg", "results/depth*.png"}
+
+
+def dangling(text: str) -> list[tuple[int, str]]:
+    """The ``results/PATH`` names of a page that are no file or folder there (a glob
+    matches none): (first line of the unit, name). A misspelt or placeholder name
+    (``S_K.json``) would leave its figures to the loose rule without a word. Names in a
+    command (a code span with a space, a code block) are arguments (``--out
+    results/NAME``), and Replica's own ``results/`` layout is not ours."""
+    out = []
+    for code, unit in units(text):
+        joined = "\n".join(line for _, line in unit)  # a code span may wrap
+        commands = [m.span() for m in CODE_SPAN.finditer(joined) if " " in m.group(0).strip()]
+        for m in NAMED.finditer(joined):
+            name = m.group(0).rstrip(".,;:)")
+            if code or name in LAYOUT or name == "results/" or any(
+                    a < m.start() < b for a, b in commands):
+                continue
+            wanted = [x.rstrip("/") for x in _expand(name[len("results/"):])]
+            if not any(fnmatch.fnmatchcase(rel.rstrip("/"), w)
+                       for w in wanted for rel in results_paths()):
+                out.append((unit[0][0], name))
+    return out
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_every_results_path_a_page_names_exists(page):
+    missing = [f"{page}:{n}: {name}" for n, name in dangling((ROOT / page).read_text())]
+    assert not missing, "results paths that do not exist:\n" + "\n".join(missing)
+
+
+def test_a_misspelt_or_placeholder_name_is_caught():
+    assert dangling("25.91 dB (`results/example/objct.json`)") == [
+        (1, "results/example/objct.json")]
+    assert dangling("see `results/splat_scale/auto_S_K.json`")
+    assert not dangling("see `results/splat_scale/auto_*_50000.json`, `results/example/`")
+    assert not dangling("`tune --grid G\n--out results/tuning/prior/NAME`")  # an argument
 
 
 def test_names_resolve_to_the_files_they_stand_for():
