@@ -8,7 +8,9 @@ Two rules, by what the page says about a figure's source:
   line; where its line names none, those named in the rest of its unit: its table row,
   its list item (the item's first line and the lines that continue it), its paragraph
   (lines up to a blank line, a heading, a table or a list item); a heading and a line of
-  a code block are units of one line. Where it has a source, the figure must be held by a
+  a code block are units of one line. A table row that names no file takes the names of
+  the table's caption, the paragraph directly above the table. A figure keeps its sign
+  (``-0.15`` is not held by 0.15). Where it has a source, the figure must be held by a
   value in *those* files, not in any other. A name is ``results/PATH`` anywhere in the
   text (a link's target too), or a backticked path (``PATH`` with a ``/`` or a data
   file's suffix, so ``kinect`` is a word) that exists under ``results/`` as given
@@ -49,7 +51,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
 PAGES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md")
                               if p.name not in ("ARCHITECTURE.md", "validation.md"))]
-FIGURE = re.compile(r"(?<![\w.])\d+\.\d+(?![\w.])")
+FIGURE = re.compile(r"(?<![\w.])-?\d+\.\d+(?![\w.])")  # signed: -0.15 is not 0.15
 NUMBER = re.compile(r"-?\d+(?:\.\d+)?(?:[eE]-?\d+)?")
 DATA = (".csv", ".json", ".md", ".txt", ".toml")
 NOT_A_SOURCE = {"COMMANDS.md", "UNSTAMPED.txt"}  # indexes written by hand, not results
@@ -183,8 +185,14 @@ def values() -> list[float]:
 def unheld(text: str, values: list[float]) -> list[tuple[int, str, tuple[str, ...]]]:
     """The figures of a page that their rule rejects: (line, figure, named files)."""
     missing = []
+    caption: tuple[str, ...] = ()
+    above: list[tuple[int, str]] = []
     for code, unit in units(text):
-        around = sources(" ".join(line for _, line in unit))
+        row = not code and unit[0][1].lstrip().startswith("|")
+        if row and not (above and above[0][1].lstrip().startswith("|")):
+            caption = sources(" ".join(line for _, line in above))  # the table's caption
+        around = sources(" ".join(line for _, line in unit)) or (caption if row else ())
+        above = unit
         for n, line in unit:
             named = sources(line) or around
             pool = sorted({v for rel in named for v in file_values(rel)}) if named else values
@@ -237,6 +245,23 @@ def test_a_named_file_must_hold_the_figure_another_file_does_not_vouch(values):
     # the line's own name comes first: the paragraph's other names do not vouch for it
     assert unheld("25.91 dB (`quick/tables.md`)\n(`results/example/object.json`)", values)
     assert not unheld("25.91 dB\n(`results/example/object.json`)", values)
+
+
+def test_a_table_row_takes_its_captions_names(values):
+    table = "| scene | PSNR |\n|---|---|\n| object | 25.91 dB |\n"
+    assert not unheld("Caption (`results/example/object.json`):\n\n" + table, values)
+    assert unheld("Caption (`results/quick/tables.md`):\n\n" + table, values)
+    assert not unheld("## A heading\n\n" + table, values)  # no caption: the loose rule
+    # a row's own name comes first
+    assert not unheld("Caption (`results/quick/tables.md`):\n\n"
+                      "| object | 25.91 dB (`results/example/object.json`) |\n", values)
+
+
+def test_a_figure_keeps_its_sign(values):
+    named = "(`results/example/object.json`)"
+    assert not unheld(f"25.91 dB {named}", values)
+    assert unheld(f"-25.91 dB {named}", values)
+    assert [f for _, f, _ in unheld(f"range 0.4-25.91 {named}", values)] == ["0.4"]
 
 
 def test_a_setting_in_code_is_not_held_to_the_named_file(values):
