@@ -8,8 +8,9 @@ Two rules, by what the page says about a figure's source:
   line; where its line names none, those named in the rest of its unit: its table row,
   its list item (the item's first line and the lines that continue it), its paragraph
   (lines up to a blank line, a heading, a table or a list item); a heading and a line of
-  a code block are units of one line. A table row that names no file takes the names of
-  the table's caption, the paragraph directly above the table. A figure keeps its sign
+  a code block are units of one line. A table row or a list item also takes the names
+  of its lead-in, the paragraph directly above the table or the list (a table's
+  caption). A figure keeps its sign
   (``-0.15`` is not held by 0.15). Where it has a source, the figure must be held by a
   value in *those* files, not in any other. A name is ``results/PATH`` anywhere in the
   text (a link's target too), or a backticked path (``PATH`` with a ``/`` or a data
@@ -182,17 +183,24 @@ def values() -> list[float]:
     return sorted(found)
 
 
+def _kind(first: str) -> str | None:
+    """A unit's kind by its first line: a table row, a list item or neither."""
+    return "row" if first.lstrip().startswith("|") else "item" if ITEM.match(first) else None
+
+
 def unheld(text: str, values: list[float]) -> list[tuple[int, str, tuple[str, ...]]]:
     """The figures of a page that their rule rejects: (line, figure, named files)."""
     missing = []
     caption: tuple[str, ...] = ()
     above: list[tuple[int, str]] = []
+    before = None
     for code, unit in units(text):
-        row = not code and unit[0][1].lstrip().startswith("|")
-        if row and not (above and above[0][1].lstrip().startswith("|")):
-            caption = sources(" ".join(line for _, line in above))  # the table's caption
-        around = sources(" ".join(line for _, line in unit)) or (caption if row else ())
-        above = unit
+        kind = None if code else _kind(unit[0][1])
+        if kind and kind != before:
+            caption = sources(" ".join(line for _, line in above))  # the lead-in's names
+        around = tuple(sorted({*sources(" ".join(line for _, line in unit)),
+                               *(caption if kind else ())}))
+        above, before = unit, kind
         for n, line in unit:
             named = sources(line) or around
             pool = sorted({v for rel in named for v in file_values(rel)}) if named else values
@@ -255,6 +263,18 @@ def test_a_table_row_takes_its_captions_names(values):
     # a row's own name comes first
     assert not unheld("Caption (`results/quick/tables.md`):\n\n"
                       "| object | 25.91 dB (`results/example/object.json`) |\n", values)
+
+
+def test_a_list_item_takes_its_lead_ins_names(values):
+    items = "- the object: 25.91 dB\n- the room: 22.61 dB\n"
+    assert not unheld("Each scene (`results/example/object.json`, `results/standing/`):\n\n"
+                      + items, values)
+    assert [f for _, f, _ in unheld("Each (`results/example/object.json`):\n\n" + items,
+                                    values)] == ["22.61"]
+    assert not unheld("Each scene:\n\n" + items, values)  # no names: the loose rule
+    # an item's own names add to its lead-in's
+    assert not unheld("Each (`results/example/object.json`):\n\n- the object 25.91 dB\n"
+                      "  and the room 22.61 dB (`results/standing/`)", values)
 
 
 def test_a_figure_keeps_its_sign(values):
