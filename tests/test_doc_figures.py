@@ -10,10 +10,10 @@ Two rules, by what the page says about a figure's source:
   (lines up to a blank line, a heading, a table or a list item); a heading and a line of
   a code block are units of one line. A table row or a list item also takes the names
   of its lead-in, the paragraph directly above the table or the list (a table's
-  caption). A figure with a sign keeps it (``-0.15`` is not held by 0.15); one without
-  is a magnitude (``loses 3.30 dB`` is held by -3.3). Where it has a source, the figure must be held by a
-  value in *those* files, not in any other. A name is ``results/PATH`` anywhere in the
-  text (a link's target too), or a backticked path (``PATH`` with a ``/`` or a data
+  caption). Where it has a source, the figure must be held by a value in *those* files,
+  not in any other. A figure with a sign keeps it (``-0.15`` is not held by 0.15); one
+  without is a magnitude (``loses 3.30 dB`` is held by -3.3). A name is
+  ``results/PATH`` anywhere in the text (a link's target too), or a backticked path (``PATH`` with a ``/`` or a data
   file's suffix, so ``kinect`` is a word) that exists under ``results/`` as given
   (``stream_rate/sensor/``) or as the tail of one or more paths there
   (``walk640_default20.json``, ``before/``: every path it ends stands for it); a folder
