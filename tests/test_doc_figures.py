@@ -13,11 +13,11 @@ Two rules, by what the page says about a figure's source:
   caption). Where it has a source, the figure must be held by a value in *those* files,
   not in any other. A figure with a sign keeps it (``-0.15`` is not held by 0.15); one
   without is a magnitude (``loses 3.30 dB`` is held by -3.3). A name is
-  ``results/PATH`` anywhere in the text (a link's target too), or a backticked path (``PATH`` with a ``/`` or a data
-  file's suffix, so ``kinect`` is a word) that exists under ``results/`` as given
-  (``stream_rate/sensor/``) or as the tail of one or more paths there
-  (``walk640_default20.json``, ``before/``: every path it ends stands for it); a folder
-  stands for the files under it, ``*`` globs and ``{a,b}`` expands. A name that holds no
+  ``results/PATH`` anywhere in the text (a link's target too), or a backticked path
+  (``PATH`` with a ``/`` or a data file's suffix, so ``kinect`` is a word) that exists
+  under ``results/`` as given (``stream_rate/sensor/``) or as the tail of one or more
+  paths there (``walk640_default20.json``, ``before/``: every path it ends stands for
+  it); a folder stands for the files under it, ``*`` globs and ``{a,b}`` expands. A name that holds no
   data (a picture, a path that does not exist, the hand-written indexes
   ``results/COMMANDS.md`` and ``results/UNSTAMPED.txt``) is no source.
 - **Settings (loose).** A figure in code, a code span (``--opacity 0.5``) or a line of a
