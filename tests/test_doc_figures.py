@@ -17,9 +17,9 @@ Two rules, by what the page says about a figure's source:
   (``PATH`` with a ``/`` or a data file's suffix, so ``kinect`` is a word) that exists
   under ``results/`` as given (``stream_rate/sensor/``) or as the tail of one or more
   paths there (``walk640_default20.json``, ``before/``: every path it ends stands for
-  it); a folder stands for the files under it, ``*`` globs and ``{a,b}`` expands. A name that holds no
-  data (a picture, a path that does not exist, the hand-written indexes
-  ``results/COMMANDS.md`` and ``results/UNSTAMPED.txt``) is no source.
+  it); a folder stands for the files under it, ``*`` globs and ``{a,b}`` expands. A
+  name that holds no data (a picture, a path that does not exist, the hand-written
+  indexes ``results/COMMANDS.md`` and ``results/UNSTAMPED.txt``) is no source.
 - **Settings (loose).** A figure in code, a code span (``--opacity 0.5``) or a line of a
   code block, is a setting or a command's argument, not a quoted result: it keeps the
   loose rule below.
