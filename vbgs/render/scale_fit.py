@@ -14,7 +14,8 @@ experiments.studies.val_probe fit-scene --scene S --components K --splat-scale a
 `results/tuning/splat_scale/auto_val_*.json`; the grid's validation scores at each
 fixed scale are beside them), the scale is 1.2 on the object, the room and the walk at
 20k components and on the object and the room at 50k, and 1.5 on the walk at 50k: on each
-the validation best or next to it.
+the validation best of 1.2, 1.35 and 1.5 (`results/tuning/splat_scale/k20000_*`,
+`k50000_*`).
 """
 
 from __future__ import annotations
