@@ -111,10 +111,15 @@ FORGET_AFTER = 6
 # Rays that must have hit a component before it can be judged gone (a surface learned).
 MIN_HITS = 5.0
 # A frame reads a component's colour when this many of its five sample rays hit it (a
-# majority: one pixel beside an edge does not decide), and judges it against the mean
-# of at least this many earlier frames that read it and agreed.
+# majority: one pixel beside an edge does not decide). Against the history of its rays
+# (``recolour_reference="history"``), the mean of at least this many earlier frames that
+# read it and agreed; against its colour posterior ("posterior"), one that holds at least
+# this many points (module docstring: a colour mean of a few pixels says little about the
+# spread of the colours the component covers).
 MIN_COLOUR_HITS = 3
 MIN_COLOUR_FRAMES = 2
+MIN_COLOUR_POINTS = 10.0
+RECOLOUR_REFERENCES = ("history", "posterior")
 
 # A component holding at least this many points is judged seen through along each ray's
 # Gaussian, one with fewer against the hit band (module docstring: 0, every component,
@@ -131,49 +136,83 @@ def shaped(stats, points: float = SHAPED_POINTS) -> jax.Array:
 
 class Doubt(NamedTuple):
     """Per component, the frames in a row it was seen through (or recoloured) since a
-    frame hit it, and the colours its rays showed in the frames that agreed."""
+    frame hit it, and the colour it is judged against as ``colour / weight``: under the
+    ``"history"`` reference the sum of the mean colours its rays showed in the frames
+    that agreed and their number; under ``"posterior"`` its colour posterior's mean times
+    its precision in points and that precision, before the first frame of a run of doubt
+    while one lasts (module docstring)."""
 
     frames: jax.Array  # [k] int32
-    colour: jax.Array  # [k, 3] the sum of the mean colours its hit samples showed
-    colour_frames: jax.Array  # [k] the frames in that sum
+    colour: jax.Array  # [k, 3]
+    weight: jax.Array  # [k]
 
 
 def no_doubt(k: int) -> Doubt:
-    """Before any frame: no component doubted, no colour shown."""
+    """Before any frame: no component doubted, no colour known."""
     return Doubt(jnp.zeros(k, jnp.int32), jnp.zeros((k, 3), jnp.float32),
                  jnp.zeros(k, jnp.float32))
 
 
 @jax.jit
-def _counted(doubt: Doubt, hits, seen_through, shown, n_shown, judged, colour_tol):
+def _history(doubt: Doubt, hits, seen_through, judged, shown, n_shown, colour_tol):
     readable = n_shown >= MIN_COLOUR_HITS
-    before = doubt.colour / jnp.maximum(doubt.colour_frames, 1.0)[:, None]
-    recoloured = (readable & (doubt.colour_frames >= MIN_COLOUR_FRAMES)
+    before = doubt.colour / jnp.maximum(doubt.weight, 1.0)[:, None]
+    recoloured = (readable & (doubt.weight >= MIN_COLOUR_FRAMES)
                   & (((shown - before) ** 2).sum(-1) > colour_tol**2))
-    against = (seen_through | recoloured) & judged
-    frames = jnp.where(against, doubt.frames + 1, jnp.where(hits > 0, 0, doubt.frames))
     agrees = readable & ~recoloured  # the colour the component is known by
-    return Doubt(frames, doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
-                 doubt.colour_frames + agrees)
+    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
+                 doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
+                 doubt.weight + agrees)
+
+
+@jax.jit
+def _posterior(doubt: Doubt, hits, seen_through, judged, shown, n_shown, spread, mean, kappa,
+               sigmas, colour_noise):
+    held = doubt.frames > 0  # in a run of doubt: judged against the colour before it
+    kappa = jnp.where(held, doubt.weight, kappa)
+    mean = jnp.where(held[:, None], doubt.colour / jnp.maximum(kappa, 1e-6)[:, None], mean)
+    expected = 3.0 * colour_noise**2 * (1.0 + 1.0 / jnp.maximum(kappa, 1e-6)) + spread
+    recoloured = ((n_shown >= MIN_COLOUR_HITS) & (kappa >= MIN_COLOUR_POINTS)
+                  & (((shown - mean) ** 2).sum(-1) > sigmas**2 * expected))
+    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
+                 mean * kappa[:, None], kappa)
+
+
+def _count(doubt: Doubt, hits, against, judged):
+    """The frames in a row: one more where the frame counts ``against`` a ``judged``
+    component, 0 where it hit it otherwise, kept where it said nothing."""
+    return jnp.where(against & judged, doubt.frames + 1,
+                     jnp.where(hits > 0, 0, doubt.frames))
 
 
 def colour_tolerance(recolour_sigmas: float, colour_noise: float) -> float:
     """How far a frame's colour on a component may lie from what earlier frames showed
-    before it counts against the component: ``recolour_sigmas`` colour sigmas
-    (``colour_noise``); infinite when 0 (colour tells no change, none is read)."""
+    before it counts against the component under the ``"history"`` reference:
+    ``recolour_sigmas`` colour sigmas (``colour_noise``); infinite when 0 (colour tells
+    no change, none is read)."""
     return recolour_sigmas * colour_noise if recolour_sigmas > 0 else math.inf
 
 
-def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active,
-            colour_tol: float = math.inf) -> Doubt:
+def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
+            reference: str = "history", colour=None, recolour_sigmas: float = 0.0,
+            colour_noise: float = 0.0) -> Doubt:
     """``doubt`` after one frame's evidence ``frame``: a see-through of an ``active [k]``
     component hit ``MIN_HITS`` rays or more before (``evidence``, the counts before the
-    frame), or a recolouring (module docstring: its hit samples' mean colour farther
-    than ``colour_tol`` from the mean of those its earlier agreeing frames showed), adds
-    one; any other hit resets the count; a frame without either keeps it."""
+    frame), or a recolouring, adds one; any other hit resets the count; a frame without
+    either keeps it. A recolouring (module docstring), none when ``recolour_sigmas`` is 0:
+    ``MIN_COLOUR_HITS`` or more sample rays read and, under ``reference="history"``,
+    their mean colour farther than ``recolour_sigmas`` colour sigmas (``colour_noise``)
+    from the mean of those its earlier agreeing frames showed; under ``"posterior"``
+    farther from its colour posterior's mean (``colour``, a
+    :class:`vbgs.inference.expfam.ColourNormal` before the frame; the one before the run
+    of doubt while one lasts, holding ``MIN_COLOUR_POINTS`` points or more) than
+    ``recolour_sigmas`` times the distance expected where nothing changed."""
     judged = jnp.asarray(active) & (evidence.hits >= MIN_HITS)
-    return _counted(doubt, frame.hits, frame.seen_through, frame.shown, frame.n_shown,
-                    judged, jnp.float32(colour_tol))
+    args = (doubt, frame.hits, frame.seen_through, judged, frame.shown, frame.n_shown)
+    if reference == "posterior" and recolour_sigmas > 0:
+        return _posterior(*args, frame.spread, colour.mean, colour.kappa,
+                          jnp.float32(recolour_sigmas), jnp.float32(colour_noise))
+    return _history(*args, jnp.float32(colour_tolerance(recolour_sigmas, colour_noise)))
 
 
 def gone(doubt: Doubt, forget_after: int) -> np.ndarray:
