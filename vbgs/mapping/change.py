@@ -56,13 +56,44 @@ it; nor does it tell a moved object's components that touched the ground it stoo
 ghost of its footprint). With ``EvidenceConfig.recolour_sigmas`` above 0 a frame also
 reads the colour at a component's sample rays that hit it (at least
 ``MIN_COLOUR_HITS`` of the five) and counts against the component when their mean lies
-farther than that many colour sigmas (the model's ``colour_noise``) from the mean of
-what its earlier frames' rays showed (at least ``MIN_COLOUR_FRAMES`` of them, each
-agreeing). The reference is that history, not the component's posterior colour: five
-pixels of a high-contrast texture are a biased sample of the patch a component averages,
-the same from one view to the next, and judged against the posterior colour a static
-textured world would be found changed. A frame that agrees joins the history and, as a
-hit, resets the count; one that disagrees does not join it.
+too far from the colour the component is known by (``recolour_reference``):
+
+* ``"history"`` (the default): farther than ``recolour_sigmas`` colour sigmas (the
+  model's ``colour_noise``) from the mean of what its earlier frames' rays showed (at
+  least ``MIN_COLOUR_FRAMES`` of them, each agreeing). A frame that agrees joins the
+  history and, as a hit, resets the count; one that disagrees does not join it. Two
+  frames' pixels are a thin reference: where later views' rays land elsewhere on a
+  texture, or on the neighbouring face of an edge, every later frame disagrees, and
+  static streams forget hundreds of components (``results/changing/static/``).
+* ``"posterior"``: judged against the component's own colour posterior
+  ``N(m, σ_c² / κ I)`` (before the frame; while a run of doubt lasts, the posterior
+  before it, so that the frames after a change do not drag the reference after them).
+  Where nothing changed, a hit ray's colour is ``c = m + e``: ``m`` off by the
+  posterior's ``σ_c² / κ`` a channel, ``e`` the colour noise ``σ_c²`` a channel plus
+  the spread of colour the component covers where the rays land (a texture). That
+  spread is estimated from the frame itself, the rays' own squared scatter about their
+  mean ``S`` (the statistics hold no second moment of colour), so the expected squared
+  distance of their mean from ``m`` is at most ``E = 3 σ_c² (1 + 1/κ) + S`` (``S`` not
+  divided by the number of rays: rays a few pixels apart on a texture are not
+  independent). A frame counts against the component when the squared distance exceeds
+  ``recolour_sigmas² E``; by Markov's inequality a still surface does that with
+  probability at most ``1 / recolour_sigmas²`` a frame, whatever the colours'
+  distribution, and ``forget_after`` frames in a row are needed. Two guards come from
+  where the static streams' false recolourings were found. (i) Edge components seen from
+  one side: their side rays land on the neighbouring face within the hit band (a crate's
+  top seen past its side's component, a platform's rim), a surface the component never
+  explained. Only rays whose surface point lies within ``pass_sigmas`` Mahalanobis
+  sigmas of the component's own Gaussian are read
+  (:func:`vbgs.render.opacity.frame_evidence`, ``colour_on``). (ii) Components of a few
+  points: their colour mean is a few pixels, whose spread is unknown (the predictive of
+  a colour under an unknown variance is a Student t with the points less one degrees of
+  freedom, heavy-tailed for a few); judged from ``MIN_COLOUR_POINTS`` points on.
+
+What the posterior reference costs: the rays that land off a component's Gaussian are
+also where most of a changed world's colour evidence was (a new surface now standing
+within the band of an old one's components), and a changed world's components mostly
+hold few points at 128 px; see the measurements in ``results/tuning/recolour/`` and
+``results/changing/``.
 
 Only a measured return beyond the component is free space for this test: with exact
 depth a pixel without depth shows nothing (sky, empty space) and counts as well, but a
