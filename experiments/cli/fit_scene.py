@@ -65,6 +65,13 @@ def add(sub):
                         "counts toward forgetting it, as a see-through does (a repainted "
                         "surface; default: the map's evidence.recolour_sigmas, 0: colour "
                         "tells no change)")
+    p.add_argument("--recolour-reference", default=None, metavar="REF",  # the map checks it
+                   help="VBGS: what --recolour-sigmas judges a frame's colour against: "
+                        "history, the mean of what earlier frames' rays showed (S colour "
+                        "sigmas), or posterior, each component's colour posterior (S times "
+                        "the distance expected where nothing changed; at 6 the static "
+                        "scenes forget nothing; default: the map's "
+                        "evidence.recolour_reference)")
     p.add_argument("--budget-points", type=int, default=80000,  # BudgetConfig's default
                    metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
@@ -203,6 +210,7 @@ def _evidence(args) -> dict:
     from vbgs.mapping import EvidenceConfig
 
     given = {name: value for name, value in (("forget_after", args.forget_after),
-                                             ("recolour_sigmas", args.recolour_sigmas))
+                                             ("recolour_sigmas", args.recolour_sigmas),
+                                             ("recolour_reference", args.recolour_reference))
              if value is not None}
     return {"evidence": EvidenceConfig(**given)} if given else {}

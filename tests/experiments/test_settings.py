@@ -16,7 +16,8 @@ RENAMED = {"test_views": "n_test", "val_views": "n_val", "image": "image", "scen
 NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "reassign", "opacity",
                    "splat_scale", "splat_blur", "view", "methods", "anchor",
                    "budget_points", "budget_saturation",  # the nested budget.points, .saturation
-                   "forget_after", "recolour_sigmas"}  # the nested evidence.* (None: their defaults)
+                   # the nested evidence.* (None: their defaults)
+                   "forget_after", "recolour_sigmas", "recolour_reference"}
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:

@@ -56,13 +56,51 @@ it; nor does it tell a moved object's components that touched the ground it stoo
 ghost of its footprint). With ``EvidenceConfig.recolour_sigmas`` above 0 a frame also
 reads the colour at a component's sample rays that hit it (at least
 ``MIN_COLOUR_HITS`` of the five) and counts against the component when their mean lies
-farther than that many colour sigmas (the model's ``colour_noise``) from the mean of
-what its earlier frames' rays showed (at least ``MIN_COLOUR_FRAMES`` of them, each
-agreeing). The reference is that history, not the component's posterior colour: five
-pixels of a high-contrast texture are a biased sample of the patch a component averages,
-the same from one view to the next, and judged against the posterior colour a static
-textured world would be found changed. A frame that agrees joins the history and, as a
-hit, resets the count; one that disagrees does not join it.
+too far from the colour the component is known by (``recolour_reference``):
+
+* ``"history"`` (the default): farther than ``recolour_sigmas`` colour sigmas (the
+  model's ``colour_noise``) from the mean of what its earlier frames' rays showed (at
+  least ``MIN_COLOUR_FRAMES`` of them, each agreeing). A frame that agrees joins the
+  history and, as a hit, resets the count; one that disagrees does not join it. Two
+  frames' pixels are a thin reference: where later views' rays land elsewhere on a
+  texture, or on the neighbouring face of an edge, every later frame disagrees, and
+  static streams forget hundreds of components (``results/changing/static/``).
+* ``"posterior"``: judged against the component's own colour posterior
+  ``N(m, σ_c² / κ I)`` (before the frame; while a run of doubt lasts, the posterior
+  before it, so that the frames after a change do not drag the reference after them).
+  Where nothing changed, a hit ray's colour is ``c = m + e``: ``m`` off by the
+  posterior's ``σ_c² / κ`` a channel, ``e`` the colour noise ``σ_c²`` a channel plus
+  the spread of colour the component covers where the rays land (a texture). That
+  spread is estimated from the frame itself, the rays' own squared scatter about their
+  mean ``S`` (the statistics hold no second moment of colour), so the expected squared
+  distance of their mean from ``m`` is at most ``E = 3 σ_c² (1 + 1/κ) + S`` (``S`` not
+  divided by the number of rays: rays a few pixels apart on a texture are not
+  independent). A frame counts against the component when the squared distance exceeds
+  ``recolour_sigmas² E``; by Markov's inequality a still surface does that with
+  probability at most ``1 / recolour_sigmas²`` a frame, whatever the colours'
+  distribution, and ``forget_after`` frames in a row are needed. Two guards come from
+  where the static streams' false recolourings were found. (i) Edge components seen from
+  one side: their side rays land on the neighbouring face within the hit band (a crate's
+  top seen past its side's component, a platform's rim), a surface the component never
+  explained. Only rays whose surface point lies within ``pass_sigmas`` Mahalanobis
+  sigmas of the component's own Gaussian are read
+  (:func:`vbgs.render.opacity.frame_evidence`, ``colour_on``). (ii) Components of a few
+  points: their colour mean is a few pixels, whose spread is unknown (the predictive of
+  a colour under an unknown variance is a Student t with the points less one degrees of
+  freedom, heavy-tailed for a few); judged from ``MIN_COLOUR_POINTS`` points on.
+
+At ``recolour_sigmas`` 6 the posterior reference is safe: the static object, room and
+walk streams, and the object and room under the Kinect, are what they are with colour
+off, to the bit (``results/changing/static/*.posterior6.json``; at 4 the object and the
+walk each forget one component more). It is not the default because it then tells
+little: 24.83 dB on object-change against 24.77 by depth alone, room-change the same,
+and on the validation views 22.97 dB against 22.94 without colour and 24.37 with the
+history at 4 (``results/changing/*.posterior6.json``, ``results/tuning/recolour/``).
+Most of a changed world's colour evidence lies where the static false alarms did, on
+rays that land off the component's Gaussian (a new surface standing within an old one's
+band), and most of its components hold fewer than ``MIN_COLOUR_POINTS`` points at
+128 px: telling a face the map already holds from a new one needs the map's other
+components along that ray, which this per-component test does not read.
 
 Only a measured return beyond the component is free space for this test: with exact
 depth a pixel without depth shows nothing (sky, empty space) and counts as well, but a
@@ -111,10 +149,15 @@ FORGET_AFTER = 6
 # Rays that must have hit a component before it can be judged gone (a surface learned).
 MIN_HITS = 5.0
 # A frame reads a component's colour when this many of its five sample rays hit it (a
-# majority: one pixel beside an edge does not decide), and judges it against the mean
-# of at least this many earlier frames that read it and agreed.
+# majority: one pixel beside an edge does not decide). Against the history of its rays
+# (``recolour_reference="history"``), the mean of at least this many earlier frames that
+# read it and agreed; against its colour posterior ("posterior"), one that holds at least
+# this many points (module docstring: a colour mean of a few pixels says little about the
+# spread of the colours the component covers).
 MIN_COLOUR_HITS = 3
 MIN_COLOUR_FRAMES = 2
+MIN_COLOUR_POINTS = 10.0
+RECOLOUR_REFERENCES = ("history", "posterior")
 
 # A component holding at least this many points is judged seen through along each ray's
 # Gaussian, one with fewer against the hit band (module docstring: 0, every component,
@@ -131,49 +174,83 @@ def shaped(stats, points: float = SHAPED_POINTS) -> jax.Array:
 
 class Doubt(NamedTuple):
     """Per component, the frames in a row it was seen through (or recoloured) since a
-    frame hit it, and the colours its rays showed in the frames that agreed."""
+    frame hit it, and the colour it is judged against as ``colour / weight``: under the
+    ``"history"`` reference the sum of the mean colours its rays showed in the frames
+    that agreed and their number; under ``"posterior"`` its colour posterior's mean times
+    its precision in points and that precision, before the first frame of a run of doubt
+    while one lasts (module docstring)."""
 
     frames: jax.Array  # [k] int32
-    colour: jax.Array  # [k, 3] the sum of the mean colours its hit samples showed
-    colour_frames: jax.Array  # [k] the frames in that sum
+    colour: jax.Array  # [k, 3]
+    weight: jax.Array  # [k]
 
 
 def no_doubt(k: int) -> Doubt:
-    """Before any frame: no component doubted, no colour shown."""
+    """Before any frame: no component doubted, no colour known."""
     return Doubt(jnp.zeros(k, jnp.int32), jnp.zeros((k, 3), jnp.float32),
                  jnp.zeros(k, jnp.float32))
 
 
 @jax.jit
-def _counted(doubt: Doubt, hits, seen_through, shown, n_shown, judged, colour_tol):
+def _history(doubt: Doubt, hits, seen_through, judged, shown, n_shown, colour_tol):
     readable = n_shown >= MIN_COLOUR_HITS
-    before = doubt.colour / jnp.maximum(doubt.colour_frames, 1.0)[:, None]
-    recoloured = (readable & (doubt.colour_frames >= MIN_COLOUR_FRAMES)
+    before = doubt.colour / jnp.maximum(doubt.weight, 1.0)[:, None]
+    recoloured = (readable & (doubt.weight >= MIN_COLOUR_FRAMES)
                   & (((shown - before) ** 2).sum(-1) > colour_tol**2))
-    against = (seen_through | recoloured) & judged
-    frames = jnp.where(against, doubt.frames + 1, jnp.where(hits > 0, 0, doubt.frames))
     agrees = readable & ~recoloured  # the colour the component is known by
-    return Doubt(frames, doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
-                 doubt.colour_frames + agrees)
+    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
+                 doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
+                 doubt.weight + agrees)
+
+
+@jax.jit
+def _posterior(doubt: Doubt, hits, seen_through, judged, shown, n_shown, spread, mean, kappa,
+               sigmas, colour_noise):
+    held = doubt.frames > 0  # in a run of doubt: judged against the colour before it
+    kappa = jnp.where(held, doubt.weight, kappa)
+    mean = jnp.where(held[:, None], doubt.colour / jnp.maximum(kappa, 1e-6)[:, None], mean)
+    expected = 3.0 * colour_noise**2 * (1.0 + 1.0 / jnp.maximum(kappa, 1e-6)) + spread
+    recoloured = ((n_shown >= MIN_COLOUR_HITS) & (kappa >= MIN_COLOUR_POINTS)
+                  & (((shown - mean) ** 2).sum(-1) > sigmas**2 * expected))
+    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
+                 mean * kappa[:, None], kappa)
+
+
+def _count(doubt: Doubt, hits, against, judged):
+    """The frames in a row: one more where the frame counts ``against`` a ``judged``
+    component, 0 where it hit it otherwise, kept where it said nothing."""
+    return jnp.where(against & judged, doubt.frames + 1,
+                     jnp.where(hits > 0, 0, doubt.frames))
 
 
 def colour_tolerance(recolour_sigmas: float, colour_noise: float) -> float:
     """How far a frame's colour on a component may lie from what earlier frames showed
-    before it counts against the component: ``recolour_sigmas`` colour sigmas
-    (``colour_noise``); infinite when 0 (colour tells no change, none is read)."""
+    before it counts against the component under the ``"history"`` reference:
+    ``recolour_sigmas`` colour sigmas (``colour_noise``); infinite when 0 (colour tells
+    no change, none is read)."""
     return recolour_sigmas * colour_noise if recolour_sigmas > 0 else math.inf
 
 
-def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active,
-            colour_tol: float = math.inf) -> Doubt:
+def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
+            reference: str = "history", colour=None, recolour_sigmas: float = 0.0,
+            colour_noise: float = 0.0) -> Doubt:
     """``doubt`` after one frame's evidence ``frame``: a see-through of an ``active [k]``
     component hit ``MIN_HITS`` rays or more before (``evidence``, the counts before the
-    frame), or a recolouring (module docstring: its hit samples' mean colour farther
-    than ``colour_tol`` from the mean of those its earlier agreeing frames showed), adds
-    one; any other hit resets the count; a frame without either keeps it."""
+    frame), or a recolouring, adds one; any other hit resets the count; a frame without
+    either keeps it. A recolouring (module docstring), none when ``recolour_sigmas`` is 0:
+    ``MIN_COLOUR_HITS`` or more sample rays read and, under ``reference="history"``,
+    their mean colour farther than ``recolour_sigmas`` colour sigmas (``colour_noise``)
+    from the mean of those its earlier agreeing frames showed; under ``"posterior"``
+    farther from its colour posterior's mean (``colour``, a
+    :class:`vbgs.inference.expfam.ColourNormal` before the frame; the one before the run
+    of doubt while one lasts, holding ``MIN_COLOUR_POINTS`` points or more) than
+    ``recolour_sigmas`` times the distance expected where nothing changed."""
     judged = jnp.asarray(active) & (evidence.hits >= MIN_HITS)
-    return _counted(doubt, frame.hits, frame.seen_through, frame.shown, frame.n_shown,
-                    judged, jnp.float32(colour_tol))
+    args = (doubt, frame.hits, frame.seen_through, judged, frame.shown, frame.n_shown)
+    if reference == "posterior" and recolour_sigmas > 0:
+        return _posterior(*args, frame.spread, colour.mean, colour.kappa,
+                          jnp.float32(recolour_sigmas), jnp.float32(colour_noise))
+    return _history(*args, jnp.float32(colour_tolerance(recolour_sigmas, colour_noise)))
 
 
 def gone(doubt: Doubt, forget_after: int) -> np.ndarray:

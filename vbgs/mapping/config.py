@@ -19,7 +19,7 @@ from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AU
                              parse_components)
 from vbgs.inference.candidates import DEFAULT_CANDIDATES
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
-from vbgs.mapping.change import FORGET_AFTER, SHAPED_POINTS
+from vbgs.mapping.change import FORGET_AFTER, RECOLOUR_REFERENCES, SHAPED_POINTS
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
@@ -171,6 +171,13 @@ class EvidenceConfig:
         than this many colour sigmas (``prior.colour_noise``) from what earlier frames'
         rays showed on it counts against it as a see-through does (a repainted surface;
         0, the default: colour tells no change, :mod:`vbgs.mapping.change` says why);
+    recolour_reference: what a frame's colour is judged against (``RECOLOUR_REFERENCES``):
+        ``"history"``, the mean of what earlier frames' rays showed, the tolerance
+        ``recolour_sigmas`` colour sigmas; ``"posterior"``, the component's colour
+        posterior, the tolerance ``recolour_sigmas`` times the distance expected where
+        nothing changed (the model's colour noise, the posterior's own uncertainty and the
+        spread of colour the frame's rays show on it: safe on static streams from 6,
+        :mod:`vbgs.mapping.change`);
     shaped_points: a component holding at least this many points is seen through when
         the rays pass beyond it along its own shape (the Gaussian taken along each ray),
         one with fewer when they pass beyond its extent along the camera axis
@@ -183,6 +190,7 @@ class EvidenceConfig:
     prior_passes: float = opacity.PRIOR_PASSES
     forget_after: int = FORGET_AFTER
     recolour_sigmas: float = 0.0
+    recolour_reference: str = "history"
     shaped_points: float = SHAPED_POINTS
 
     def __post_init__(self):
@@ -196,6 +204,7 @@ class EvidenceConfig:
         if isinstance(r, bool) or not isinstance(r, int | float) or not 0 <= r < math.inf:
             raise ValueError(f"evidence.recolour_sigmas must be a number >= 0 (0: colour "
                              f"tells no change), got {r!r}")
+        _choice("evidence.recolour_reference", self.recolour_reference, RECOLOUR_REFERENCES)
         p = self.shaped_points
         if isinstance(p, bool) or not isinstance(p, int | float) or not p >= 0:
             raise ValueError(f"evidence.shaped_points must be a number of points >= 0 "

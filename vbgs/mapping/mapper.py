@@ -82,7 +82,6 @@ current posterior, so those are not (see :mod:`vbgs.inference.grow`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from functools import partial
 from typing import NamedTuple
@@ -280,17 +279,17 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
         variance = depth_variance(geometry[0], frame.camera, sensor.model, level) \
             if sensor.noisy else None
         e = config.evidence
-        tol = change.colour_tolerance(e.recolour_sigmas, config.prior.colour_noise)
-        reads_colour = state.growing and e.forget_after > 0 and math.isfinite(tol)
+        reads_colour = state.growing and e.forget_after > 0 and e.recolour_sigmas > 0
         seen = opacity.frame_evidence(  # a sensor's missing pixel is no free space
             *geometry, frame.camera, frame.depth, pass_sigmas=e.pass_sigmas,
             sensor_var=variance, empty=empty,
             through_empty=None if empty is None else np.zeros_like(empty),
             rgb=frame.rgb if reads_colour else None,
+            colour_on=e.recolour_reference == "posterior",
             shaped=change.shaped(state.mixture.stats, e.shaped_points)
             if state.growing and sensor.exact else None)  # a sensor's tails: the band
         state = _forget(state._replace(evidence=opacity.added(state.evidence, seen)),
-                        seen, state.evidence, tol, config)
+                        seen, state.evidence, info.before.colour, config)
     if config.render.colour_rule == "fit":
         colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
                                     frame.rgb, 0.0 if background is None else background,
@@ -300,9 +299,9 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
 
 
 def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Evidence,
-            colour_tol: float, config: Config) -> MapState:
-    """A growing map's components that its frames have now seen through (or recoloured
-    beyond ``colour_tol``, :func:`vbgs.mapping.change.colour_tolerance`)
+            colour, config: Config) -> MapState:
+    """A growing map's components that its frames have now seen through (or recoloured:
+    ``colour`` the colour posterior before the frame; :func:`vbgs.mapping.change.observe`)
     ``evidence.forget_after`` times in a row forgotten (:mod:`vbgs.mapping.change`):
     ``seen`` the frame's evidence, ``before`` the evidence before it."""
     after = config.evidence.forget_after
@@ -311,7 +310,9 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
     prior = state.mixture.prior
     doubt = change.observe(change.no_doubt(prior.n_components) if state.doubt is None
                            else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA,
-                           colour_tol)
+                           reference=config.evidence.recolour_reference, colour=colour,
+                           recolour_sigmas=config.evidence.recolour_sigmas,
+                           colour_noise=config.prior.colour_noise)
     slots = change.gone(doubt, after)
     if len(slots) == 0:
         return state._replace(doubt=doubt)

@@ -32,7 +32,7 @@ from vbgs.inference.stepper import Stepper
 from vbgs.mapping.config import Config
 from vbgs.mapping.mapper import MapState, _sync_stepper
 
-FORMAT = 2  # bumped when the file's layout changes (2: the change doubt reads colour)
+FORMAT = 3  # bumped when the file's layout changes (3: the change doubt's colour and weight)
 _SCHEMA = "__schema__"
 
 

@@ -28,6 +28,7 @@ against the current posterior they follow it, like posterior assignment does.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -96,6 +97,8 @@ class FrameEvidence(NamedTuple):
     #                          beyond its Gaussian along the ray where ``shaped``)
     shown: jax.Array  # [k, 3] the mean colour of the frame at the sample rays that hit it
     n_shown: jax.Array  # [k] int: how many hit samples that mean is over (0: no colour read)
+    spread: jax.Array  # [k] the hit samples' mean squared distance from that mean (summed
+    #                    over the channels): how much the colour varies across them
 
 
 def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
@@ -113,7 +116,7 @@ def added(evidence: Evidence, frame: FrameEvidence) -> Evidence:
 
 def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = PASS_SIGMAS,
                    sensor_var=None, empty=None, through_empty=None, rgb=None,
-                   shaped=None) -> FrameEvidence:
+                   shaped=None, colour_on: bool = False) -> FrameEvidence:
     """One frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
     (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
@@ -128,7 +131,10 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     ``through_empty [h, w]``: the pixels without depth the see-through test takes as
     free space (None: ``empty``; a sensor's missing pixels, out of its range, say
     nothing about what stands there). ``rgb [h, w, 3]``: the frame's colours, of which
-    the mean over each component's hit samples is returned (None: no colour read).
+    the mean over each component's hit samples is returned (None: no colour read);
+    ``colour_on``: over those of its hit samples alone whose surface point lies within
+    its own Gaussian, ``pass_sigmas`` Mahalanobis sigmas of it (:func:`_along_ray`; a
+    sample on a neighbouring surface within the hit band tells nothing of its colour).
     ``shaped [k]`` bool: the components whose see-through is judged along each ray's
     own Gaussian (:func:`_far_along_ray`, :mod:`vbgs.mapping.change`), the others
     against the hit band (None: none)."""
@@ -137,7 +143,7 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     empty = empty_pixels(depth) if empty is None else empty
     through_empty = empty if through_empty is None else through_empty
     return FrameEvidence(*_frame_counts(
-        jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
+        bool(colour_on), jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
         jnp.asarray(empty), jnp.asarray(through_empty),
         None if rgb is None else jnp.asarray(rgb, jnp.float32),
         None if shaped is None else jnp.asarray(shaped, bool),
@@ -151,11 +157,29 @@ def _far_along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, s
                    far_side):
     """``far(uv [s, k, 2]) -> [s, k]``: the camera depth beyond which the ray through the
     centre of the pixel at ``uv`` (the ray its depth was read along) has passed each
-    component: the Gaussian taken along the ray itself
-    (module docstring of :mod:`vbgs.mapping.change`), its mean depth there
-    ``t* = rᵀ Σ⁻¹ (μ - c) / rᵀ Σ⁻¹ r`` and its standard deviation
-    ``sqrt(1 / rᵀ Σ⁻¹ r + sensor_var)``, ``r`` the ray scaled to unit camera depth;
-    ``far_side [k]`` (the hit band's) where not ``shaped``. The covariance is inverted
+    component: the Gaussian taken along the ray itself (:func:`_along_ray`; module
+    docstring of :mod:`vbgs.mapping.change`), its mean depth ``t*`` there and
+    ``pass_sigmas`` of its standard deviation beyond; ``far_side [k]`` (the hit band's)
+    where not ``shaped``."""
+    along = _along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy)
+
+    def far(uv):
+        centre, variance, _ = along(uv)
+        return jnp.where(shaped[None], centre + pass_sigmas * jnp.sqrt(variance),
+                         far_side[None])
+
+    return far
+
+
+def _along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy):
+    """``along(uv [s, k, 2]) -> (t*, var, miss)``, each ``[s, k]``: each component's
+    Gaussian taken along the ray through the centre of the pixel at ``uv`` (the ray its
+    depth was read along), ``r`` that ray scaled to unit camera depth from the camera
+    centre ``c``: its mean depth there ``t* = rᵀ Σ⁻¹ (μ - c) / rᵀ Σ⁻¹ r``, its variance
+    ``1 / rᵀ Σ⁻¹ r + sensor_var`` (a reading's noise added), and ``miss``, the squared
+    Mahalanobis distance from ``μ`` of the ray's point at ``t*`` (how far the ray passes
+    from the component: a surface point read at depth ``D`` on that ray lies
+    ``miss + (D - t*)² / var`` squared sigmas from it). The covariance is inverted
     through its LDLᵀ factors at unit trace, elementwise
     (:func:`vbgs.inference.precision.ldl3`: stable for a thin component in float32)."""
     scale = jnp.maximum(jnp.trace(covs, axis1=-2, axis2=-1), 1e-30)  # [k]
@@ -164,7 +188,7 @@ def _far_along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, s
     offset = unit_lower_solve3(f, *(means - pose[:3, 3]).T)  # L⁻¹ (μ - c), entries [k]
     rot = pose[:3, :3]
 
-    def far(uv):
+    def along(uv):
         centre_uv = jnp.floor(uv) + PIXEL_CENTRE_OFFSET  # the read pixel's: its depth's ray
         u, v = (centre_uv[..., 0] - cx) / fx, (centre_uv[..., 1] - cy) / fy  # [s, k]
         ray = unit_lower_solve3(f, *(rot[i, 0] * u + rot[i, 1] * v + rot[i, 2]
@@ -172,14 +196,15 @@ def _far_along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, s
         curvature = jnp.maximum(sum(y * y * w for y, w in zip(ray, weight, strict=True)),
                                 1e-30)  # rᵀ Σ⁻¹ r
         centre = sum(y * o * w for y, o, w in zip(ray, offset, weight, strict=True)) / curvature
-        spread = jnp.sqrt(1.0 / curvature + sensor_var[None])
-        return jnp.where(shaped[None], centre + pass_sigmas * spread, far_side[None])
+        miss = sum((centre * y - o) ** 2 * w for y, o, w in zip(ray, offset, weight,
+                                                                  strict=True))
+        return centre, 1.0 / curvature + sensor_var[None], miss
 
-    return far
+    return along
 
 
-@jax.jit
-def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, means, covs,
+@partial(jax.jit, static_argnums=0)
+def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, means, covs,
                   fx, fy, cx, cy, pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring), whether it was seen
     through ``[k]`` (the five samples taken at least ``THROUGH_PIXELS`` apart all passed)
@@ -219,19 +244,28 @@ def _frame_counts(pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, me
         hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
         beyond = far_side if far is None else far(uv)
         passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > beyond)))
-        return hit, passed, row, col
+        return hit, passed, row, col, uv, observed
 
-    hit, passed, row, col = sample(sigma_u, sigma_v, empty)
+    hit, passed, row, col, uv, observed = sample(sigma_u, sigma_v, empty)
     per_sample = area / N_SAMPLES
     wide = jnp.float32(THROUGH_PIXELS)
     far = None if shaped is None else _far_along_ray(  # None: the band alone (no inverse)
         means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, shaped, far_side)
-    _, through, _, _ = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
+    _, through, *_ = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
                               through_empty, far)
     n_hit = hit.sum(0)
-    if rgb is not None:  # the colours the hits show
-        shown = (rgb[row, col] * hit[..., None]).sum(0) / jnp.maximum(n_hit, 1)[:, None]
-        n_shown = n_hit.astype(jnp.int32)
+    if rgb is not None:  # the colours the hits show (on the component's own Gaussian)
+        on = hit
+        if colour_on:
+            centre, variance, miss = _along_ray(means, covs, sensor_var, pose, fx, fy, cx,
+                                                cy)(uv)
+            on = hit & (miss + (observed - centre) ** 2 / variance <= pass_sigmas**2)
+        n_on = on.sum(0)
+        colours = rgb[row, col]  # [s, k, 3]
+        shown = (colours * on[..., None]).sum(0) / jnp.maximum(n_on, 1)[:, None]
+        spread = (((colours - shown[None]) ** 2).sum(-1) * on).sum(0) / jnp.maximum(n_on, 1)
+        n_shown = n_on.astype(jnp.int32)
     else:
-        shown, n_shown = jnp.zeros((k, 3)), jnp.zeros(k, jnp.int32)
-    return n_hit * per_sample, passed.sum(0) * per_sample, through.all(0), shown, n_shown
+        shown, n_shown, spread = jnp.zeros((k, 3)), jnp.zeros(k, jnp.int32), jnp.zeros(k)
+    return (n_hit * per_sample, passed.sum(0) * per_sample, through.all(0), shown, n_shown,
+            spread)

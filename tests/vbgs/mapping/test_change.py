@@ -18,9 +18,15 @@ SIZE, FRAMES, K = 64, 24, 4000  # twelve frames a lap
 
 
 def config(forget_after=change.FORGET_AFTER, sensor=SensorConfig(), recolour=0.0,
-           shaped=change.SHAPED_POINTS):
+           shaped=change.SHAPED_POINTS, reference="history"):
     return mapping.Config(components=K, sensor=sensor, evidence=EvidenceConfig(
-        forget_after=forget_after, recolour_sigmas=recolour, shaped_points=shaped))
+        forget_after=forget_after, recolour_sigmas=recolour, shaped_points=shaped,
+        recolour_reference=reference))
+
+
+def repainted(frame):
+    """A frame of the same world with every channel moved by half its range."""
+    return frame._replace(rgb=(np.asarray(frame.rgb) + 0.5) % 1.0)
 
 
 def stream(frames, cfg, background=None, each=None):
@@ -137,10 +143,6 @@ def test_a_repainted_world_is_learned_in_its_new_colours():
 
     scene = make_scene("object", size=SIZE, n_train=FRAMES, n_test=2, n_val=0)
     lap = FRAMES // 2
-
-    def repainted(frame):
-        return frame._replace(rgb=(np.asarray(frame.rgb) + 0.5) % 1.0)
-
     frames = scene.train[:lap] + [repainted(f) for f in scene.train[lap:]]
     background = (np.asarray(scene.background) + 0.5) % 1.0
     scores, forgotten = {}, {}
@@ -176,6 +178,39 @@ def test_a_static_noisy_stream_forgets_nothing():
     assert int(np.asarray(is_active(state.mixture.prior)).sum()) > 1000
 
 
+def test_judged_against_its_posterior_a_static_stream_forgets_nothing_to_the_bit():
+    """At 6 sigmas of the distance expected where nothing changed, colour read against
+    each component's posterior forgets nothing on a static stream, exact or under the
+    Kinect: the map is the one depth's evidence alone learns, to the bit."""
+    scene = make_scene("object", size=SIZE, n_train=FRAMES, n_test=1, n_val=0)
+    noisy = [f._replace(depth=simulate("kinect", f.depth, f.camera, seed=[0, i]))
+             for i, f in enumerate(scene.train)]
+    for frames, sensor in ((scene.train, SensorConfig()), (noisy, SensorConfig("kinect"))):
+        on = stream(frames, config(sensor=sensor, recolour=6.0, reference="posterior"),
+                    scene.background)
+        off = stream(frames, config(sensor=sensor), scene.background)
+        assert on.n_forgotten == 0 and off.n_forgotten == 0
+        for a, b in zip(jax.tree_util.tree_leaves(on.mixture),
+                        jax.tree_util.tree_leaves(off.mixture), strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_judged_against_its_posterior_a_repainted_surface_is_forgotten():
+    """The object repainted after its first lap: against their posteriors, components are
+    forgotten as soon as ``forget_after`` frames in a row have shown them another colour
+    (none before), where depth alone forgets none."""
+    scene = make_scene("object", size=SIZE, n_train=FRAMES, n_test=1, n_val=0)
+    lap = FRAMES // 2
+    frames = scene.train[:lap] + [repainted(f) for f in scene.train[lap:]]
+    background = (np.asarray(scene.background) + 0.5) % 1.0
+    counts = []
+    stream(frames, config(recolour=6.0, reference="posterior"), background,
+           each=lambda state: counts.append(state.n_forgotten))
+    first = lap + change.FORGET_AFTER - 1  # the frame that completes the first run
+    assert counts[first - 1] == 0 and counts[first] > 20, counts  # measured 29, then 36
+    assert stream(frames, config(), background).n_forgotten == 0
+
+
 def test_colour_is_read_only_when_asked():
     """Off by default (the records of static scenes stay what they were: colour is not
     read); a tolerance that is not a number >= 0 is refused."""
@@ -184,6 +219,9 @@ def test_colour_is_read_only_when_asked():
         EvidenceConfig(recolour_sigmas=-1.0)
     with pytest.raises(ValueError, match="recolour_sigmas"):
         EvidenceConfig(recolour_sigmas=float("inf"))
+    assert EvidenceConfig().recolour_reference == "history"
+    with pytest.raises(ValueError, match="recolour_reference"):
+        EvidenceConfig(recolour_reference="pixels")
 
 
 def test_a_bad_setting_is_refused():

@@ -132,3 +132,22 @@ def test_the_colour_a_frame_shows_at_each_component():
     assert not np.asarray(plain.n_shown).any()
     for a, b in zip(seen[:3], plain[:3], strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_colour_on_reads_only_the_rays_whose_surface_lies_on_the_component():
+    """A face tilted 60 degrees to the view, its mean on a wall facing the camera: all
+    five samples hit within its (deep) band along the camera axis, but the two to its
+    sides reach the wall far off the face's plane, so with ``colour_on`` only the centre
+    and the two samples along its untilted axis are read; hits are the same either way."""
+    cam = from_fov(32, 32, np.deg2rad(60), np.eye(4))
+    depth = np.full((32, 32), 2.0)
+    rgb = np.full((32, 32, 3), 0.5)
+    tilt = np.deg2rad(60)
+    axes = np.array([[np.cos(tilt), 0.0, np.sin(tilt)], [0.0, 1.0, 0.0],
+                     [-np.sin(tilt), 0.0, np.cos(tilt)]]).T  # columns: in-plane, in-plane, normal
+    covs = (axes @ np.diag([0.3**2, 0.3**2, 0.02**2]) @ axes.T)[None]
+    means = np.array([[0.0, 0.0, 2.0]])
+    every = opacity.frame_evidence(means, covs, cam, depth, rgb=rgb)
+    on = opacity.frame_evidence(means, covs, cam, depth, rgb=rgb, colour_on=True)
+    assert int(np.asarray(every.n_shown)[0]) == 5 and int(np.asarray(on.n_shown)[0]) == 3
+    np.testing.assert_array_equal(np.asarray(every.hits), np.asarray(on.hits))
