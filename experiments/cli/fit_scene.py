@@ -141,6 +141,11 @@ def add(sub):
                    help="VBGS: each stage's seconds a frame in the JSON (stage_seconds, "
                         "the frames seconds_per_frame averages; the stages wait for their "
                         "device work, so frames take a little longer)")
+    p.add_argument("--streaming-bound", action="store_true",
+                   help="VBGS: the streaming bound in the JSON (stream_bound, "
+                        "stream_bound_per_point, ...; vbgs.inference.bound): a second "
+                        "E-step of every frame and the KL of every component, outside "
+                        "seconds_per_frame but not outside the wall time")
     p.add_argument("--save", metavar="PNG", help="ground truth and render of held-out views")
     add_json(p)
 
@@ -172,7 +177,8 @@ def run(args) -> dict:
                      drift=args.drift, budget=BudgetConfig(points=args.budget_points,
                                                                saturation=args.budget_saturation),
                      save_map=args.save_map, resume_map=args.resume_map,
-                     stage_times=args.stage_times, **calibration(args),
+                     stage_times=args.stage_times, streaming_bound=args.streaming_bound,
+                     **calibration(args),
                      **_evidence(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views

@@ -86,6 +86,7 @@ RULES = {
         *((dest, flag, lambda a: a.method == "vbgs", _VBGS_MAP)
           for dest, flag in (("search", "--search"), ("save_map", "--save-map"),
                              ("resume_map", "--resume-map"), ("stage_times", "--stage-times"),
+                             ("streaming_bound", "--streaming-bound"),
                              ("forget_after", "--forget-after"),
                              ("recolour_sigmas", "--recolour-sigmas"),
                              ("recolour_reference", "--recolour-reference"))),

@@ -132,12 +132,13 @@ class VbgsLearner:
 
     def diagnose(self, frame: Frame) -> None:
         """Add the last frame's streaming bound ``B_t`` (untimed) over the points it
-        learned."""
-        if self.info is not None and self.info.n_learned:
+        learned, when the task asks for it (``streaming_bound``)."""
+        if self.task.streaming_bound and self.info is not None and self.info.n_learned:
             self.bound = self.bound.add(mapping.bound(self.info, self.config))
 
     def details(self, result: SceneResult) -> dict:
-        """The streaming bound (:meth:`vbgs.inference.bound.StreamBound.summary`), the
+        """The streaming bound (:meth:`vbgs.inference.bound.StreamBound.summary`; when
+        the task asks for it), the
         median points a component holds and, for a map that grows, the share of points
         no component learned."""
         extra = {"points_per_component": self.state.points_per_component}
@@ -167,7 +168,7 @@ class VbgsLearner:
             extra.update(components_chosen=int(is_active(prior).sum()),
                          components_capacity=int(prior.n_components),
                          components_capped=bool(self.state.capped))
-        return {**self.bound.summary(), **extra}
+        return {**(self.bound.summary() if self.task.streaming_bound else {}), **extra}
 
     def _photo_inputs(self, frame: Frame, background, photo: PhotoConfig) -> dict:
         """The frame's depth, the sensor's sigma_z at each reading (None with exact

@@ -97,6 +97,10 @@ class SceneTask:
     save_map: str | None = None
     resume_map: str | None = None
     stage_times: bool = False
+    # VBGS: the streaming bound in the record (vbgs.inference.bound; a second E-step of
+    # every frame and the KL of every component, untimed: off, a stream takes about half
+    # the wall time at 640x480 and two thirds at 128 px)
+    streaming_bound: bool = False
     init: str = INIT.default  # see experiments.tasks.init_schemes
     seed: int = 0
     opacity_rule: str = OPACITY_RULE.default  # evidence (per component, vbgs.render.opacity) | constant

@@ -64,9 +64,12 @@ def test_gradient_learner_grows_where_vbgs_grows(scene):
                                rtol=1e-6, atol=1e-6)
 
 
-def test_vbgs_record_has_the_streaming_bound():
-    result = run_scene(tiny()).to_dict()
+def test_vbgs_record_has_the_streaming_bound_when_asked():
+    plain = run_scene(tiny()).to_dict()
+    assert "stream_bound" not in plain and "stream_kl" not in plain  # a second E-step: opt-in
+    result = run_scene(tiny(streaming_bound=True)).to_dict()
     assert result["init"] == "stream" and result["oracle_start"] is False
+    assert result["psnr"] == plain["psnr"]  # a diagnostic: the map is the same
     per_batch = result["stream_bound_per_batch"]
     assert len(per_batch) == 6 and all(math.isfinite(b) for b in per_batch)
     assert result["stream_bound"] == pytest.approx(sum(per_batch), rel=1e-6)
@@ -89,7 +92,8 @@ def room_past_its_budget():
             super().__init__(*args, **kw)
             learners.append(self)
 
-    task = tiny(scene="room", frames=25, components=300, growth=GrowthConfig(merge=False))
+    task = tiny(scene="room", frames=25, components=300, growth=GrowthConfig(merge=False),
+                streaming_bound=True)
     err = io.StringIO()
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err):
         mp.setitem(LEARNERS, "vbgs", Kept)
