@@ -6,6 +6,8 @@ import json
 import subprocess
 from pathlib import Path
 
+import jax
+import numpy as np
 import pytest
 
 from experiments import provenance
@@ -77,6 +79,10 @@ def test_each_writer_stamps_what_it_writes(tmp_path, monkeypatch):
     store_record(tmp_path, {"key": "k1", "status": "ok", "settings": {}})
     cell = json.loads(next(tmp_path.rglob("k1.json")).read_text())
     assert is_stamped_json(cell) and cell["command"] == "python -m experiments.run bench image"
+    # and the versions that move its last bits: this process's own
+    assert cell["environment"] == provenance.environment()
+    assert f"numpy {np.__version__}" in cell["environment"]
+    assert f"jax {jax.__version__}" in cell["environment"]
 
 
 def _results(suffix):
