@@ -8,9 +8,9 @@ from, with ``+dirty`` when tracked code (``vbgs``, ``depth``, ``experiments``,
 ``unknown`` outside a git checkout. ``command`` is the command line as run: what
 ``experiments.run.main`` was given (:func:`record_command`), else the process's own
 ``sys.argv``. A JSON record also names the ``environment`` it ran in (:func:`environment`):
-the same code and command give the same figures to the last bit only under the same
-versions of the numeric packages (the object at fit-scene's defaults: 25.91227 dB under
-one install, 25.91528 under a later one, at the same code).
+the same code and command give the same figures to the last bit only on the same kind of
+CPU under the same versions of the numeric packages (the object at fit-scene's defaults,
+at one code: 25.91227 dB on an AMD EPYC, 25.91528 on an Intel Xeon with a later install).
 """
 
 from __future__ import annotations
@@ -71,15 +71,26 @@ def command() -> str:
 
 
 @functools.cache
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), else what :mod:`platform` says."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            return next(line.split(":", 1)[1].strip() for line in f
+                        if line.startswith("model name"))
+    except (OSError, StopIteration):
+        return platform.processor() or platform.machine()
+
+
+@functools.cache
 def environment() -> str:
-    """Python's version and those of :data:`NUMERIC_PACKAGES`, one line."""
+    """The CPU, Python's version and those of :data:`NUMERIC_PACKAGES`, one line."""
     def version(name):
         try:
             return metadata.version(name)
         except metadata.PackageNotFoundError:
             return "absent"
 
-    return ", ".join([f"Python {platform.python_version()}",
+    return ", ".join([cpu_model(), f"Python {platform.python_version()}",
                       *(f"{name} {version(name)}" for name in NUMERIC_PACKAGES)])
 
 

@@ -11,7 +11,7 @@ import jax
 import numpy as np
 import pandas as pd
 from experiments.progress import progress as progress_bar
-from experiments.provenance import first_line
+from experiments.provenance import cpu_model, first_line
 
 from vbgs.data.images import image_to_points, load_image
 from vbgs.inference import model
@@ -22,12 +22,7 @@ from vbgs.render.metrics import psnr
 
 def machine() -> str:
     """One line describing where a figure was measured."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
+    cpu = cpu_model()
     backend = jax.default_backend()
     device = "" if backend == "cpu" else f" ({jax.devices()[0].device_kind})"  # e.g. NVIDIA H100
     return (f"{cpu}, {os.cpu_count()} cores, {platform.system()}, Python "
