@@ -10,7 +10,8 @@ from, with ``+dirty`` when tracked code (``vbgs``, ``depth``, ``experiments``,
 ``sys.argv``. A JSON record also names the ``environment`` it ran in (:func:`environment`):
 the same code and command give the same figures to the last bit only on the same kind of
 CPU under the same versions of the numeric packages (the object at fit-scene's defaults,
-at one code: 25.91227 dB on an AMD EPYC, 25.91528 on an Intel Xeon with a later install).
+at one code: 25.91227 dB where its first record was made, 25.91528 on an Intel Xeon with
+a later install).
 """
 
 from __future__ import annotations
