@@ -138,9 +138,8 @@ class VbgsLearner:
 
     def details(self, result: SceneResult) -> dict:
         """The streaming bound (:meth:`vbgs.inference.bound.StreamBound.summary`; when
-        the task asks for it), the
-        median points a component holds and, for a map that grows, the share of points
-        no component learned."""
+        the task asks for it), the median points a component holds and, for a map that
+        grows, the share of points no component learned."""
         extra = {"points_per_component": self.state.points_per_component}
         if self.resumed is not None:  # the stream went on from a map saved after this frame
             extra["frames_resumed"] = self.resumed
