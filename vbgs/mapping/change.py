@@ -102,6 +102,31 @@ band), and most of its components hold fewer than ``MIN_COLOUR_POINTS`` points a
 128 px: telling a face the map already holds from a new one needs the map's other
 components along that ray, which this per-component test does not read.
 
+* ``"map"``: the history's test, and the map as a whole must fail to explain the
+  colour where it is read. The map before the frame is drawn at the frame's pose
+  (:func:`vbgs.render.raster.rasterize`, as it is shown): where nothing changed a
+  pixel's colour is that render's plus the colour noise, ``σ_c²`` a channel, so its
+  squared distance from the render has mean ``3 σ_c²``, and by Markov's inequality it
+  lies beyond ``recolour_sigmas² 3 σ_c²`` with probability at most
+  ``1 / recolour_sigmas²``. A pixel is *unexplained* when it and its eight neighbours
+  all lie beyond (:func:`unexplained`): the render's blur and a pixel's misregistration
+  along an edge put a line a pixel wide off the render, a change puts a patch. A
+  sample ray of a component is *blamed* when it hits the component, its pixel is
+  unexplained and the pixel's colour lies beyond the same tolerance from the
+  component's own colour mean too (the component draws the wrong colour there: a
+  neighbour of the right colour is not blamed for a ghost beside it;
+  :func:`vbgs.render.opacity.frame_evidence`, ``blame``). A frame counts against the
+  component when its history disagrees and ``MIN_COLOUR_HITS`` of its rays are blamed.
+  An edge component whose side rays land on the neighbouring face is not blamed: the
+  neighbour's components draw that face's colour there. The render's blend of colours
+  at a pixel (its second moment) was tried as a further allowance and dropped: on a
+  texture it covers every change (object-change at 4 gained nothing over depth
+  alone). At ``recolour_sigmas`` 2 the static object stream is what it is with colour
+  off, to the bit, and object-change gains a few tenths of a dB over depth alone; far
+  less than the history's gain: most of that gain lies on pixels the map already
+  explains, a new surface's colour learned by the components about it within a frame
+  or two of the change (``results/changing/``).
+
 Only a measured return beyond the component is free space for this test: with exact
 depth a pixel without depth shows nothing (sky, empty space) and counts as well, but a
 sensor's missing pixel (out of its range, a hole) says nothing about what stands there.
@@ -142,6 +167,7 @@ import numpy as np
 from vbgs.inference import model
 from vbgs.inference.model import Mixture
 from vbgs.render.opacity import Evidence, FrameEvidence
+from vbgs.render.raster import rasterize
 
 # Frames in a row seen through, no frame hitting it, after which a component is gone
 # (module docstring: static streams of object, room and walk forget nothing).
@@ -157,7 +183,7 @@ MIN_HITS = 5.0
 MIN_COLOUR_HITS = 3
 MIN_COLOUR_FRAMES = 2
 MIN_COLOUR_POINTS = 10.0
-RECOLOUR_REFERENCES = ("history", "posterior")
+RECOLOUR_REFERENCES = ("history", "posterior", "map")
 
 # A component holding at least this many points is judged seen through along each ray's
 # Gaussian, one with fewer against the hit band (module docstring: 0, every component,
@@ -216,6 +242,49 @@ def _posterior(doubt: Doubt, hits, seen_through, judged, shown, n_shown, spread,
                  mean * kappa[:, None], kappa)
 
 
+@jax.jit
+def unexplained(rgb, rendered, sigmas, colour_noise):
+    """Where the map as a whole fails to explain a frame's colour (module docstring,
+    ``"map"``): ``rgb [h, w, 3]`` the frame, ``rendered [h, w, 3]`` the map drawn at its
+    pose. Returns ``[h, w]`` bool: the squared colour distance between frame and render
+    lies above ``sigmas² 3 σ_c²`` (``colour_noise`` ``σ_c``) at the pixel and at each of
+    its eight neighbours (a pixel's misregistration along an edge, a line a pixel wide,
+    is not change), and that tolerance ``[h, w]``."""
+    h, w = rgb.shape[:2]
+    tolerance = jnp.full((h, w), sigmas**2 * 3.0 * colour_noise**2, jnp.float32)
+    residual = jnp.pad(((rgb - rendered) ** 2).sum(-1), 1, mode="edge")
+    least = jnp.min(jnp.stack([residual[i:i + h, j:j + w] for i in range(3)
+                               for j in range(3)]), 0)
+    return least > tolerance, tolerance
+
+
+def blame(splats, camera, rgb, background, sigmas: float, colour_noise: float,
+          blur: float):
+    """``blame`` of :func:`vbgs.render.opacity.frame_evidence` under the ``"map"``
+    reference: the map's ``splats`` rendered at the frame's ``camera`` (``background``
+    [3] or None: black), the pixels of ``rgb [h, w, 3]`` it fails to explain
+    (:func:`unexplained`), the tolerance there and the splats' own colours."""
+    bg = jnp.zeros(3, jnp.float32) if background is None else jnp.asarray(background,
+                                                                           jnp.float32)
+    rendered = rasterize(splats, camera, background=bg, blur=blur).rgb
+    bad, tolerance = unexplained(jnp.asarray(rgb, jnp.float32), rendered,
+                                 jnp.float32(sigmas), jnp.float32(colour_noise))
+    return bad, tolerance, splats.colours
+
+
+@jax.jit
+def _mapped(doubt: Doubt, hits, seen_through, judged, shown, n_shown, blamed, colour_tol):
+    readable = n_shown >= MIN_COLOUR_HITS
+    before = doubt.colour / jnp.maximum(doubt.weight, 1.0)[:, None]
+    off = (readable & (doubt.weight >= MIN_COLOUR_FRAMES)
+           & (((shown - before) ** 2).sum(-1) > colour_tol**2))
+    recoloured = off & (blamed >= MIN_COLOUR_HITS)  # and the map does not explain it
+    agrees = readable & ~off
+    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
+                 doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
+                 doubt.weight + agrees)
+
+
 def _count(doubt: Doubt, hits, against, judged):
     """The frames in a row: one more where the frame counts ``against`` a ``judged``
     component, 0 where it hit it otherwise, kept where it said nothing."""
@@ -244,9 +313,15 @@ def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
     farther from its colour posterior's mean (``colour``, a
     :class:`vbgs.inference.expfam.ColourNormal` before the frame; the one before the run
     of doubt while one lasts, holding ``MIN_COLOUR_POINTS`` points or more) than
-    ``recolour_sigmas`` times the distance expected where nothing changed."""
+    ``recolour_sigmas`` times the distance expected where nothing changed; under
+    ``"map"`` the history's test and ``MIN_COLOUR_HITS`` or more rays blamed
+    (``frame.blamed``: the map as a whole and the component's own colour both fail to
+    explain their pixels, :func:`blame`)."""
     judged = jnp.asarray(active) & (evidence.hits >= MIN_HITS)
     args = (doubt, frame.hits, frame.seen_through, judged, frame.shown, frame.n_shown)
+    if reference == "map" and recolour_sigmas > 0:
+        return _mapped(*args, frame.blamed,
+                       jnp.float32(colour_tolerance(recolour_sigmas, colour_noise)))
     if reference == "posterior" and recolour_sigmas > 0:
         return _posterior(*args, frame.spread, colour.mean, colour.kappa,
                           jnp.float32(recolour_sigmas), jnp.float32(colour_noise))

@@ -177,7 +177,9 @@ class EvidenceConfig:
         posterior, the tolerance ``recolour_sigmas`` times the distance expected where
         nothing changed (the model's colour noise, the posterior's own uncertainty and the
         spread of colour the frame's rays show on it: safe on static streams from 6,
-        :mod:`vbgs.mapping.change`);
+        :mod:`vbgs.mapping.change`); ``"map"``, the history's test where the map as a
+        whole, drawn at the frame's pose, and the component's own colour both fail to
+        explain the pixels its rays read, beyond ``recolour_sigmas`` colour sigmas;
     shaped_points: a component holding at least this many points is seen through when
         the rays pass beyond it along its own shape (the Gaussian taken along each ray),
         one with fewer when they pass beyond its extent along the camera axis

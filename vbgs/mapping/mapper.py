@@ -286,6 +286,14 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
             through_empty=None if empty is None else np.zeros_like(empty),
             rgb=frame.rgb if reads_colour else None,
             colour_on=e.recolour_reference == "posterior",
+            blame=change.blame(from_posterior(  # the map before the frame, as drawn
+                info.before, state.mixture.prior, opacity=config.render.opacity,
+                cov_scale=config.render.splat_scale, drop_unused=False,
+                opacities=opacity.expected_opacity(state.evidence, e.prior_hits,
+                                                   e.prior_passes)), frame.camera, frame.rgb,
+                background, e.recolour_sigmas, config.prior.colour_noise,
+                config.render.splat_blur)
+            if reads_colour and e.recolour_reference == "map" else None,
             shaped=change.shaped(state.mixture.stats, e.shaped_points)
             if state.growing and sensor.exact else None)  # a sensor's tails: the band
         state = _forget(state._replace(evidence=opacity.added(state.evidence, seen)),

@@ -99,6 +99,9 @@ class FrameEvidence(NamedTuple):
     n_shown: jax.Array  # [k] int: how many hit samples that mean is over (0: no colour read)
     spread: jax.Array  # [k] the hit samples' mean squared distance from that mean (summed
     #                    over the channels): how much the colour varies across them
+    blamed: jax.Array  # [k] int: hit samples whose colour the map as a whole does not
+    #                    explain and the component's own colour does not either (``blame``;
+    #                    0 without it, vbgs.mapping.change)
 
 
 def observe(evidence: Evidence, means, covs, camera: Camera, depth, *,
@@ -116,7 +119,7 @@ def added(evidence: Evidence, frame: FrameEvidence) -> Evidence:
 
 def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = PASS_SIGMAS,
                    sensor_var=None, empty=None, through_empty=None, rgb=None,
-                   shaped=None, colour_on: bool = False) -> FrameEvidence:
+                   shaped=None, colour_on: bool = False, blame=None) -> FrameEvidence:
     """One frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
     (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
@@ -137,7 +140,12 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     sample on a neighbouring surface within the hit band tells nothing of its colour).
     ``shaped [k]`` bool: the components whose see-through is judged along each ray's
     own Gaussian (:func:`_far_along_ray`, :mod:`vbgs.mapping.change`), the others
-    against the hit band (None: none)."""
+    against the hit band (None: none). ``blame``: ``(unexplained [h, w] bool, tolerance
+    [h, w], own [k, 3])``, the pixels whose colour the map as a whole fails to explain, the
+    squared colour distance allowed at each and the components' own colours
+    (:func:`vbgs.mapping.change.unexplained`): each component's hit samples on such a pixel
+    whose colour lies farther than the tolerance from its own are counted (``blamed``;
+    None: none, 0)."""
     k = np.shape(means)[0]
     sensor_var = np.zeros(k, np.float32) if sensor_var is None else sensor_var
     empty = empty_pixels(depth) if empty is None else empty
@@ -147,6 +155,7 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
         jnp.asarray(empty), jnp.asarray(through_empty),
         None if rgb is None else jnp.asarray(rgb, jnp.float32),
         None if shaped is None else jnp.asarray(shaped, bool),
+        None if blame is None else tuple(jnp.asarray(b) for b in blame),
         jnp.asarray(means, jnp.float32), jnp.asarray(covs, jnp.float32),
         *(jnp.asarray(v, jnp.float32) for v in (camera.fx, camera.fy, camera.cx, camera.cy)),
         jnp.asarray(camera.pose, jnp.float32), jnp.asarray(depth, jnp.float32),
@@ -204,12 +213,13 @@ def _along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy):
 
 
 @partial(jax.jit, static_argnums=0)
-def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, means, covs,
-                  fx, fy, cx, cy, pose, depth):
+def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, blame,
+                  means, covs, fx, fy, cx, cy, pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring), whether it was seen
     through ``[k]`` (the five samples taken at least ``THROUGH_PIXELS`` apart all passed)
     and the mean colour ``[k, 3]`` of ``rgb`` at the samples that hit, with their number
-    ``[k]`` (0 where ``rgb`` is None: no colour read)."""
+    ``[k]`` (0 where ``rgb`` is None: no colour read), and the hit samples ``blame`` puts
+    on the component ``[k]`` (0 where it is None)."""
     height, width = depth.shape
     k = means.shape[0]
     splats = Splats(means, covs, jnp.zeros((k, 3)), jnp.ones(k))
@@ -267,5 +277,12 @@ def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb,
         n_shown = n_on.astype(jnp.int32)
     else:
         shown, n_shown, spread = jnp.zeros((k, 3)), jnp.zeros(k, jnp.int32), jnp.zeros(k)
+    if blame is not None:  # unexplained by the map, and by the component's own colour
+        unexplained, tolerance, own = blame
+        rgb_at = rgb[row, col]  # [s, k, 3]
+        off = ((rgb_at - own[None]) ** 2).sum(-1) > tolerance[row, col]
+        blamed = (hit & unexplained[row, col] & off).sum(0).astype(jnp.int32)
+    else:
+        blamed = jnp.zeros(k, jnp.int32)
     return (n_hit * per_sample, passed.sum(0) * per_sample, through.all(0), shown, n_shown,
-            spread)
+            spread, blamed)
