@@ -1,19 +1,17 @@
 """Colour judged against the map as a whole (``evidence.recolour_reference="map"``,
-vbgs.mapping.change): a repainted surface is forgotten, a static stream forgets nothing,
-and an edge component whose side rays land on the neighbouring face is not blamed."""
+vbgs.mapping.change): a repainted surface is forgotten and an edge component whose side
+rays land on the neighbouring face is not blamed (a static stream forgets nothing:
+``test_change.test_judged_by_colour_a_static_stream_forgets_nothing_to_the_bit``)."""
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from vbgs.data.synthetic import make_scene
 from vbgs.mapping import change
-from vbgs.mapping.config import SensorConfig
 from vbgs.render.camera import Camera
 from vbgs.render.opacity import frame_evidence
 from vbgs.render.raster import rasterize
 from vbgs.render.splats import Splats
-from vbgs.sensors import simulate
 
 from tests.vbgs.mapping.test_change import FRAMES, SIZE, config, repainted, stream
 
@@ -88,19 +86,3 @@ def test_against_the_map_a_repainted_surface_is_forgotten():
     off = stream(frames, config(), background)
     assert off.n_forgotten == 0
     assert on.n_forgotten > 300, on.n_forgotten  # measured 572 of about 4000
-
-
-def test_against_the_map_a_static_stream_forgets_nothing_to_the_bit():
-    """A static stream, exact or under the Kinect, judged against the map at 2 sigmas: the
-    map is the one depth's evidence alone learns, to the bit."""
-    scene = make_scene("object", size=SIZE, n_train=FRAMES, n_test=1, n_val=0)
-    noisy = [f._replace(depth=simulate("kinect", f.depth, f.camera, seed=[0, i]))
-             for i, f in enumerate(scene.train)]
-    for frames, sensor in ((scene.train, SensorConfig()), (noisy, SensorConfig("kinect"))):
-        on = stream(frames, config(sensor=sensor, recolour=2.0, reference="map"),
-                    scene.background)
-        off = stream(frames, config(sensor=sensor), scene.background)
-        assert on.n_forgotten == 0 and off.n_forgotten == 0
-        for a, b in zip(jax.tree_util.tree_leaves(on.mixture),
-                        jax.tree_util.tree_leaves(off.mixture), strict=True):
-            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
