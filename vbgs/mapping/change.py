@@ -218,12 +218,17 @@ def no_doubt(k: int) -> Doubt:
 
 
 @jax.jit
-def _history(doubt: Doubt, hits, seen_through, judged, shown, n_shown, colour_tol):
+def _history(doubt: Doubt, hits, seen_through, judged, shown, n_shown, colour_tol,
+             blamed=None):
+    """The history's test; with ``blamed [k]`` (the ``"map"`` reference) a disagreeing
+    frame counts against a component only where ``MIN_COLOUR_HITS`` of its rays are
+    blamed (the map as a whole does not explain them either)."""
     readable = n_shown >= MIN_COLOUR_HITS
     before = doubt.colour / jnp.maximum(doubt.weight, 1.0)[:, None]
-    recoloured = (readable & (doubt.weight >= MIN_COLOUR_FRAMES)
-                  & (((shown - before) ** 2).sum(-1) > colour_tol**2))
-    agrees = readable & ~recoloured  # the colour the component is known by
+    off = (readable & (doubt.weight >= MIN_COLOUR_FRAMES)
+           & (((shown - before) ** 2).sum(-1) > colour_tol**2))
+    agrees = readable & ~off  # the colour the component is known by
+    recoloured = off if blamed is None else off & (blamed >= MIN_COLOUR_HITS)
     return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
                  doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
                  doubt.weight + agrees)
@@ -272,19 +277,6 @@ def blame(splats, camera, rgb, background, sigmas: float, colour_noise: float,
     return bad, tolerance, splats.colours
 
 
-@jax.jit
-def _mapped(doubt: Doubt, hits, seen_through, judged, shown, n_shown, blamed, colour_tol):
-    readable = n_shown >= MIN_COLOUR_HITS
-    before = doubt.colour / jnp.maximum(doubt.weight, 1.0)[:, None]
-    off = (readable & (doubt.weight >= MIN_COLOUR_FRAMES)
-           & (((shown - before) ** 2).sum(-1) > colour_tol**2))
-    recoloured = off & (blamed >= MIN_COLOUR_HITS)  # and the map does not explain it
-    agrees = readable & ~off
-    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
-                 doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
-                 doubt.weight + agrees)
-
-
 def _count(doubt: Doubt, hits, against, judged):
     """The frames in a row: one more where the frame counts ``against`` a ``judged``
     component, 0 where it hit it otherwise, kept where it said nothing."""
@@ -319,13 +311,11 @@ def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
     explain their pixels, :func:`blame`)."""
     judged = jnp.asarray(active) & (evidence.hits >= MIN_HITS)
     args = (doubt, frame.hits, frame.seen_through, judged, frame.shown, frame.n_shown)
-    if reference == "map" and recolour_sigmas > 0:
-        return _mapped(*args, frame.blamed,
-                       jnp.float32(colour_tolerance(recolour_sigmas, colour_noise)))
     if reference == "posterior" and recolour_sigmas > 0:
         return _posterior(*args, frame.spread, colour.mean, colour.kappa,
                           jnp.float32(recolour_sigmas), jnp.float32(colour_noise))
-    return _history(*args, jnp.float32(colour_tolerance(recolour_sigmas, colour_noise)))
+    return _history(*args, jnp.float32(colour_tolerance(recolour_sigmas, colour_noise)),
+                    frame.blamed if reference == "map" and recolour_sigmas > 0 else None)
 
 
 def gone(doubt: Doubt, forget_after: int) -> np.ndarray:

@@ -286,13 +286,7 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
             through_empty=None if empty is None else np.zeros_like(empty),
             rgb=frame.rgb if reads_colour else None,
             colour_on=e.recolour_reference == "posterior",
-            blame=change.blame(from_posterior(  # the map before the frame, as drawn
-                info.before, state.mixture.prior, opacity=config.render.opacity,
-                cov_scale=config.render.splat_scale, drop_unused=False,
-                opacities=opacity.expected_opacity(state.evidence, e.prior_hits,
-                                                   e.prior_passes)), frame.camera, frame.rgb,
-                background, e.recolour_sigmas, config.prior.colour_noise,
-                config.render.splat_blur)
+            blame=_blame(state, info, frame, background, config)
             if reads_colour and e.recolour_reference == "map" else None,
             shaped=change.shaped(state.mixture.stats, e.shaped_points)
             if state.growing and sensor.exact else None)  # a sensor's tails: the band
@@ -304,6 +298,15 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
                                     blur=config.render.splat_blur)
         state = state._replace(colour=colour)
     return state
+
+
+def _blame(state: MapState, info: MapInfo, frame: Frame, background, config: Config):
+    """The ``"map"`` colour reference's ``blame`` (:func:`vbgs.mapping.change.blame`):
+    the map before the frame (``info.before``), drawn as :func:`splats` draws it."""
+    before = state._replace(mixture=state.mixture._replace(posterior=info.before))
+    return change.blame(_splats(before, config), frame.camera, frame.rgb, background,
+                        config.evidence.recolour_sigmas, config.prior.colour_noise,
+                        config.render.splat_blur)
 
 
 def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Evidence,
