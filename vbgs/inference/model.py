@@ -91,7 +91,7 @@ jax.tree_util.register_static(PriorConfig)
 # --frames 60 --size 128 --grid prior.NAME=... --out results/tuning/prior/NAME`
 # (the command and code version head each table): cov_scale 0.6 the best,
 # results/tuning/prior/cov_scale/mean.md; thickness 0.1 the best,
-# results/tuning/prior/surface_thickness/mean.md; both at 24.61 dB mean (the isotropic
+# results/tuning/prior/surface_thickness/mean.md; both at 24.59 dB mean (the isotropic
 # prior, thickness 1: 23.03).
 SURFACE_COV_SCALE = 0.6
 SURFACE_THICKNESS = 0.1

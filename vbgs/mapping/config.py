@@ -102,7 +102,7 @@ class GrowthConfig:
     reach_cells: float = grow.REACH_CELLS
     coarse_levels: int = grow.COARSE_LEVELS
     # merging on: the best mean validation PSNR over object, room and walk,
-    # results/tuning/growth/mean.md (23.67 dB with coarse cells from 4x; 22.72 without)
+    # results/tuning/growth/mean.md (23.65 dB with coarse cells from 4x; 22.73 without)
     merge: bool = True
     merge_ahead: float = MERGE_AHEAD
     coarse_from: float = grow.COARSE_FROM
