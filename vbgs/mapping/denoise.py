@@ -37,7 +37,7 @@ holes, 8 validation views, ``python -m experiments.studies.val_probe --val-views
 smoothing 24.60 dB; a radius of 2 with the noise left at the reading's 24.98, at half
 of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noise)
 24.70; radius 1 at 0.33 of it 25.22 (one-off runs patching the learner; the radius
-itself is chosen in ``results/tuning/denoise/``: radius 1, 25.29). Test views, fit-scene's
+itself is chosen in ``results/tuning/denoise/``: radius 1, 25.22). Test views, fit-scene's
 defaults (``results/sensors/``): object 24.33 dB (exact 25.91), room 21.87 (22.61), walk
 13.94 (its far ground lies beyond the Kinect's range); without the averaging, at an
 earlier code (one-off runs), 23.76, 21.83 and 14.01. The
@@ -71,7 +71,7 @@ DENOISE_RADIUS = 1  # window half-side in pixels (3 x 3); 0: no smoothing. Chose
 # object room --simulate-sensor kinect --sensor kinect --val-views 8 --grid
 # growth.denoise_radius=...`, results/tuning/denoise/mean.md and its size64/; rule: the
 # best mean validation PSNR over the object and the room at both sizes): at 128 px / 20k /
-# 60 frames (re-made at the code in the table's first line) 2 and 1 tie, 23.67 and 23.63 dB;
+# 60 frames (re-made at the code in the table's first line) 2 and 1 tie, 23.67 and 23.62 dB;
 # at 64 px / 5000 / 20 frames 1 is the best, 21.51 against 21.14 at 2. A window is
 # some 4 cm a pixel at 64 px: 5 x 5 spans the object's curves. Without the holes 2 is the
 # better at 128 px (the object 25.77 against 25.36 dB; results/tuning/denoise/noise_only/).

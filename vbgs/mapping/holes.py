@@ -82,11 +82,11 @@ from vbgs.render.camera import valid_depth
 # object gains, the room, whose 5000 components are all spent, loses a little at the
 # colour tolerance below). An earlier one-off run at 128 px / 20k / 60 frames with the
 # Kinect's noise and holes gave 24.50 dB with the fill against 23.66 without. Radius 2
-# scores 0.06 dB over 1 at the tolerance below, under the 0.1 dB a move needs: 1 kept.
+# scores 0.03 dB over 1 at the tolerance below, under the 0.1 dB a move needs: 1 kept.
 HOLE_RADIUS = 1
 # Largest difference in any colour channel ([0, 1]) between a hole and the neighbour
 # whose surface it continues. Same table: at radius 1 the best mean is 1.0 (no colour
-# test), 0.11 dB over 0.15, all of it the room's (the object ties); not moved, as one
+# test), 0.05 dB over 0.15, all of it the room's (the object ties); not moved, as one
 # scene at 64 px is not a clear gain and the Kinect results would all be made again.
 HOLE_COLOUR_TOL = 0.15
 # A surface nearer than a neighbour by more than this many pixel footprints (z / focal)
