@@ -278,7 +278,7 @@ def load_ply(path) -> Splats:
 # records). The walk and 50k components: results/tuning/splat_scale/ (the walk at 50k wants
 # larger splats, experiments.tasks.scene_report.FEW_POINTS; over the three scenes 1.2 is
 # the best mean at 20k, results/tuning/splat_scale/k20000_mean.md; at 50k 1.35 is 0.06 dB
-# over it, k50000_mean.md, 24.30 against 24.23).
+# over it, k50000_mean.md, 24.30 against 24.24).
 # Opacity comes from evidence (vbgs.render.opacity); VBGS_OPACITY is the constant of the old
 # rule (`opacity_rule="constant"`), kept for comparison.
 VBGS_OPACITY = 0.5
