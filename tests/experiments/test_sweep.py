@@ -32,8 +32,14 @@ def _sweep(*args, **kw):
                           capture_output=True, text=True, timeout=300, **kw)
 
 
+def _stored(out: Path) -> list[Path]:
+    """The sweep's stored cell records: a cell in flight is written under a hidden
+    temporary name first (vbgs.io_atomic), which pathlib's glob matches too."""
+    return [p for p in (out / "cells").glob("*.json") if not p.name.startswith(".")]
+
+
 def _records(out: Path) -> dict:
-    return {p.stem: json.loads(p.read_text()) for p in (out / "cells").glob("*.json")}
+    return {p.stem: json.loads(p.read_text()) for p in _stored(out)}
 
 
 def _rows(out: Path) -> list[dict]:
@@ -61,7 +67,7 @@ def test_local_backend_two_workers_end_to_end(tmp_path):
     assert "PSNR (dB)" in tables and "astronaut" in tables and "± " in tables
     assert is_stamped_markdown(tables) and "experiments.run sweep --config" in tables
     assert is_stamped_json(json.loads((out / "plan.json").read_text()))
-    cells = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    cells = [json.loads(p.read_text()) for p in _stored(out)]
     assert len(cells) == 4 and all(is_stamped_json(c) for c in cells)
     for name in FIGURES:
         assert (out / name).stat().st_size > 5_000, name
@@ -105,7 +111,7 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path):
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     deadline = time.monotonic() + 240
-    while not list((out / "cells").glob("*.json")) and time.monotonic() < deadline:
+    while not _stored(out) and time.monotonic() < deadline:
         assert proc.poll() is None, "sweep ended before the first cell was stored"
         time.sleep(0.02)
     os.killpg(proc.pid, signal.SIGKILL)
