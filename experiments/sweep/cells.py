@@ -219,6 +219,13 @@ def cell_path(out: Path, key: str) -> Path:
     return Path(out) / "cells" / f"{key}.json"
 
 
+def stored_keys(out: Path) -> set[str]:
+    """Keys of the cell files in ``out/cells``: a cell in flight is written under a hidden
+    temporary name first (:mod:`vbgs.io_atomic`, names starting with a dot), which a glob
+    matches too, so those are left out."""
+    return {p.stem for p in (Path(out) / "cells").glob("*.json") if not p.name.startswith(".")}
+
+
 def render_path(out: Path, key: str, name: str = "render") -> Path:
     suffix = "" if name == "render" else f".{name}"
     return Path(out) / "renders" / f"{key}{suffix}.png"

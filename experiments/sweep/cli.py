@@ -144,11 +144,6 @@ def _run(records, pending: list, labels: list[str], out: Path, log: SweepLog,
     return counts
 
 
-def stored_keys(out: Path) -> set[str]:
-    """Keys of the cell files in ``out/cells`` (temporary ``.*`` files left out)."""
-    return {p.stem for p in (out / "cells").glob("*.json") if not p.name.startswith(".")}
-
-
 def check_out(out: Path, config, plan, force: bool) -> list[str]:
     """Check the results folder before anything runs; return the stored cells this plan
     leaves out (the caller says so).
@@ -162,6 +157,8 @@ def check_out(out: Path, config, plan, force: bool) -> list[str]:
         raise ValueError(f"--out {out} is a file; give a folder for the results")
     if not out.is_dir():
         return []
+    from experiments.sweep.cells import stored_keys
+
     orphans = sorted(stored_keys(out) - {c.key for c in plan.cells})
     if not orphans:
         return []

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.provenance import first_line
-from experiments.sweep.cells import cell_path, load_record
+from experiments.sweep.cells import cell_path, load_record, stored_keys
 from experiments.sweep.cl_report import plot_cl_matrices, write_cl_matrix
 from experiments.sweep.plots import (
     plot_changes,
@@ -70,8 +70,8 @@ def load_records(out: Path) -> tuple[list[dict], dict, list[Path]]:
                          f"cell in {out}/cells, or run the sweep again") from err
     if plan:
         keys = [c["key"] for c in plan["cells"]]
-    else:  # names starting with a dot are temporary files of writes in progress
-        keys = sorted(p.stem for p in (out / "cells").glob("*.json") if not p.name.startswith("."))
+    else:
+        keys = sorted(stored_keys(out))
     records, unreadable = [], []
     for key in keys:
         record = load_record(out, key)

@@ -14,7 +14,7 @@ import pytest
 
 from experiments.provenance import is_stamped_json, is_stamped_markdown
 from experiments.run import main
-from experiments.sweep.cells import failed_record, store_record
+from experiments.sweep.cells import cell_path, failed_record, stored_keys, store_record
 from experiments.sweep.tasks import TASKS
 
 FIGURES = ("psnr_vs_components.png", "psnr_vs_seconds.png", "renders.png")
@@ -32,14 +32,8 @@ def _sweep(*args, **kw):
                           capture_output=True, text=True, timeout=300, **kw)
 
 
-def _stored(out: Path) -> list[Path]:
-    """The sweep's stored cell records: a cell in flight is written under a hidden
-    temporary name first (vbgs.io_atomic), which pathlib's glob matches too."""
-    return [p for p in (out / "cells").glob("*.json") if not p.name.startswith(".")]
-
-
 def _records(out: Path) -> dict:
-    return {p.stem: json.loads(p.read_text()) for p in _stored(out)}
+    return {k: json.loads(cell_path(out, k).read_text()) for k in stored_keys(out)}
 
 
 def _rows(out: Path) -> list[dict]:
@@ -67,7 +61,7 @@ def test_local_backend_two_workers_end_to_end(tmp_path):
     assert "PSNR (dB)" in tables and "astronaut" in tables and "± " in tables
     assert is_stamped_markdown(tables) and "experiments.run sweep --config" in tables
     assert is_stamped_json(json.loads((out / "plan.json").read_text()))
-    cells = [json.loads(p.read_text()) for p in _stored(out)]
+    cells = list(_records(out).values())
     assert len(cells) == 4 and all(is_stamped_json(c) for c in cells)
     for name in FIGURES:
         assert (out / name).stat().st_size > 5_000, name
@@ -111,7 +105,7 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path):
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     deadline = time.monotonic() + 240
-    while not _stored(out) and time.monotonic() < deadline:
+    while not stored_keys(out) and time.monotonic() < deadline:
         assert proc.poll() is None, "sweep ended before the first cell was stored"
         time.sleep(0.02)
     os.killpg(proc.pid, signal.SIGKILL)
