@@ -72,6 +72,12 @@ def add(sub):
                         "the distance expected where nothing changed; at 6 the static "
                         "scenes forget nothing; default: the map's "
                         "evidence.recolour_reference)")
+    p.add_argument("--doubt-opacity", type=float, default=None, metavar="O",
+                   help="VBGS: frames count toward forgetting a component only once its "
+                        "rays' hits against passes give it an expected opacity of O or "
+                        "more: a component thinner than a pixel, which the rays pass about "
+                        "as often as they hit, is kept (at 0.5 the static scenes forget "
+                        "nothing; default: the map's evidence.doubt_opacity, 0: any)")
     p.add_argument("--budget-points", type=int, default=80000,  # BudgetConfig's default
                    metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
@@ -211,12 +217,14 @@ def run(args) -> dict:
 
 
 def _evidence(args) -> dict:
-    """The task's ``evidence`` setting where ``--forget-after`` or ``--recolour-sigmas``
-    changes it (else none: the map's defaults)."""
+    """The task's ``evidence`` setting where ``--forget-after``, ``--recolour-sigmas``,
+    ``--recolour-reference`` or ``--doubt-opacity`` changes it (else none: the map's
+    defaults)."""
     from vbgs.mapping import EvidenceConfig
 
     given = {name: value for name, value in (("forget_after", args.forget_after),
                                              ("recolour_sigmas", args.recolour_sigmas),
-                                             ("recolour_reference", args.recolour_reference))
+                                             ("recolour_reference", args.recolour_reference),
+                                             ("doubt_opacity", args.doubt_opacity))
              if value is not None}
     return {"evidence": EvidenceConfig(**given)} if given else {}

@@ -185,7 +185,11 @@ class EvidenceConfig:
         the rays pass beyond it along its own shape (the Gaussian taken along each ray),
         one with fewer when they pass beyond its extent along the camera axis
         (:mod:`vbgs.mapping.change`; 0, the default: every component; inf: none;
-        exact depth only: a measured sensor's tails keep the extent's band).
+        exact depth only: a measured sensor's tails keep the extent's band);
+    doubt_opacity: a run of frames that count against a component starts only where its
+        expected opacity (its rays' hits against passes so far) is at least this: a
+        component the rays pass about as often as they hit it (thinner than a pixel) is
+        never judged gone (:mod:`vbgs.mapping.change`; 0, the default: any component).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
@@ -195,6 +199,7 @@ class EvidenceConfig:
     recolour_sigmas: float = 0.0
     recolour_reference: str = "history"
     shaped_points: float = SHAPED_POINTS
+    doubt_opacity: float = 0.0
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):
@@ -212,6 +217,10 @@ class EvidenceConfig:
         if isinstance(p, bool) or not isinstance(p, int | float) or not p >= 0:
             raise ValueError(f"evidence.shaped_points must be a number of points >= 0 "
                              f"(inf: never judged along the shape), got {p!r}")
+        o = self.doubt_opacity
+        if isinstance(o, bool) or not isinstance(o, int | float) or not 0 <= o <= 1:
+            raise ValueError(f"evidence.doubt_opacity must be an opacity in [0, 1] (0: any "
+                             f"component may be doubted), got {o!r}")
 
 
 @dataclass(frozen=True)

@@ -323,7 +323,9 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
                            else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA,
                            reference=config.evidence.recolour_reference, colour=colour,
                            recolour_sigmas=config.evidence.recolour_sigmas,
-                           colour_noise=config.prior.colour_noise)
+                           colour_noise=config.prior.colour_noise,
+                           doubt_opacity=config.evidence.doubt_opacity,
+                           prior=(config.evidence.prior_hits, config.evidence.prior_passes))
     slots = change.gone(doubt, after)
     if len(slots) == 0:
         return state._replace(doubt=doubt)

@@ -252,3 +252,45 @@ def test_forgetting_is_a_new_prior_not_a_frames_evidence(changed):
     assert any(forgot) and not all(forgot)
     quiet = np.median([p for p, f in zip(per_point, forgot, strict=True) if not f])
     assert min(p for p, f in zip(per_point, forgot, strict=True) if f) > quiet - 20.0, (per_point, forgot)
+
+
+def test_a_run_of_doubt_starts_only_on_an_opaque_component():
+    """With ``doubt_opacity`` a see-through counts against a component only where its
+    rays mostly hit it (a surface), or where a run has already begun; a component the
+    rays pass more often than they hit (thinner than a pixel) is not doubted. Three
+    components, all seen through this frame: opaque, thin, thin with a run under way."""
+    from vbgs.render.opacity import Evidence, FrameEvidence
+
+    k = 3
+    seen = FrameEvidence(hits=jnp.zeros(k), passes=jnp.full(k, 5.0),
+                         seen_through=jnp.ones(k, bool), shown=jnp.zeros((k, 3)),
+                         n_shown=jnp.zeros(k, jnp.int32), spread=jnp.zeros(k),
+                         blamed=jnp.zeros(k, jnp.int32))
+    before = Evidence(hits=jnp.array([40.0, 27.0, 27.0]), passes=jnp.array([2.0, 48.0, 48.0]))
+    doubt = change.no_doubt(k)._replace(frames=jnp.array([0, 0, 3], jnp.int32))
+    active = jnp.ones(k, bool)
+    every = change.observe(doubt, seen, before, active)
+    np.testing.assert_array_equal(np.asarray(every.frames), [1, 1, 4])
+    opaque = change.observe(doubt, seen, before, active, doubt_opacity=0.5)
+    np.testing.assert_array_equal(np.asarray(opaque.frames), [1, 0, 4])
+
+
+def test_doubted_only_where_opaque_a_removed_object_is_still_forgotten(changed):
+    """At ``doubt_opacity`` 0.5 the crate taken away still loses its mass within a few
+    frames that see through it: its components were surfaces its rays hit."""
+    lo, hi = old_crate()
+    lo[2] = 0.15
+    held = []
+    cfg = mapping.Config(components=K, evidence=EvidenceConfig(doubt_opacity=0.5))
+    stream(changed.train, cfg, changed.background,
+           each=lambda s: held.append(mass_within(s, lo, hi)))
+    lap = changed.changes[0]
+    assert held[lap - 1] > 100
+    assert held[lap + change.FORGET_AFTER + 3] < 0.02 * held[lap - 1]
+
+
+def test_doubt_opacity_is_an_opacity():
+    assert EvidenceConfig().doubt_opacity == 0.0
+    for bad in (-0.1, 1.5, True, "half"):
+        with pytest.raises(ValueError, match="doubt_opacity"):
+            EvidenceConfig(doubt_opacity=bad)
