@@ -77,9 +77,8 @@ FACTORS = (4, 2, 1)
 # 3) steps at 0.065 / 0.041 s of CPU a frame; blocks (4, 2) alone left the walk at 15.6.
 # Re-checked on validation trajectories (seed 1; rule: the lowest summed ATE of the nine
 # tracked streams, results/tuning/tracking/tracking.md, python -m experiments.tune_tracking):
-# (10, 8, 6) sums 4% lower, from the walk's streams, and is worse on the object under a
-# Kinect and on the room with exact depth; a mixed gain at more CPU a frame, so (6, 4, 3)
-# is kept.
+# (10, 8, 6) sums 25.02 mm against the default's 24.43, lower on four streams and higher
+# on five, at more CPU a frame, so (6, 4, 3) is kept.
 ITERATIONS = (6, 4, 3)
 # Cauchy scale c in units of each term's robust scale.
 ROBUST = 2.5
@@ -92,8 +91,8 @@ ROBUST = 2.5
 # / 1e-2 (1 / scene units), under a Kinect 5.8 / 5.8 / 2.8 / 8.7 mm; 3e-3 is 0.013 of
 # the walk's median inverse depth (0.23 per unit). Re-checked on validation trajectories
 # (seed 1; rule: the lowest summed ATE of the nine tracked streams): 0.0043 (1e-3 per
-# unit on the walk) sums 31.50 mm against the default's 25.95, worse on the walk under a
-# Kinect though a little better with exact depth (results/tuning/tracking/floor_d/ against
+# unit on the walk) sums 31.87 mm against the default's 24.43, worse on the walk under a
+# Kinect though a little better on the object (results/tuning/tracking/floor_d/ against
 # results/tuning/tracking/tracking.md's default row); 0.013 kept.
 FLOOR_I, FLOOR_D = 1e-3, 0.013
 # The MAD's factor to a Gaussian standard deviation.
