@@ -17,9 +17,10 @@ from typing import Any
 from vbgs.inference import grow
 from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AUTO_REFINE_SHAPE,
                              parse_components)
-from vbgs.inference.candidates import DEFAULT_CANDIDATES
+from vbgs.inference.candidates import default_candidates
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
-from vbgs.mapping.change import FORGET_AFTER, RECOLOUR_REFERENCES, SHAPED_POINTS
+from vbgs.mapping.change import (DOUBT_OPACITY, FORGET_AFTER, RECOLOUR_REFERENCES,
+                                 SHAPED_POINTS)
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
@@ -189,7 +190,7 @@ class EvidenceConfig:
     doubt_opacity: a run of frames that count against a component starts only where its
         expected opacity (its rays' hits against passes so far) is at least this: a
         component the rays pass about as often as they hit it (thinner than a pixel) is
-        never judged gone (:mod:`vbgs.mapping.change`; 0, the default: any component).
+        never judged gone (:mod:`vbgs.mapping.change`; 0: any component).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
@@ -199,7 +200,7 @@ class EvidenceConfig:
     recolour_sigmas: float = 0.0
     recolour_reference: str = "history"
     shaped_points: float = SHAPED_POINTS
-    doubt_opacity: float = 0.0
+    doubt_opacity: float = DOUBT_OPACITY
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):
@@ -366,7 +367,7 @@ class Config:
     components: int | str = 20000
     assign: str = "prior"
     estep: str = "sparse"
-    candidates: int = DEFAULT_CANDIDATES
+    candidates: int | None = None
     search: str = "auto"
     local_iters: int = 1
     reseed: bool = False
@@ -380,8 +381,10 @@ class Config:
     def __post_init__(self):
         parse_components(self.components)
         value = self.candidates
-        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-            raise ValueError(f"candidates must be a positive integer, got {value!r}")
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool)
+                                  or value < 1):
+            raise ValueError(f"candidates must be a positive integer (None: the sensor's "
+                             f"default), got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
         _choice("search", self.search, SEARCH)
@@ -399,6 +402,13 @@ class Config:
         if self.sensor.noisy and self.estep != "sparse":
             raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
                              f"estep='sparse': its noise is modelled in the sparse E-step")
+
+    @property
+    def n_candidates(self) -> int:
+        """Candidates per point: ``candidates``, or when None the sensor's default
+        (:func:`vbgs.inference.candidates.default_candidates`: 8 with exact depth, 16
+        under a measured sensor)."""
+        return self.candidates or default_candidates(self.sensor.exact)
 
     @property
     def slow_path(self) -> bool:
