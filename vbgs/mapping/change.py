@@ -63,8 +63,8 @@ see-throughs of a change lower the opacity as they count). At 0.5 the static obj
 room and walk with exact depth, and the object and room under the Kinect, are what
 they are with forgetting off, to the bit (the walk's two components and the Kinect
 object's two are kept), and the changing scenes lose a few hundredths of a dB
-(``results/changing/*.doubt50.json``, ``results/changing/static/*.doubt50.json``), the
-default (:data:`DOUBT_OPACITY`).
+(``results/changing/*.doubt50.json``, ``results/changing/static/*.doubt50.json``). It is
+off by default until every result is re-made with it.
 
 **Colour.** A surface repainted in place is hit as before, so depth alone never tells
 it; nor does it tell a moved object's components that touched the ground it stood on
@@ -191,9 +191,6 @@ from vbgs.render.raster import rasterize
 FORGET_AFTER = 6
 # Rays that must have hit a component before it can be judged gone (a surface learned).
 MIN_HITS = 5.0
-# A run of doubt starts only on a component at least this opaque (module docstring, "Who
-# may be doubted": at 0.5 every static stream forgets nothing).
-DOUBT_OPACITY = 0.5
 # A frame reads a component's colour when this many of its five sample rays hit it (a
 # majority: one pixel beside an edge does not decide). Against the history of its rays
 # (``recolour_reference="history"``), the mean of at least this many earlier frames that

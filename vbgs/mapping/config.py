@@ -19,8 +19,7 @@ from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AU
                              parse_components)
 from vbgs.inference.candidates import default_candidates
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
-from vbgs.mapping.change import (DOUBT_OPACITY, FORGET_AFTER, RECOLOUR_REFERENCES,
-                                 SHAPED_POINTS)
+from vbgs.mapping.change import FORGET_AFTER, RECOLOUR_REFERENCES, SHAPED_POINTS
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
@@ -190,7 +189,7 @@ class EvidenceConfig:
     doubt_opacity: a run of frames that count against a component starts only where its
         expected opacity (its rays' hits against passes so far) is at least this: a
         component the rays pass about as often as they hit it (thinner than a pixel) is
-        never judged gone (:mod:`vbgs.mapping.change`; 0: any component).
+        never judged gone (:mod:`vbgs.mapping.change`; 0, the default: any component).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
@@ -200,7 +199,7 @@ class EvidenceConfig:
     recolour_sigmas: float = 0.0
     recolour_reference: str = "history"
     shaped_points: float = SHAPED_POINTS
-    doubt_opacity: float = DOUBT_OPACITY
+    doubt_opacity: float = 0.0
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):

@@ -290,7 +290,7 @@ def test_doubted_only_where_opaque_a_removed_object_is_still_forgotten(changed):
 
 
 def test_doubt_opacity_is_an_opacity():
-    assert EvidenceConfig().doubt_opacity == change.DOUBT_OPACITY == 0.5
+    assert EvidenceConfig().doubt_opacity == 0.0
     for bad in (-0.1, 1.5, True, "half"):
         with pytest.raises(ValueError, match="doubt_opacity"):
             EvidenceConfig(doubt_opacity=bad)
