@@ -77,7 +77,7 @@ def add(sub):
                         "rays' hits against passes give it an expected opacity of O or "
                         "more: a component thinner than a pixel, which the rays pass about "
                         "as often as they hit, is kept (at 0.5 the static scenes forget "
-                        "nothing; default: the map's evidence.doubt_opacity, 0: any)")
+                        "nothing; default: 0.5 with exact depth, 0, any, under a measured --sensor)")
     p.add_argument("--budget-points", type=int, default=80000,  # BudgetConfig's default
                    metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "

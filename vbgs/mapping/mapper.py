@@ -324,7 +324,7 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
                            reference=config.evidence.recolour_reference, colour=colour,
                            recolour_sigmas=config.evidence.recolour_sigmas,
                            colour_noise=config.prior.colour_noise,
-                           doubt_opacity=config.evidence.doubt_opacity,
+                           doubt_opacity=config.doubt_opacity,
                            prior=(config.evidence.prior_hits, config.evidence.prior_passes))
     slots = change.gone(doubt, after)
     if len(slots) == 0:
