@@ -17,7 +17,7 @@ NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "rea
                    "splat_scale", "splat_blur", "view", "methods", "anchor",
                    "budget_points", "budget_saturation",  # the nested budget.points, .saturation
                    # the nested evidence.* (None: their defaults)
-                   "forget_after", "recolour_sigmas", "recolour_reference"}
+                   "forget_after", "recolour_sigmas", "recolour_reference", "doubt_opacity"}
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:
