@@ -77,7 +77,7 @@ def add(sub):
                         "rays' hits against passes give it an expected opacity of O or "
                         "more: a component thinner than a pixel, which the rays pass about "
                         "as often as they hit, is kept (at 0.5 the static scenes forget "
-                        "nothing; default: the map's evidence.doubt_opacity, 0: any)")
+                        "nothing; default: 0.5 with exact depth, 0, any, under a measured --sensor)")
     p.add_argument("--budget-points", type=int, default=80000,  # BudgetConfig's default
                    metavar="N",
                    help="VBGS learns at most N points a frame: every s-th pixel per axis from "
@@ -90,7 +90,9 @@ def add(sub):
     add_choice(p, "--order", ORDER)
     add_choice(p, "--assign", ASSIGN)
     add_choice(p, "--estep", ESTEP)
-    p.add_argument("--candidates", type=int, default=16, help="components per point (sparse)")
+    p.add_argument("--candidates", type=int, default=None,
+                   help="components per point (sparse; default: 8 with exact depth, 16 "
+                        "under a measured --sensor)")
     add_choice(p, "--search", SEARCH)
     add_choice(p, "--init", INIT)
     add_seed(p)

@@ -89,7 +89,7 @@ class SceneTask:
     order: str = ORDER.default
     assign: str = ASSIGN.default
     estep: str = ESTEP.default
-    candidates: int = 16
+    candidates: int | None = None  # None: the sensor's default (8 exact, 16 measured)
     search: str = SEARCH.default  # VBGS: KD-tree or projective candidates
     # VBGS: the map saved after every frame to this .npz (vbgs.mapping.save), a stream
     # resumed from one (its frames already learned are skipped), and each stage's

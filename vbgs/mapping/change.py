@@ -67,7 +67,8 @@ of a dB (``results/changing/*.doubt50.json``, ``results/changing/static/*.doubt5
 Under the Kinect's noise fewer of a removed object's components are opaque enough to be
 doubted: the changing object forgets 3175 components where it forgot 4686, 19.51 dB
 against 20.48; at 0.4 that loss is 0.28 dB but the walk forgets its two again
-(``*.doubt40.json``). No one threshold serves both, so it is off by default.
+(``*.doubt40.json``). So with exact depth the default is 0.5
+(:data:`EXACT_DOUBT_OPACITY`) and under a measured sensor 0, any component.
 
 **Colour.** A surface repainted in place is hit as before, so depth alone never tells
 it; nor does it tell a moved object's components that touched the ground it stood on
@@ -194,6 +195,9 @@ from vbgs.render.raster import rasterize
 FORGET_AFTER = 6
 # Rays that must have hit a component before it can be judged gone (a surface learned).
 MIN_HITS = 5.0
+# With exact depth a run of doubt starts only on a component at least this opaque (module
+# docstring, "Who may be doubted"); under a measured sensor any component may be doubted.
+EXACT_DOUBT_OPACITY = 0.5
 # A frame reads a component's colour when this many of its five sample rays hit it (a
 # majority: one pixel beside an edge does not decide). Against the history of its rays
 # (``recolour_reference="history"``), the mean of at least this many earlier frames that

@@ -17,9 +17,10 @@ from typing import Any
 from vbgs.inference import grow
 from vbgs.components import (AUTO_MERGE_EVERY, AUTO_POINTS, AUTO_REFINE_GAIN, AUTO_REFINE_SHAPE,
                              parse_components)
-from vbgs.inference.candidates import DEFAULT_CANDIDATES
+from vbgs.inference.candidates import default_candidates
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
-from vbgs.mapping.change import FORGET_AFTER, RECOLOUR_REFERENCES, SHAPED_POINTS
+from vbgs.mapping.change import (EXACT_DOUBT_OPACITY, FORGET_AFTER, RECOLOUR_REFERENCES,
+                                 SHAPED_POINTS)
 from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
@@ -189,7 +190,9 @@ class EvidenceConfig:
     doubt_opacity: a run of frames that count against a component starts only where its
         expected opacity (its rays' hits against passes so far) is at least this: a
         component the rays pass about as often as they hit it (thinner than a pixel) is
-        never judged gone (:mod:`vbgs.mapping.change`; 0, the default: any component).
+        never judged gone (:mod:`vbgs.mapping.change`; 0: any component; None, the
+        default: :data:`vbgs.mapping.change.EXACT_DOUBT_OPACITY` with exact depth, 0
+        under a measured sensor, :meth:`Config.doubt_opacity`).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
@@ -199,7 +202,7 @@ class EvidenceConfig:
     recolour_sigmas: float = 0.0
     recolour_reference: str = "history"
     shaped_points: float = SHAPED_POINTS
-    doubt_opacity: float = 0.0
+    doubt_opacity: float | None = None
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):
@@ -218,7 +221,8 @@ class EvidenceConfig:
             raise ValueError(f"evidence.shaped_points must be a number of points >= 0 "
                              f"(inf: never judged along the shape), got {p!r}")
         o = self.doubt_opacity
-        if isinstance(o, bool) or not isinstance(o, int | float) or not 0 <= o <= 1:
+        if o is not None and (isinstance(o, bool) or not isinstance(o, int | float)
+                              or not 0 <= o <= 1):
             raise ValueError(f"evidence.doubt_opacity must be an opacity in [0, 1] (0: any "
                              f"component may be doubted), got {o!r}")
 
@@ -366,7 +370,7 @@ class Config:
     components: int | str = 20000
     assign: str = "prior"
     estep: str = "sparse"
-    candidates: int = DEFAULT_CANDIDATES
+    candidates: int | None = None
     search: str = "auto"
     local_iters: int = 1
     reseed: bool = False
@@ -380,8 +384,10 @@ class Config:
     def __post_init__(self):
         parse_components(self.components)
         value = self.candidates
-        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-            raise ValueError(f"candidates must be a positive integer, got {value!r}")
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool)
+                                  or value < 1):
+            raise ValueError(f"candidates must be a positive integer (None: the sensor's "
+                             f"default), got {value!r}")
         _choice("assign", self.assign, ASSIGN)
         _choice("estep", self.estep, ESTEP)
         _choice("search", self.search, SEARCH)
@@ -399,6 +405,21 @@ class Config:
         if self.sensor.noisy and self.estep != "sparse":
             raise ValueError(f"a measured depth (sensor {self.sensor.model!r}) needs "
                              f"estep='sparse': its noise is modelled in the sparse E-step")
+
+    @property
+    def n_candidates(self) -> int:
+        """Candidates per point: ``candidates``, or when None the sensor's default
+        (:func:`vbgs.inference.candidates.default_candidates`: 8 with exact depth, 16
+        under a measured sensor)."""
+        return self.candidates or default_candidates(self.sensor.exact)
+
+    @property
+    def doubt_opacity(self) -> float:
+        """``evidence.doubt_opacity``, or when None the sensor's default
+        (:data:`vbgs.mapping.change.EXACT_DOUBT_OPACITY` with exact depth, 0 under a
+        measured sensor: :mod:`vbgs.mapping.change`, "Who may be doubted")."""
+        o = self.evidence.doubt_opacity
+        return o if o is not None else (EXACT_DOUBT_OPACITY if self.sensor.exact else 0.0)
 
     @property
     def slow_path(self) -> bool:

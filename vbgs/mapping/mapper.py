@@ -324,7 +324,7 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
                            reference=config.evidence.recolour_reference, colour=colour,
                            recolour_sigmas=config.evidence.recolour_sigmas,
                            colour_noise=config.prior.colour_noise,
-                           doubt_opacity=config.evidence.doubt_opacity,
+                           doubt_opacity=config.doubt_opacity,
                            prior=(config.evidence.prior_hits, config.evidence.prior_passes))
     slots = change.gone(doubt, after)
     if len(slots) == 0:
@@ -409,7 +409,7 @@ def _learn_slowly(state: MapState, xyz, rgb, config: Config
     the assigning model; the state's key split once). Returns the state, the posterior the
     batch was learned from and the batch's ELBO term."""
     learn = partial(model.update, assign=config.assign, config=config.prior,
-                    estep=config.estep, n_candidates=config.candidates,
+                    estep=config.estep, n_candidates=config.n_candidates,
                     local_iters=config.local_iters)
     mixture = state.mixture
     if config.reseed:
@@ -447,7 +447,7 @@ def bound(info: MapInfo, config: Config) -> BatchBound:
     a frame that forgot 2 components, the stream's bound negative)."""
     return batch_bound(info.before, info.after, info.xyz, info.rgb,
                        config=config.prior, estep=config.estep,
-                       n_candidates=config.candidates)
+                       n_candidates=config.n_candidates)
 
 
 def mapper(config: Config) -> Mapper:
@@ -732,7 +732,7 @@ def _sync_stepper(state: MapState, slots: np.ndarray, config: Config,
             stepper_search = "projective"
             spacing = state.rule.cell if state.growing else grow.mean_spacing(prior)
         step = Stepper(prior, assign=config.assign, config=config.prior, estep=config.estep,
-                       n_candidates=config.candidates, grows=state.growing, reach=reach,
+                       n_candidates=config.n_candidates, grows=state.growing, reach=reach,
                        follow=config.budget.saturation > 0, search=stepper_search,
                        spacing=spacing)
     elif len(slots):

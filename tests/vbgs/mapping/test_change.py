@@ -290,7 +290,10 @@ def test_doubted_only_where_opaque_a_removed_object_is_still_forgotten(changed):
 
 
 def test_doubt_opacity_is_an_opacity():
-    assert EvidenceConfig().doubt_opacity == 0.0
+    assert EvidenceConfig().doubt_opacity is None
+    assert mapping.Config().doubt_opacity == change.EXACT_DOUBT_OPACITY == 0.5
+    assert mapping.Config(sensor=SensorConfig("kinect")).doubt_opacity == 0.0
+    assert mapping.Config(evidence=EvidenceConfig(doubt_opacity=0.3)).doubt_opacity == 0.3
     for bad in (-0.1, 1.5, True, "half"):
         with pytest.raises(ValueError, match="doubt_opacity"):
             EvidenceConfig(doubt_opacity=bad)
