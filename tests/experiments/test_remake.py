@@ -21,7 +21,7 @@ def head() -> str:
     return remake.git("rev-parse", "--short", "HEAD")
 
 
-def write_json(path, command, version="abc1234", **fields):
+def write_json(path, command, version="0000000", **fields):
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"psnr": 1.0, **fields, "code_version": version,
                                 "command": command}) + "\n")
@@ -44,9 +44,9 @@ def test_files_are_grouped_by_command_and_the_unrecorded_listed(tmp_path):
     (tmp_path / "t").mkdir()
     (tmp_path / "t" / "tables.md").write_text(
         "Made by `python -m experiments.run sweep --config c.toml --out /tmp/x/t` at code "
-        "`abc1234+dirty`.\n\n| a |\n")
+        "`0000000+dirty`.\n\n| a |\n")
     (tmp_path / "t" / "old.md").write_text(
-        "Made by `python -m experiments.run report results/t` at code `abc1234`.\n")
+        "Made by `python -m experiments.run report results/t` at code `0000000`.\n")
     (tmp_path / "t" / "notes.md").write_text("# no command here\n")
     (tmp_path / "COMMANDS.md").write_text("| files | command |\n")
     (tmp_path / "t" / "list.json").write_text("[1, 2]\n")
@@ -59,7 +59,7 @@ def test_files_are_grouped_by_command_and_the_unrecorded_listed(tmp_path):
     assert fit.out is None
     sweep = next(j for j in jobs if " sweep " in j.command)
     assert sweep.out == "/tmp/x/t" and sweep.results_dir == tmp_path / "t"
-    assert sweep.records[0].version == "abc1234+dirty"
+    assert sweep.records[0].version == "0000000+dirty"
     refused = {j.command.split()[3]: remake.refusal(j) for j in jobs}
     assert "make the sweep again" in refused["report"]
     assert refused["sweep"] is None and refused["fit-image"] is None
@@ -86,7 +86,7 @@ def test_a_recorded_command_is_made_again_from_a_clean_checkout(tmp_path):
     a refused table left as it was; the checkout removed afterwards."""
     results = tmp_path / "results"
     write_json(results / "fit" / "a.json", FIT, psnr=-1.0)
-    stale = "Made by `python -m experiments.run report results/t` at code `abc1234`.\n"
+    stale = "Made by `python -m experiments.run report results/t` at code `0000000`.\n"
     (results / "t.md").write_text(stale)
     cmd = [sys.executable, "-m", "experiments.remake", str(results), "--results",
            str(results)]

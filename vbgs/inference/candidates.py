@@ -23,8 +23,7 @@ import numpy as np
 # 10-20% fewer at 8; the 640x480 room at N = 80000 (2 validation views) 23.10 / 23.06 /
 # 23.04 at 8 / 12 / 16. Under a measured sensor fewer lose: the object under the Kinect
 # (`--simulate-sensor kinect --sensor kinect`) 24.35 at 8 against 24.61 at 16, its noise
-# (2.6 cm) wider than a component. 16 stays the default until every result is re-made
-# under a default per sensor (README, "Sensor-sized frames").
+# (2.6 cm) wider than a component. So 16 under a measured sensor and 8 with exact depth.
 DEFAULT_CANDIDATES = 16
 # With exact depth 8 (the validation views above; :func:`default_candidates`).
 EXACT_CANDIDATES = 8
