@@ -14,7 +14,8 @@ How a command's files are found again:
 
 - a JSON record whose command writes no ``--out`` is what the command printed: the last
   line of its standard output that reads as a JSON object (``fit-scene --json``);
-- a command with ``--out FOLDER`` (a sweep, ``tune``, ``front``, ``bench``) is given a
+- a command with ``--out FOLDER`` (a sweep, ``tune``, ``front``, ``bench``; not
+  ``write-scene``, whose ``--out`` is the dataset it writes in the checkout) is given a
   staging folder in its place, the one of the results folder its stamped files lie in;
   every file it writes there whose counterpart exists under that results folder is
   copied (its plots and CSVs with its tables), a file that does not exist there is
@@ -64,9 +65,17 @@ class Job:
     records: list[Record] = field(default_factory=list)
 
     @property
+    def writes_dataset(self) -> bool:
+        """Whether the command writes a dataset folder (``write-scene``: its ``--out`` is
+        that folder, inside the checkout, which later commands read; its record is what
+        it printed)."""
+        return " write-scene " in f" {self.command} "
+
+    @property
     def out(self) -> str | None:
-        """The command's ``--out`` folder, or None when its record is what it printed."""
-        return option(self.command, "--out")
+        """The command's ``--out`` results folder, or None when its record is what it
+        printed."""
+        return None if self.writes_dataset else option(self.command, "--out")
 
     @property
     def results_dir(self) -> Path:
@@ -130,7 +139,7 @@ def jobs_of(records: list[Record]) -> list[Job]:
     jobs: dict[str, Job] = {}
     for r in records:
         jobs.setdefault(r.command, Job(r.command)).records.append(r)
-    return sorted(jobs.values(), key=lambda j: " write-scene " not in f" {j.command} ")
+    return sorted(jobs.values(), key=lambda j: not j.writes_dataset)
 
 
 def refusal(job: Job) -> str | None:

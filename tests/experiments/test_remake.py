@@ -54,6 +54,7 @@ def test_files_are_grouped_by_command_and_the_unrecorded_listed(tmp_path):
     assert sorted(p.name for p in unstamped) == ["list.json", "notes.md"]
     jobs = remake.jobs_of(records)
     assert len(jobs) == 4 and " write-scene " in jobs[0].command  # datasets first
+    assert jobs[0].writes_dataset and jobs[0].out is None  # its --out is the dataset
     fit = next(j for j in jobs if j.command == FIT)
     assert sorted(r.path.name for r in fit.records) == ["one.json", "two.json"]
     assert fit.out is None
