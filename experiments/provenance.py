@@ -17,6 +17,7 @@ a later install).
 from __future__ import annotations
 
 import functools
+import json
 import platform
 import re
 import shlex
@@ -34,17 +35,20 @@ UNKNOWN = "unknown"
 _command: str | None = None
 
 
+def git(*args, root: str | Path = ROOT) -> str:
+    """``git -C root ARGS``'s output, stripped (raises ``CalledProcessError`` on failure,
+    ``OSError`` where git is missing)."""
+    return subprocess.run(["git", "-C", str(root), *args], capture_output=True,
+                          text=True, timeout=60, check=True).stdout.strip()
+
+
 @functools.cache
 def code_version(root: str | Path = ROOT) -> str:
     """``git rev-parse --short HEAD`` of ``root``, ``+dirty`` when its code differs from
     that commit; ``unknown`` when ``root`` is not a git checkout (or git is missing)."""
-    def git(*args):
-        return subprocess.run(["git", "-C", str(root), *args], capture_output=True,
-                              text=True, timeout=30, check=True).stdout.strip()
-
     try:
-        head = git("rev-parse", "--short", "HEAD")
-        changed = git("status", "--porcelain", "--", *CODE_PATHS)
+        head = git("rev-parse", "--short", "HEAD", root=root)
+        changed = git("status", "--porcelain", "--", *CODE_PATHS, root=root)
     except (OSError, subprocess.SubprocessError):
         return UNKNOWN
     return head + ("+dirty" if changed else "")
@@ -120,3 +124,17 @@ def is_stamped_json(record) -> bool:
 def is_stamped_markdown(text: str) -> bool:
     """Whether a markdown file's first line names a command and a code version."""
     return FIRST_LINE.match(text.split("\n", 1)[0]) is not None
+
+
+def recorded(path: Path) -> tuple[str, str] | None:
+    """The command and code version a results file (``.json`` or ``.md``) records, or
+    None where it records none (a JSON file that does not parse records none)."""
+    text = path.read_text()
+    if path.suffix == ".json":
+        try:
+            record = json.loads(text)
+        except ValueError:
+            return None
+        return (record["command"], record["code_version"]) if is_stamped_json(record) else None
+    match = FIRST_LINE.match(text.split("\n", 1)[0]) if path.suffix == ".md" else None
+    return (match["command"], match["version"]) if match else None

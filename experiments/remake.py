@@ -33,6 +33,7 @@ before and after, seconds, exit status) goes to ``STAGE/remake.log``: the result
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import shlex
@@ -43,7 +44,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from experiments.provenance import CODE_PATHS, FIRST_LINE, ROOT, is_stamped_json
+from experiments.provenance import CODE_PATHS, ROOT, git, recorded
 
 SKIPPED_NAMES = ("COMMANDS.md",)  # files of prose that record no command of their own
 
@@ -107,19 +108,13 @@ def with_option(command: str, name: str, value: str) -> str:
 
 def read_record(path: Path) -> Record | None:
     """The command and code version a results file records, or None if it names none."""
-    if path.suffix == ".json":
-        try:
-            record = json.loads(path.read_text())
-        except (OSError, ValueError):
-            return None
-        if not is_stamped_json(record):
-            return None
-        return Record(path, record["command"], record["code_version"])
-    if path.suffix == ".md" and path.name not in SKIPPED_NAMES:
-        first = path.read_text().split("\n", 1)[0]
-        match = FIRST_LINE.match(first)
-        return Record(path, match["command"], match["version"]) if match else None
-    return None
+    if path.name in SKIPPED_NAMES:
+        return None
+    try:
+        stamp = recorded(path)
+    except OSError:
+        return None
+    return Record(path, *stamp) if stamp else None
 
 
 def collect(paths: list[Path]) -> tuple[list[Record], list[Path]]:
@@ -152,11 +147,7 @@ def refusal(job: Job) -> str | None:
     return None
 
 
-def git(*args, cwd: Path = ROOT) -> str:
-    return subprocess.run(["git", "-C", str(cwd), *args], capture_output=True, text=True,
-                          check=True, timeout=60).stdout.strip()
-
-
+@functools.cache  # one git call per version, however many files name it
 def behind(version: str, commit: str = "HEAD") -> int | None:
     """Commits that changed the code paths between ``version`` and ``commit`` (None: the
     version is not a commit of this repository)."""

@@ -91,10 +91,7 @@ def _results(suffix):
 
 
 def _stamped(name: str) -> bool:
-    path = RESULTS / name
-    if path.suffix == ".json":
-        return is_stamped_json(json.loads(path.read_text()))
-    return is_stamped_markdown(path.read_text())
+    return provenance.recorded(RESULTS / name) is not None
 
 
 def _listed() -> list[str]:
