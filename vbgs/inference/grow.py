@@ -527,34 +527,39 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
          config: PriorConfig = PriorConfig(), ray=None, levels=None, earns=None,
-         pixel: pixel_patches.PixelGrid | None = None) -> tuple[State, GrowInfo]:
+         pixel: pixel_patches.PixelGrid | None = None, held=None) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`);
     ``levels [n]``: the points' coarse levels (:func:`point_levels`); ``earns [n, levels]``:
     the refinement levels each point may seed (:func:`vbgs.mapping.splits.earned_levels`);
     ``pixel``: a frame's points on its pixel grid, where the seeds' patches are found
-    (:mod:`vbgs.inference.pixel_patches`; None: bare points, a KD-tree over the batch)."""
+    (:mod:`vbgs.inference.pixel_patches`; None: bare points, a KD-tree over the batch);
+    ``held [g, d]``: positions about the grid's origin whose cells count as held though
+    no component's mean lies there (ground a merge paid for, :mod:`vbgs.inference.merge`)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
                                config=config, ray=ray, levels=levels, earns=earns,
-                               pixel=pixel)
+                               pixel=pixel, held=held)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
 
 
-def _about_origin(prior: Mixture, posterior: Mixture, xyz, ray=None):
+def _about_origin(prior: Mixture, posterior: Mixture, xyz, ray=None, held=None):
     """The batch ``xyz [n, d]`` about the grid's origin ``[n, d]``, the means of the
-    components in use ``[m, d]`` (of ``posterior``), the active slots ``[k]`` bool and
-    the rays ``[n, d]`` (or None), in float64 on the host."""
+    components in use ``[m, d]`` (of ``posterior``; with ``held [g, d]`` after them:
+    positions whose cells count as held), the active slots ``[k]`` bool and the rays
+    ``[n, d]`` (or None), in float64 on the host."""
     active = is_active(prior)
     x = np.asarray(xyz, np.float64) - np.asarray(prior.origin, np.float64)
     taken = np.asarray(posterior.space.mean, np.float64)[active]
+    if held is not None and len(held):
+        taken = np.concatenate([taken, np.asarray(held, np.float64)])
     return x, taken, active, None if ray is None else np.asarray(ray, np.float64)
 
 
-def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=None
-              ) -> int:
+def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=None,
+              held=None) -> int:
     """How many more components the new ground of the batch ``xyz [n, d]`` wants (at most
     ``rule.max_new``, as :func:`select` counts it) than there are empty slots: above 0
     when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it). With
@@ -562,11 +567,12 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
     points seed counts too (as :func:`select` counts it with every slot free, in the
     points' own order). Nothing is counted while the empty slots alone take the most a
     batch may add (``rule.max_new``, which bounds what it wants): the shortfall is then
-    at most ``rule.max_new - empty slots <= 0``, and that bound is returned."""
+    at most ``rule.max_new - empty slots <= 0``, and that bound is returned. ``held``: as
+    :func:`grow`'s."""
     n_empty = int((~is_active(state.prior)).sum())
     if n_empty >= rule.max_new:
         return rule.max_new - n_empty
-    x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray)
+    x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray, held)
     if earns is None:
         wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
     else:
@@ -585,10 +591,11 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
                  key: jax.Array, config: PriorConfig, ray=None, levels=None, earns=None,
-                 pixel: pixel_patches.PixelGrid | None = None) -> tuple[Mixture, GrowInfo]:
+                 pixel: pixel_patches.PixelGrid | None = None, held=None
+                 ) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
-    x, taken, active, ray = _about_origin(prior, posterior, xyz, ray)
+    x, taken, active, ray = _about_origin(prior, posterior, xyz, ray, held)
     empty = np.flatnonzero(~active)
     chosen, n_ground, split = _select(x, taken, len(empty), rule, key=key, ray=ray,
                                       levels=levels, earns=earns)

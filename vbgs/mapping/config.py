@@ -94,7 +94,11 @@ class GrowthConfig:
         per channel (:mod:`vbgs.mapping.holes`; radius 0: holes stay holes);
     denoise_radius: noise independent between pixels only (``sensor.white``): each
         reading is replaced by the plane fitted to its surface's readings within this
-        many px (:mod:`vbgs.mapping.denoise`; 0: read as measured).
+        many px (:mod:`vbgs.mapping.denoise`; 0: read as measured);
+    hold_seeds: a component's seed (its prior mean) holds its cell as its posterior mean
+        does, so ground whose components' means moved out of it is not grown again;
+    hold_paid: the cells where merged components stood stay held (a merge pays for the
+        ground once; ``vbgs.mapping.mapper._paid``).
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -107,6 +111,10 @@ class GrowthConfig:
     # results/tuning/growth/mean.md (23.65 dB with coarse cells from 4x; 22.73 without)
     merge: bool = True
     merge_ahead: float = MERGE_AHEAD
+    # off (the table behind each: results/tuning/hold/; module docstring of
+    # vbgs.mapping.mapper's _held and _paid)
+    hold_paid: bool = False
+    hold_seeds: bool = False
     coarse_from: float = grow.COARSE_FROM
     auto_points: float = AUTO_POINTS
     auto_merge_every: int = AUTO_MERGE_EVERY
@@ -153,6 +161,10 @@ class GrowthConfig:
             raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
         if not isinstance(self.merge, bool):
             raise ValueError(f"growth.merge must be true or false, got {self.merge!r}")
+        for name in ("hold_paid", "hold_seeds"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"growth.{name} must be true or false, got "
+                                 f"{getattr(self, name)!r}")
         _positive("growth", "coarse_from", self.coarse_from)
         if not (isinstance(self.merge_ahead, (int, float)) and 0 <= self.merge_ahead < 0.5):
             raise ValueError(f"growth.merge_ahead must be in [0, 0.5), got {self.merge_ahead!r}")

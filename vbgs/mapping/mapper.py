@@ -90,7 +90,7 @@ import jax
 import numpy as np
 
 from vbgs.data.scene import Frame
-from vbgs.inference import capacity, expfam, grow, kept_pairs, merge, model
+from vbgs.inference import capacity, cells, expfam, grow, kept_pairs, merge, model
 from vbgs.inference.pixel_patches import PixelGrid
 from vbgs.inference.bound import BatchBound, batch_bound
 from vbgs.inference.reassign import reassign
@@ -132,6 +132,8 @@ class MapState(NamedTuple):
     n_forgotten: int = 0  # components forgotten as gone (vbgs.mapping.change)
     n_merge_rounds: int = 0  # rounds of merges that made room for new ground
     n_merged: int = 0  # components merged into a neighbour in them
+    paid: np.ndarray | None = None  # [g, 3] where merged components stood, about the
+    #                                 grid's origin: ground the budget paid for (_make_room)
 
     @property
     def points_unlearned(self) -> float:
@@ -331,7 +333,8 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
         return state._replace(doubt=doubt)
     empty = grow.empty_prior(prior.n_components, prior.origin, state.rule.cell, config.prior,
                              prior.alpha.dtype)
-    state = state._replace(mixture=change.emptied(state.mixture, slots, empty),
+    state = state._replace(paid=_unpaid(state, slots),
+                           mixture=change.emptied(state.mixture, slots, empty),
                            evidence=change.cleared(state.evidence, slots),
                            colour=change.cleared(state.colour, slots),
                            doubt=change.cleared(doubt, slots),
@@ -515,7 +518,8 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     else:
         state, merged = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
-                              ray=ray, levels=levels, earns=earns, pixel=pixel)
+                              ray=ray, levels=levels, earns=earns, pixel=pixel,
+                              held=_held(state, config))
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
@@ -590,7 +594,8 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
     if not g.merge:
         return state, none
     with stage("merge") as done:
-        short = grow.shortfall(mixture, xyz, rule, ray=ray, levels=levels)
+        short = grow.shortfall(mixture, xyz, rule, ray=ray, levels=levels,
+                               held=_held(state, config))
         if short <= 0:
             return state, none
         prior = mixture.prior
@@ -598,10 +603,57 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
         n_pairs = max(short, int(g.merge_ahead * prior.n_components))
         pairs = kept_pairs.choose_pairs(mixture.posterior, counts, grow.is_active(prior),
                                         n_pairs, config.prior.colour_noise)
+        if g.hold_paid:
+            state = state._replace(paid=_paid(state, pairs))
         state = _merged(state, pairs, config)
         done(state.mixture)
     return state._replace(n_merge_rounds=state.n_merge_rounds + 1,
                           n_merged=state.n_merged + len(pairs)), pairs.reshape(-1)
+
+
+def _held(state: MapState, config: Config) -> np.ndarray | None:
+    """``[g, 3]`` positions (about the grid's origin) whose cells growth counts as held
+    besides those of the components' posterior means (:func:`vbgs.inference.grow.grow`'s
+    ``held``): the prior means of the components in use (``growth.hold_seeds``: under
+    prior assignment a component's prior row is the reference that assigns the ground
+    about its seed, wherever its posterior mean has moved since) and the ground merges
+    paid for (``growth.hold_paid``, :func:`_paid`); None when neither."""
+    g, prior = config.growth, state.mixture.prior
+    parts = []
+    if g.hold_seeds:
+        parts.append(np.asarray(prior.space.mean, np.float64)[grow.is_active(prior)])
+    if g.hold_paid and state.paid is not None:
+        parts.append(state.paid)
+    return np.concatenate(parts) if parts else None
+
+
+def _paid(state: MapState, pairs: np.ndarray) -> np.ndarray:
+    """``state.paid`` with the means of both ends of ``pairs [p, 2]`` (before the merge)
+    added, about the grid's origin, one per cell of the finest level (``growth.hold_paid``).
+
+    Why: a merge moves the pair's mass to its moment match between them, and the cell one
+    of them stood in is then new ground to growth (no mean lies in it): the next frame
+    that sees it grows a component there, which the budget pays for by merging another
+    pair. On the room at fit-scene's defaults about half the new ground grown after the
+    first ten frames lay in cells a component had held before. The merged component
+    still draws that ground (its covariance spans the pair), so the cells stay held."""
+    mixture, rule = state.mixture, state.rule
+    means = np.asarray(mixture.posterior.space.mean, np.float64)[pairs.reshape(-1)]
+    paid = means if state.paid is None else np.concatenate([state.paid, means])
+    fine = rule.cell / 2.0 ** max(rule.levels - 1, 0)
+    _, first = np.unique(cells.cell_keys(cells.cell_index(paid, fine)), return_index=True)
+    return paid[np.sort(first)]
+
+
+def _unpaid(state: MapState, slots: np.ndarray) -> np.ndarray | None:
+    """``state.paid`` less the positions in the level-0 cells of the components ``slots``
+    (forgotten as gone, :mod:`vbgs.mapping.change`): what stands there now is new ground."""
+    if state.paid is None or len(state.paid) == 0 or len(slots) == 0:
+        return state.paid
+    mixture, cell = state.mixture, state.rule.cell
+    gone = np.asarray(mixture.posterior.space.mean, np.float64)[slots]
+    (paid_keys, gone_keys), size = cells.box_keys([state.paid, gone], cell)
+    return state.paid[~cells.held(gone_keys, paid_keys, size)]
 
 
 def _merged(state: MapState, pairs: np.ndarray, config: Config) -> MapState:
@@ -644,7 +696,8 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
         pairs = merge.bound_pairs(mixture, grow.is_active(mixture.prior),
                                   config.prior.colour_noise)
         state, merged = _merged(state, pairs, config), pairs.reshape(-1)
-    short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels)
+    short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels,
+                           held=_held(state, config))
     k0 = state.mixture.prior.n_components
     if short > 0:
         state = _widened(state, k0 + short, config)
@@ -694,7 +747,7 @@ def _auto_widen(state: MapState, xyz, ray, levels, earns, config: Config) -> Map
     if earns is None or not earns.any():
         return state
     short = grow.shortfall(state.mixture, xyz, state.rule, ray=ray, levels=levels,
-                           earns=earns)
+                           earns=earns, held=_held(state, config))
     if short <= 0:
         return state
     return _widened(state, state.mixture.prior.n_components + short, config)

@@ -324,3 +324,19 @@ def test_a_small_quota_picks_from_a_prefix_the_cells_a_full_pass_picks():
                 np.testing.assert_array_equal(_pick(x, taken, cell, order, quota, r), full)
                 checked_prefix |= PREFIX_TIMES**2 * quota <= len(x) and len(full) == quota
     assert checked_prefix
+
+
+def test_cells_of_held_positions_are_not_new_ground():
+    """``held``: positions about the grid's origin whose cells count as held though no
+    component's mean lies there (a component's seed after its mean moved away). The
+    cells holding them get nothing; the shortfall does not count them either."""
+    xy = lattice(8)  # 16 cells of side 2 about the centre 3.5
+    rule = grow.Growth(cell=2.0, levels=1, refine=0.0, max_new=100)
+    state = grow.start_empty(xy, 40, rule.cell)
+    held = np.float64([[-3.0, -3.0], [3.0, 3.0]])  # about the origin: two corner cells
+    _, info = grow.grow(state, xy, colours(xy), rule, key=jax.random.key(0), held=held)
+    assert info.n_new == 16 - 2
+    full = grow.Growth(cell=2.0, levels=1, refine=0.0, max_new=10)  # 10 new at most
+    state = grow.start_empty(xy, 12, full.cell)
+    state, _ = grow.grow(state, xy[:32], colours(xy[:32]), full, key=jax.random.key(1))
+    assert grow.shortfall(state, xy, full) > grow.shortfall(state, xy, full, held=held)
