@@ -55,6 +55,13 @@ def add(sub):
                    help="learn the stream from training frame N on: a fresh map of what "
                         "those frames show (after a changing scene's last change, its world "
                         "as it is now)")
+    p.add_argument("--hold-seeds", action="store_true",
+                   help="VBGS: a component's seed holds its cell as its mean does, so ground "
+                        "whose components' means moved away is not grown again (the map's "
+                        "growth.hold_seeds)")
+    p.add_argument("--hold-paid", action="store_true",
+                   help="VBGS: where merged components stood stays held, so a merge pays for "
+                        "its ground once (the map's growth.hold_paid)")
     p.add_argument("--forget-after", type=int, default=None, metavar="N",
                    help="VBGS forgets a component its frames have seen through N times in a "
                         "row, none hitting it: what the world no longer holds (default: "
@@ -187,7 +194,7 @@ def run(args) -> dict:
                      save_map=args.save_map, resume_map=args.resume_map,
                      stage_times=args.stage_times, streaming_bound=args.streaming_bound,
                      **calibration(args),
-                     **_evidence(args),
+                     **_evidence(args), **_growth(args),
                      **render)
     if args.test_views < 1:  # checks before the fit: output paths, sizes, held-out views
         raise ValueError(f"--test-views must be at least 1 (the scores are measured on "
@@ -216,6 +223,15 @@ def run(args) -> dict:
         save_trajectory_plot(args.plot, out, f"{args.scene}, --poses {args.poses}: ATE RMSE "
                                              f"{out['ate_rmse']:.4f}")
     return out
+
+
+def _growth(args) -> dict:
+    """The task's ``growth`` setting where ``--hold-seeds`` or ``--hold-paid`` changes it
+    (else none: the map's defaults)."""
+    from vbgs.mapping import GrowthConfig
+
+    given = {name: True for name in ("hold_seeds", "hold_paid") if getattr(args, name)}
+    return {"growth": GrowthConfig(**given)} if given else {}
 
 
 def _evidence(args) -> dict:

@@ -91,3 +91,17 @@ def test_fit_scene_non_square_frames_with_a_budget(capsys):
     with pytest.raises(SystemExit) as refused:  # argparse: exit status 2, the reason said
         main(["fit-scene", "--size", "640x", "--json"])
     assert refused.value.code == 2 and "WIDTHxHEIGHT" in capsys.readouterr().err
+
+
+def test_fit_scene_hold_flags_reach_the_map(capsys):
+    """``--hold-seeds --hold-paid`` set the map's ``growth.hold_seeds`` and
+    ``growth.hold_paid``: the room at 32 px, whose 300 slots fill by its twelfth frame,
+    then grows nothing it held before, so nothing is merged to pay for it (without the
+    flags: 31 merged in 2 rounds, measured; the map's own test holds the pair)."""
+    assert main(["fit-scene", "--scene", "room", "--size", "32", "--components", "300",
+                 "--frames", "12", "--test-views", "1", "--hold-seeds", "--hold-paid",
+                 "--json"]) == 0
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert r["components_merged"] == 0 and r["merge_rounds"] == 0
+    # measured 18.85 dB (18.59 without the flags)
+    assert r["psnr"] > 18.0
