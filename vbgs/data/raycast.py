@@ -28,7 +28,7 @@ import numpy as np
 from skimage import data as skdata
 from skimage.transform import resize
 
-from vbgs.render.camera import Camera, pixel_grid
+from vbgs.render.camera import Camera, pixel_blocks, pixel_grid
 
 T_MIN = 1e-6  # smallest accepted ray parameter: ignores hits at the ray origin
 TEXTURE_SIZE = 256  # textures are resized once to TEXTURE_SIZE x TEXTURE_SIZE
@@ -321,7 +321,14 @@ def _rays_near(bounds, origin, dirs, dir_sq) -> np.ndarray:
 def camera_rays(camera: Camera, samples: int = 1) -> np.ndarray:
     """World directions ``[h * w * samples², 3]`` with camera-frame z = 1: through the
     pixel centres (``samples = 1``), or through the centres of a ``samples x samples``
-    grid of equal sub-pixels in each pixel, pixel-major (row, col, sub-row, sub-col)."""
+    grid of equal sub-pixels in each pixel, pixel-major (row, col, sub-row, sub-col).
+
+    The rotation to the world is a matrix product of :data:`~vbgs.render.camera.BLOCK`
+    rays at a time: each ray's row of the product is the same as in one product of all
+    of them (its three sums do not depend on the other rows), but BLAS runs a block on
+    one thread, where for a whole frame it starts its threads, which on a busy 2-core
+    machine took 50 ms for 128 x 128 x 9 rays and a second at 640 x 480 x 9 (0.1 ms a block).
+    """
     u, v = pixel_grid(camera)  # [h, w] pixel centres
     offsets = (np.arange(samples) + 0.5) / samples - 0.5  # sub-pixel centres, [-0.5, 0.5]
     u = u[:, :, None, None] + offsets[None, None, None, :]
@@ -329,8 +336,11 @@ def camera_rays(camera: Camera, samples: int = 1) -> np.ndarray:
     u, v = np.broadcast_arrays(u, v)
     d_cam = np.stack(
         [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], -1
-    )
-    return d_cam.reshape(-1, 3) @ np.asarray(camera.pose, float)[:3, :3].T
+    ).reshape(-1, 3)
+    rot, out = np.asarray(camera.pose, float)[:3, :3].T, np.empty_like(d_cam)
+    for rows in pixel_blocks(len(d_cam)):  # the same rows' products, one block at a time
+        np.matmul(d_cam[rows], rot, out=out[rows])
+    return out
 
 
 def render(prims, camera: Camera, background=(1.0, 1.0, 1.0), samples: int = 1
