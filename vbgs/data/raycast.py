@@ -286,13 +286,25 @@ def cast(prims, origin: np.ndarray, dirs: np.ndarray):
 
     Each primitive is intersected only with the rays that pass through the sphere
     around its bounding box (:func:`_rays_near`): the same hits, far fewer rays tested
-    for small primitives.
+    for small primitives. That test is itself run only on the tiles of ``TILE``
+    consecutive rays whose cone can reach the sphere (:func:`_tiles_near`, which never
+    drops a ray the test passes), so the rays each primitive is intersected with are
+    the same.
     """
     best_t = np.full(len(dirs), np.inf)
     rgb = np.zeros((len(dirs), 3))
     dir_sq = np.einsum("ij,ij->i", dirs, dirs)  # [n] |d|², rays need not be unit length
+    cones = _tile_cones(dirs)
     for prim in prims:
-        (rows,) = np.nonzero(_rays_near(prim.bounds(), origin, dirs, dir_sq))
+        sphere = _bounding_sphere(prim.bounds())
+        tiles = _tiles_near(sphere, origin, *cones)
+        if not tiles.any():
+            continue
+        if tiles.all():
+            (rows,) = np.nonzero(_rays_near(sphere, origin, dirs, dir_sq))
+        else:
+            tried = _tile_rows(tiles, len(dirs))
+            rows = tried[_rays_near(sphere, origin, dirs[tried], dir_sq[tried])]
         if len(rows) == 0:
             continue
         t, uv = prim.hit(origin, dirs[rows])
@@ -303,12 +315,19 @@ def cast(prims, origin: np.ndarray, dirs: np.ndarray):
     return best_t, rgb
 
 
-def _rays_near(bounds, origin, dirs, dir_sq) -> np.ndarray:
-    """``[n]`` bool: the ray ``origin + t dirs`` (t > 0) comes within the radius of the
-    sphere around the box ``bounds = (lo, hi)`` of its centre (a conservative test:
-    every ray that can hit the box passes it)."""
+def _bounding_sphere(bounds) -> tuple[np.ndarray, float]:
+    """Centre and radius of the sphere around the box ``bounds = (lo, hi)``, the radius
+    widened a little (relative 1e-6, absolute 1e-9) so that rounding loses no ray."""
     lo, hi = (np.asarray(b, float) for b in bounds)
-    centre, radius = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo) * (1 + 1e-6) + 1e-9
+    return 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo) * (1 + 1e-6) + 1e-9
+
+
+def _rays_near(sphere, origin, dirs, dir_sq) -> np.ndarray:
+    """``[n]`` bool: the ray ``origin + t dirs`` (t > 0) comes within the radius of
+    ``sphere = (centre, radius)`` (:func:`_bounding_sphere`) of its centre (a
+    conservative test: every ray that can hit the box passes it). Each ray's answer
+    depends on that ray alone."""
+    centre, radius = sphere
     to_centre = centre - np.asarray(origin, float)
     along = dirs @ to_centre  # [n] (c - o) . d
     dist_sq = to_centre @ to_centre
@@ -316,6 +335,47 @@ def _rays_near(bounds, origin, dirs, dir_sq) -> np.ndarray:
     # squared distance from the centre to the ray's closest point (ahead of the origin)
     closest_sq = dist_sq - np.where(along > 0, along * along / dir_sq, 0.0)
     return inside | ((along > 0) & (closest_sq <= radius * radius))
+
+
+TILE = 256  # consecutive rays that cast culls together (a few pixels of a camera's row)
+CONE_MARGIN = 1e-4  # radians added to a tile's cone: far more than the tests' rounding
+
+
+def _tile_cones(dirs) -> tuple[np.ndarray, np.ndarray]:
+    """Per tile of ``TILE`` consecutive rays (the last one shorter): its unit mean
+    direction ``axis [k, 3]`` and ``half [k]``, the largest angle from it to one of
+    its rays (NaN where a ray or the mean has no direction: never culled)."""
+    n = len(dirs)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        pad = np.repeat(unit[-1:], -n % TILE, 0)  # copies of the last ray: the same cone
+        unit = np.concatenate([unit, pad]).reshape(-1, TILE, 3)
+        axis = unit.sum(1)
+        axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+        cos = np.einsum("ktj,kj->kt", unit, axis).min(1)
+    return axis, np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def _tiles_near(sphere, origin, axis, half) -> np.ndarray:
+    """``[k]`` bool: the tile's cone (:func:`_tile_cones`) may hold a ray that
+    :func:`_rays_near` passes. A ray whose angle to the centre exceeds the sphere's
+    angular radius ``alpha`` misses it, and every ray of a tile lies within ``half`` of
+    its axis, so a tile whose axis is more than ``half + alpha`` (plus
+    ``CONE_MARGIN``) from the centre has none; an origin in or near the sphere keeps all."""
+    centre, radius = sphere
+    to_centre = centre - np.asarray(origin, float)
+    dist = float(np.linalg.norm(to_centre))
+    if dist <= radius * 1.01:
+        return np.ones(len(axis), bool)
+    alpha = np.arcsin(radius / dist)
+    beta = np.arccos(np.clip(axis @ (to_centre / dist), -1.0, 1.0))
+    return ~(beta > half + alpha + CONE_MARGIN)  # NaN (no direction) keeps the tile
+
+
+def _tile_rows(tiles, n: int) -> np.ndarray:
+    """Indices (ascending) of the rays in the tiles ``tiles [k]`` marks, below ``n``."""
+    rows = (np.flatnonzero(tiles)[:, None] * TILE + np.arange(TILE)).ravel()
+    return rows[rows < n]
 
 
 def camera_rays(camera: Camera, samples: int = 1) -> np.ndarray:

@@ -2,8 +2,17 @@
 
 import numpy as np
 
-from vbgs.data.raycast import camera_rays
-from vbgs.data.synthetic import make_scene
+from vbgs.data.raycast import (
+    TILE,
+    _bounding_sphere,
+    _rays_near,
+    _tile_cones,
+    _tile_rows,
+    _tiles_near,
+    camera_rays,
+    cast,
+)
+from vbgs.data.synthetic import make_scene, scene_primitives
 from vbgs.render.camera import BLOCK, pixel_grid
 
 
@@ -24,3 +33,39 @@ def test_camera_rays_blocked_product_equals_one_product():
     assert len(rays) > 2 * BLOCK
     np.testing.assert_array_equal(
         rays, d_cam.reshape(-1, 3) @ np.asarray(cam.pose, float)[:3, :3].T)
+
+
+def test_tiles_near_keeps_every_ray_the_sphere_test_passes():
+    """The tile cones drop no ray of _rays_near's, for spheres near and far, in front,
+    behind and around the origin, and do drop tiles that look away."""
+    rng = np.random.default_rng(0)
+    dirs = rng.normal(size=(40 * TILE + 17, 3))
+    dirs = dirs[np.argsort(np.arctan2(dirs[:, 1], dirs[:, 0]))] * rng.uniform(0.5, 2, (len(dirs), 1))
+    dir_sq = np.einsum("ij,ij->i", dirs, dirs)
+    cones, origin, dropped = _tile_cones(dirs), np.array([0.3, -0.2, 0.1]), 0
+    for _ in range(300):
+        lo = origin + rng.normal(size=3) * rng.choice([0.5, 3.0, 30.0])
+        sphere = _bounding_sphere((lo, lo + rng.uniform(0, 2) * rng.random(3)))
+        near = _rays_near(sphere, origin, dirs, dir_sq)
+        kept = np.zeros(len(dirs), bool)
+        kept[_tile_rows(_tiles_near(sphere, origin, *cones), len(dirs))] = True
+        assert not np.any(near & ~kept)
+        dropped += np.sum(~kept)
+    assert dropped > 0.3 * 300 * len(dirs)
+
+
+def test_culled_cast_equals_every_primitive_on_every_ray():
+    """cast on a frame of many tiles (some primitives culled on most of them): the
+    bits of intersecting every primitive with every ray."""
+    for name in ("object", "walk"):
+        cam = _camera(name)
+        prims, dirs = scene_primitives(name), camera_rays(cam, samples=2)
+        best_t, rgb = np.full(len(dirs), np.inf), np.zeros((len(dirs), 3))
+        for prim in prims:
+            t, uv = prim.hit(cam.position, dirs)
+            closer = t < best_t
+            best_t[closer] = t[closer]
+            rgb[closer] = prim.surface.colour(uv[closer])
+        t, colours = cast(prims, cam.position, dirs)
+        np.testing.assert_array_equal(t, best_t)
+        np.testing.assert_array_equal(colours, rgb)
