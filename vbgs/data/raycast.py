@@ -61,16 +61,27 @@ def texture(name: str) -> np.ndarray:
 
 
 def sample(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear, wrap-around lookup of ``tex [th, tw, 3]`` at ``uv [n, 2]`` -> ``[n, 3]``."""
+    """Bilinear, wrap-around lookup of ``tex [th, tw, 3]`` at ``uv [n, 2]`` -> ``[n, 3]``.
+
+    Each corner texel is gathered by one index into the ``[th * tw, 3]`` rows of
+    ``tex``; the weights and sums are those of
+    ``tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax`` (top, bottom likewise), then
+    ``top * (1 - ay) + bottom * ay`` (float64 weights: float64 results)."""
     th, tw = tex.shape[:2]
+    texels = tex.reshape(th * tw, -1)
     x = uv[:, 0] * tw - 0.5
     y = uv[:, 1] * th - 0.5
     x0, y0 = np.floor(x), np.floor(y)
     ax, ay = (x - x0)[:, None], (y - y0)[:, None]
     c0, r0 = x0.astype(np.int64) % tw, y0.astype(np.int64) % th
     c1, r1 = (c0 + 1) % tw, (r0 + 1) % th
-    top = tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax
-    bottom = tex[r1, c0] * (1 - ax) + tex[r1, c1] * ax
+    r0, r1 = r0 * tw, r1 * tw  # the rows' first texels
+
+    def corner(r, c):
+        return np.take(texels, r + c, axis=0)
+
+    top = corner(r0, c0) * (1 - ax) + corner(r0, c1) * ax
+    bottom = corner(r1, c0) * (1 - ax) + corner(r1, c1) * ax
     return top * (1 - ay) + bottom * ay
 
 

@@ -11,6 +11,8 @@ from vbgs.data.raycast import (
     _tiles_near,
     camera_rays,
     cast,
+    sample,
+    texture,
 )
 from vbgs.data.synthetic import make_scene, scene_primitives
 from vbgs.render.camera import BLOCK, pixel_grid
@@ -69,3 +71,18 @@ def test_culled_cast_equals_every_primitive_on_every_ray():
         t, colours = cast(prims, cam.position, dirs)
         np.testing.assert_array_equal(t, best_t)
         np.testing.assert_array_equal(colours, rgb)
+
+
+def test_sample_gather_equals_the_four_texel_formula():
+    """sample's flat gathers: the bits of indexing the photo by row and column."""
+    tex = texture("astronaut")
+    uv = np.random.default_rng(1).uniform(-3, 5, (5000, 2))
+    th, tw = tex.shape[:2]
+    x, y = uv[:, 0] * tw - 0.5, uv[:, 1] * th - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    ax, ay = (x - x0)[:, None], (y - y0)[:, None]
+    c0, r0 = x0.astype(np.int64) % tw, y0.astype(np.int64) % th
+    c1, r1 = (c0 + 1) % tw, (r0 + 1) % th
+    top = tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax
+    bottom = tex[r1, c0] * (1 - ax) + tex[r1, c1] * ax
+    np.testing.assert_array_equal(sample(tex, uv), top * (1 - ay) + bottom * ay)
