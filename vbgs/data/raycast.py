@@ -300,14 +300,22 @@ def cast(prims, origin: np.ndarray, dirs: np.ndarray):
     for small primitives. That test is itself run only on the tiles of ``TILE``
     consecutive rays whose cone can reach the sphere (:func:`_tiles_near`, which never
     drops a ray the test passes), so the rays each primitive is intersected with are
-    the same.
+    the same. Every ray's result depends on that ray alone, so the rays are cast
+    :data:`~vbgs.render.camera.BLOCK` at a time, whose temporaries stay in the cache.
     """
     best_t = np.full(len(dirs), np.inf)
     rgb = np.zeros((len(dirs), 3))
+    spheres = [_bounding_sphere(prim.bounds()) for prim in prims]
+    for block in pixel_blocks(len(dirs)):
+        _cast_block(prims, spheres, origin, dirs[block], best_t[block], rgb[block])
+    return best_t, rgb
+
+
+def _cast_block(prims, spheres, origin, dirs, best_t, rgb) -> None:
+    """:func:`cast` of the rays ``dirs``, written into the views ``best_t`` and ``rgb``."""
     dir_sq = np.einsum("ij,ij->i", dirs, dirs)  # [n] |d|², rays need not be unit length
     cones = _tile_cones(dirs)
-    for prim in prims:
-        sphere = _bounding_sphere(prim.bounds())
+    for prim, sphere in zip(prims, spheres, strict=True):
         tiles = _tiles_near(sphere, origin, *cones)
         if not tiles.any():
             continue
@@ -323,7 +331,6 @@ def cast(prims, origin: np.ndarray, dirs: np.ndarray):
         if np.any(closer):
             best_t[rows[closer]] = t[closer]
             rgb[rows[closer]] = prim.surface.colour(uv[closer])
-    return best_t, rgb
 
 
 def _bounding_sphere(bounds) -> tuple[np.ndarray, float]:
