@@ -22,7 +22,7 @@ beyond [0, 1) tiles the photo. ``uv = (0, 0)`` is the photo's top-left corner,
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 
 import numpy as np
 from skimage import data as skdata
@@ -155,13 +155,21 @@ class Quad:
     edge_v: tuple[float, float, float]
     surface: Surface
 
-    def _local(self, q):  # q [n, 3] relative to the corner -> (a, b) each [n]
+    @cached_property
+    def _edges(self):  # edge_u, edge_v as arrays and their squared lengths, worked out once
         eu, ev = np.asarray(self.edge_u, float), np.asarray(self.edge_v, float)
-        return q @ eu / (eu @ eu), q @ ev / (ev @ ev)
+        return eu, ev, eu @ eu, ev @ ev
+
+    @cached_property
+    def _normal(self):  # edge_u x edge_v, worked out once (np.cross takes 0.1 ms)
+        return np.cross(self.edge_u, self.edge_v)
+
+    def _local(self, q):  # q [n, 3] relative to the corner -> (a, b) each [n]
+        eu, ev, eu_sq, ev_sq = self._edges
+        return q @ eu / eu_sq, q @ ev / ev_sq
 
     def hit(self, origin, dirs):
-        p0 = np.asarray(self.corner, float)
-        n = np.cross(self.edge_u, self.edge_v)
+        p0, n = np.asarray(self.corner, float), self._normal
         denom = dirs @ n  # [n]
         ok = np.abs(denom) > 1e-12
         t = np.where(ok, ((p0 - origin) @ n) / np.where(ok, denom, 1.0), np.inf)
