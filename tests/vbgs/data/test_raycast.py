@@ -11,10 +11,18 @@ from vbgs.data.raycast import (
     _tiles_near,
     camera_rays,
     cast,
+    render,
     sample,
     texture,
 )
-from vbgs.data.synthetic import make_scene, scene_primitives
+from vbgs.data.synthetic import (
+    WALK_FOV_X,
+    WALK_SKY,
+    _frames,
+    make_scene,
+    scene_primitives,
+    walk_poses,
+)
 from vbgs.render.camera import BLOCK, pixel_grid
 
 
@@ -86,3 +94,15 @@ def test_sample_gather_equals_the_four_texel_formula():
     top = tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax
     bottom = tex[r1, c0] * (1 - ax) + tex[r1, c1] * ax
     np.testing.assert_array_equal(sample(tex, uv), top * (1 - ay) + bottom * ay)
+
+
+def test_frames_rendered_in_threads_are_each_pose_rendered_in_turn():
+    """_frames renders FRAME_THREADS views at a time: the frames, in the poses' order,
+    are those of rendering each pose alone."""
+    poses = walk_poses(5, 0)[0]
+    frames = _frames(scene_primitives("walk"), poses, (24, 18), WALK_FOV_X, WALK_SKY, 2)
+    for frame, pose in zip(frames, poses, strict=True):
+        np.testing.assert_array_equal(frame.camera.pose, pose)
+        rgb, depth = render(scene_primitives("walk"), frame.camera, WALK_SKY, 2)
+        np.testing.assert_array_equal(frame.rgb, rgb)
+        np.testing.assert_array_equal(frame.depth, depth)
