@@ -60,29 +60,47 @@ def texture(name: str) -> np.ndarray:
     return out
 
 
-def sample(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
+@cache
+def texture_planes(name: str) -> np.ndarray:
+    """:func:`texture` ``name`` channel-major, float64 ``[3, TEXTURE_SIZE²]`` (the same
+    values): the layout :func:`sample` gathers from fastest."""
+    out = np.ascontiguousarray(texture(name).reshape(-1, 3).T, np.float64)
+    out.setflags(write=False)  # shared through the cache
+    return out
+
+
+def sample(tex: np.ndarray, uv: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
     """Bilinear, wrap-around lookup of ``tex [th, tw, 3]`` at ``uv [n, 2]`` -> ``[n, 3]``.
 
-    Each corner texel is gathered by one index into the ``[th * tw, 3]`` rows of
-    ``tex``; the weights and sums are those of
-    ``tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax`` (top, bottom likewise), then
-    ``top * (1 - ay) + bottom * ay`` (float64 weights: float64 results)."""
+    ``top = tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax``, the bottom row's likewise,
+    then ``top * (1 - ay) + bottom * ay``, in float64. The work is done channel-major:
+    each corner's channels gathered by one index into ``planes``, ``tex`` as ``[3, th
+    * tw]`` (:func:`texture_planes`; made here if not given), and weighted along those
+    rows: the same products and sums, several times faster than ``[n, 3]`` texels
+    weighted by ``[n, 1]`` columns."""
     th, tw = tex.shape[:2]
-    texels = tex.reshape(th * tw, -1)
+    if planes is None:
+        planes = np.ascontiguousarray(tex.reshape(th * tw, -1).T)
     x = uv[:, 0] * tw - 0.5
     y = uv[:, 1] * th - 0.5
     x0, y0 = np.floor(x), np.floor(y)
-    ax, ay = (x - x0)[:, None], (y - y0)[:, None]
-    c0, r0 = x0.astype(np.int64) % tw, y0.astype(np.int64) % th
-    c1, r1 = (c0 + 1) % tw, (r0 + 1) % th
+    ax, ay = x - x0, y - y0
+    c0, r0 = _wrap(x0.astype(np.int64), tw), _wrap(y0.astype(np.int64), th)
+    c1, r1 = _wrap(c0 + 1, tw), _wrap(r0 + 1, th)
     r0, r1 = r0 * tw, r1 * tw  # the rows' first texels
 
-    def corner(r, c):
-        return np.take(texels, r + c, axis=0)
+    def corner(r, c):  # [3, n]
+        return np.take(planes, r + c, axis=1)
 
     top = corner(r0, c0) * (1 - ax) + corner(r0, c1) * ax
     bottom = corner(r1, c0) * (1 - ax) + corner(r1, c1) * ax
-    return top * (1 - ay) + bottom * ay
+    return (top * (1 - ay) + bottom * ay).T
+
+
+def _wrap(i: np.ndarray, size: int) -> np.ndarray:
+    """``i % size`` (in ``[0, size)``), by a bit mask when ``size`` is a power of two:
+    the same integers, a tenth of the time."""
+    return i & (size - 1) if size & (size - 1) == 0 else i % size
 
 
 @dataclass(frozen=True)
@@ -95,7 +113,8 @@ class Surface:
 
     def colour(self, uv: np.ndarray) -> np.ndarray:
         """Albedo ``[n, 3]`` at texture coordinates ``uv [n, 2]``."""
-        return sample(texture(self.texture), uv * np.asarray(self.repeat)) * np.asarray(self.tint)
+        tex, planes = texture(self.texture), texture_planes(self.texture)
+        return sample(tex, uv * np.asarray(self.repeat), planes) * np.asarray(self.tint)
 
 
 def _nearest_root(a, b, c, extra_ok=None):

@@ -14,6 +14,7 @@ from vbgs.data.raycast import (
     render,
     sample,
     texture,
+    texture_planes,
 )
 from vbgs.data.synthetic import (
     WALK_FOV_X,
@@ -82,18 +83,20 @@ def test_culled_cast_equals_every_primitive_on_every_ray():
 
 
 def test_sample_gather_equals_the_four_texel_formula():
-    """sample's flat gathers: the bits of indexing the photo by row and column."""
-    tex = texture("astronaut")
+    """sample's channel-major gathers and masked wrap-around: the bits of indexing the
+    photo by row and column, for a cached photo and a made-up one of odd sides."""
     uv = np.random.default_rng(1).uniform(-3, 5, (5000, 2))
-    th, tw = tex.shape[:2]
-    x, y = uv[:, 0] * tw - 0.5, uv[:, 1] * th - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    ax, ay = (x - x0)[:, None], (y - y0)[:, None]
-    c0, r0 = x0.astype(np.int64) % tw, y0.astype(np.int64) % th
-    c1, r1 = (c0 + 1) % tw, (r0 + 1) % th
-    top = tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax
-    bottom = tex[r1, c0] * (1 - ax) + tex[r1, c1] * ax
-    np.testing.assert_array_equal(sample(tex, uv), top * (1 - ay) + bottom * ay)
+    odd = np.random.default_rng(2).random((37, 20, 3)).astype(np.float32)
+    for tex, planes in ((texture("astronaut"), texture_planes("astronaut")), (odd, None)):
+        th, tw = tex.shape[:2]
+        x, y = uv[:, 0] * tw - 0.5, uv[:, 1] * th - 0.5
+        x0, y0 = np.floor(x), np.floor(y)
+        ax, ay = (x - x0)[:, None], (y - y0)[:, None]
+        c0, r0 = x0.astype(np.int64) % tw, y0.astype(np.int64) % th
+        c1, r1 = (c0 + 1) % tw, (r0 + 1) % th
+        top = tex[r0, c0] * (1 - ax) + tex[r0, c1] * ax
+        bottom = tex[r1, c0] * (1 - ax) + tex[r1, c1] * ax
+        np.testing.assert_array_equal(sample(tex, uv, planes), top * (1 - ay) + bottom * ay)
 
 
 def test_frames_rendered_in_threads_are_each_pose_rendered_in_turn():
