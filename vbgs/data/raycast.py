@@ -347,17 +347,19 @@ def _cast_block(prims, spheres, origin, dirs, best_t, rgb) -> None:
         if not tiles.any():
             continue
         if tiles.all():
-            (rows,) = np.nonzero(_rays_near(sphere, origin, dirs, dir_sq))
+            near = _rays_near(sphere, origin, dirs, dir_sq)
+            rows = slice(None) if near.all() else np.flatnonzero(near)  # all: views
         else:
             tried = _tile_rows(tiles, len(dirs))
             rows = tried[_rays_near(sphere, origin, dirs[tried], dir_sq[tried])]
-        if len(rows) == 0:
+        if not isinstance(rows, slice) and len(rows) == 0:
             continue
         t, uv = prim.hit(origin, dirs[rows])
         closer = t < best_t[rows]
         if np.any(closer):
-            best_t[rows[closer]] = t[closer]
-            rgb[rows[closer]] = prim.surface.colour(uv[closer])
+            at = np.flatnonzero(closer) if isinstance(rows, slice) else rows[closer]
+            best_t[at] = t[closer]
+            rgb[at] = prim.surface.colour(uv[closer])
 
 
 def _bounding_sphere(bounds) -> tuple[np.ndarray, float]:
