@@ -111,8 +111,10 @@ class GrowthConfig:
     # results/tuning/growth/mean.md (23.65 dB with coarse cells from 4x; 22.73 without)
     merge: bool = True
     merge_ahead: float = MERGE_AHEAD
-    # off (the table behind each: results/tuning/hold/; module docstring of
-    # vbgs.mapping.mapper's _held and _paid)
+    # off. hold_paid: it lowers the mean of object, room and walk on validation views
+    # (results/tuning/hold/mean.md). hold_seeds: the best of that mean, by less than a
+    # tenth of a dB (and neutral under the Kinect, results/tuning/hold_kinect/mean.md);
+    # off until the records it would move (every stream at the defaults) are re-made.
     hold_paid: bool = False
     hold_seeds: bool = False
     coarse_from: float = grow.COARSE_FROM
