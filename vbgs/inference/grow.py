@@ -536,7 +536,8 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     ``pixel``: a frame's points on its pixel grid, where the seeds' patches are found
     (:mod:`vbgs.inference.pixel_patches`; None: bare points, a KD-tree over the batch);
     ``held [g, d]``: positions about the grid's origin whose cells count as held though
-    no component's mean lies there (ground a merge paid for, :mod:`vbgs.inference.merge`)."""
+    no component's mean lies there (a component's seed after its mean moved away, ground
+    a merge emptied: ``vbgs.mapping.mapper._held``)."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
                                config=config, ray=ray, levels=levels, earns=earns,
                                pixel=pixel, held=held)

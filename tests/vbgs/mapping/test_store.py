@@ -20,9 +20,17 @@ def _leaves_equal(a, b):
         np.testing.assert_array_equal(np.asarray(u), np.asarray(v))
 
 
-@pytest.mark.parametrize("search", ["kdtree", "projective"])
-def test_a_resumed_stream_equals_the_uninterrupted_one_to_the_bit(scene, tmp_path, search):
+@pytest.mark.parametrize("search,held", [("kdtree", False), ("projective", False),
+                                         ("kdtree", True)])
+def test_a_resumed_stream_equals_the_uninterrupted_one_to_the_bit(scene, tmp_path, search,
+                                                                   held):
+    """``held``: the walk on a budget its first frame half spends, with growth's held
+    ground (seeds and what merges emptied, ``growth.hold_*``) carried in the saved map."""
     config = mapping.Config(components=600, search=search)
+    if held:
+        config = mapping.Config(components=400, search=search, growth=mapping.GrowthConfig(
+            first_frame_share=0.5, hold_seeds=True, hold_paid=True))
+        scene = load_scene("walk", size=32, n_train=10, n_test=1, seed=0)
     learner = mapping.mapper(config)
     state = learner.init(key=jax.random.key(3))
     for frame in scene.train[:5]:
@@ -42,6 +50,9 @@ def test_a_resumed_stream_equals_the_uninterrupted_one_to_the_bit(scene, tmp_pat
                                   jax.random.key_data(resumed.key))
     assert (whole.n_points, whole.n_unlearned) == (resumed.n_points, resumed.n_unlearned)
     _leaves_equal(learner.splats(whole), learner.splats(resumed))
+    if held:
+        assert state.paid is not None and whole.n_merged > state.n_merged > 0
+        np.testing.assert_array_equal(whole.paid, resumed.paid)
 
 
 def test_a_map_before_any_frame_round_trips(tmp_path):
