@@ -66,11 +66,10 @@ PROTOCOL = Choice(("continual", "static"), "continual",
 OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "VBGS splat opacity: per component from hit/pass-through rays "
                       "(evidence) or the constant --opacity")
-# The fit scores more on validation views (results/tuning/colour/mean.md: 24.73 against
-# 24.59 dB over the object and the room; colour_walk: 22.15 against 21.76; colour_kinect,
-# the object under the Kinect: 24.94 against 24.81) at 1.4 to 2.8 times the seconds a frame
-# (results/tuning/colour_cost/: the walk 0.1945 against 0.1352 s, the Kinect object 0.3171
-# against 0.1122 s, single runs on a loaded machine). Off by default: a frame's time is
+# The fit scores more on validation views (about a tenth of a dB over the object and the
+# room, results/tuning/colour/mean.md; more on the walk, colour_walk/, and on the object
+# under the Kinect, colour_kinect/) at 1.4 to 2.8 times the seconds a frame
+# (results/tuning/colour_cost/, single runs on a loaded machine). Off by default: a frame's time is
 # what a stream at a sensor's rate cannot spare, and turning it on would re-make every
 # VBGS result.
 COLOUR_RULE = Choice(("posterior", "fit"), "posterior",

@@ -90,9 +90,8 @@ jax.tree_util.register_static(PriorConfig)
 # defaults, by `python -m experiments.run tune --scene object room --components 20000
 # --frames 60 --size 128 --grid prior.NAME=... --out results/tuning/prior/NAME`
 # (the command and code version head each table): cov_scale 0.6 the best,
-# results/tuning/prior/cov_scale/mean.md; thickness 0.1 the best,
-# results/tuning/prior/surface_thickness/mean.md; both at 24.59 dB mean (the isotropic
-# prior, thickness 1: 23.03).
+# results/tuning/prior/cov_scale/mean.md; thickness 0.1 the best, well above the isotropic
+# prior's thickness 1, results/tuning/prior/surface_thickness/mean.md.
 SURFACE_COV_SCALE = 0.6
 SURFACE_THICKNESS = 0.1
 SURFACE_PRIOR = PriorConfig(cov_scale=SURFACE_COV_SCALE, surface_thickness=SURFACE_THICKNESS)

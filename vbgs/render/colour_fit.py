@@ -50,7 +50,7 @@ from vbgs.render.splats import Splats
 # `python -m experiments.run tune --scene object room --components 20000 --frames 60
 # --size 128 --grid colour_rule=fit,posterior colour_ridge=16,32,64,128,256
 # --out results/tuning/colour` (results/tuning/colour/mean.md, its code version in its
-# first line): best at 64, 24.73 dB mean under the fit.
+# first line): best at 64 under the fit.
 RIDGE = 64.0
 
 

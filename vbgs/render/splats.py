@@ -273,12 +273,13 @@ def load_ply(path) -> Splats:
 # 60 frames), `python -m experiments.run tune --scene object room --components 20000
 # --frames 60 --size 128 --grid splat_scale=1.0,1.2,1.4 splat_blur=0,0.02,0.05
 # --out results/tuning/prior/splat` (results/tuning/prior/splat/mean.md, its command and
-# code version in its first line): scale 1.2 the best, 24.72 dB mean at blur 0 against
-# 24.59 at the default 0.02 (the blur's change is left for a round that re-makes the
-# records). The walk and 50k components: results/tuning/splat_scale/ (the walk at 50k wants
-# larger splats, experiments.tasks.scene_report.FEW_POINTS; over the three scenes 1.2 is
-# the best mean at 20k, results/tuning/splat_scale/k20000_mean.md; at 50k 1.35 is 0.06 dB
-# over it, k50000_mean.md, 24.30 against 24.24).
+# code version in its first line): scale 1.2 the best; blur 0 leads the default 0.02 there
+# by about a tenth of a dB but not on the walk nor on the object under the Kinect
+# (splat_blur_walk/, splat_blur_kinect/ beside it), and moving it is left for a round that
+# re-makes the records. The walk and 50k components: results/tuning/splat_scale/ (the walk
+# at 50k wants larger splats, experiments.tasks.scene_report.FEW_POINTS; over the three
+# scenes 1.2 is the best mean at 20k, k20000_mean.md; at 50k 1.35 leads it by less than a
+# tenth of a dB, k50000_mean.md).
 # Opacity comes from evidence (vbgs.render.opacity); VBGS_OPACITY is the constant of the old
 # rule (`opacity_rule="constant"`), kept for comparison.
 VBGS_OPACITY = 0.5
