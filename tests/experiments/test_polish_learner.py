@@ -93,7 +93,7 @@ def test_continual_polish_with_fifo_replay(capsys):
     assert record["steps_total"] == 4 * 3
     assert record["seconds_vbgs"] > 0 and record["seconds_polish"] > 0
     assert record["seconds"] == pytest.approx(record["seconds_vbgs"] + record["seconds_polish"])
-    assert record["psnr"] > 18.0  # measured 18.95 dB
+    assert record["psnr"] > 18.3  # measured 19.21 dB
 
 
 def test_the_anchor_is_per_point_of_the_frames_drawn(scene):

@@ -39,5 +39,5 @@ def test_command_scores_every_part_on_validation_views(capsys):
     scores = record["scores"]
     assert record["command"].startswith("python -m experiments.studies.polish_residual --scene object")
     assert record["val_views"] == 2 and len(scores) == 12
-    # measured 18.54 dB (VBGS's splats alone) to 18.81 (the whole polish)
-    assert all(len(s["view_psnr"]) == 2 and s["psnr"] > 17.6 for s in scores.values())
+    # measured 18.62 to 18.89 dB over the twelve parts
+    assert all(len(s["view_psnr"]) == 2 and s["psnr"] > 17.7 for s in scores.values())

@@ -25,8 +25,8 @@ def test_fit_scene_on_the_walk(capsys):
     for key in ("psnr", "ssim", "depth_l1", "points_unlearned", "early_psnr_when_seen",
                 "early_psnr_at_end"):
         assert np.isfinite(r[key]), key
-    # measured 17.60 dB (seed 0); the sky colour alone scores 8.1 dB on these two views
-    assert r["psnr"] > 16.7
+    # measured 17.91 dB (seed 0); the sky colour alone scores 8.1 dB on these two views
+    assert r["psnr"] > 17.0
     assert 0 < r["components_used"] <= 600 and 0.0 <= r["points_unlearned"] <= 1.0
     # the background is estimated from the pixels without depth: the sky
     np.testing.assert_allclose(r["background_rgb"], WALK_SKY, atol=0.02)
