@@ -72,8 +72,8 @@ NORMAL_NEIGHBOURS = 12
 # has covered (a component in the point's own cell) is always within reach. Chosen on
 # validation views: results/tuning/reach (python -m experiments.run tune --scene object
 # room walk --grid growth.reach_cells=1.5,2,3 --out results/tuning/reach): 1.5, 2 and 3
-# are within 0.01 dB of each other, so 2 is kept (confirmed, not re-chosen). Re-made at the
-# code in the table's first line: all three at 23.65 dB mean, within 0.005 dB; 2 kept.
+# are within 0.01 dB of each other (re-made at the code in the table's first line), so 2
+# is kept (confirmed, not re-chosen).
 REACH_CELLS = 2.0
 # Coarse levels far ground may use (point_levels): cells up to 2^5 = 32 times the
 # level-0 side, for ground seen 32 times more coarsely than the first frame's median
@@ -83,7 +83,7 @@ COARSE_LEVELS = 5
 # the coarse cells (point_levels): a room's far wall, 2x its median depth, keeps the
 # fine cells; a street's end, 10x, does not. Rule: the best mean validation PSNR over the
 # object, room and walk, results/tuning/growth/mean.md (made by the command in it, with
-# merging on and off): 4 the best, 23.65 dB with merging.
+# merging on and off): 4 the best.
 COARSE_FROM = 4.0
 # components="auto": a refinement cell is at least this many pixel footprints a side
 # (vbgs.mapping.splits; a component need not be much finer than the pixels it is seen

@@ -107,8 +107,8 @@ class GrowthConfig:
     max_new_share: float = grow.MAX_NEW_SHARE
     reach_cells: float = grow.REACH_CELLS
     coarse_levels: int = grow.COARSE_LEVELS
-    # merging on: the best mean validation PSNR over object, room and walk,
-    # results/tuning/growth/mean.md (23.65 dB with coarse cells from 4x; 22.73 without)
+    # merging on, coarse cells from 4x: the best mean validation PSNR over object, room
+    # and walk, results/tuning/growth/mean.md
     merge: bool = True
     merge_ahead: float = MERGE_AHEAD
     # off. hold_paid: it lowers the mean of object, room and walk on validation views
