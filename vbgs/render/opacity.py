@@ -55,8 +55,7 @@ N_SAMPLES = 5  # footprint pixels read per component and frame: centre, +-1 sigm
 # evidence.prior_hits=1,2,4`): 4 is best there by a few hundredths of a dB of mean PSNR
 # (rule: the best mean validation PSNR over the three scenes;
 # results/tuning/evidence_prior/k20000_mean.md, k50000_mean.md, each with its code version
-# in its first line): 4 best by 0.01 dB at 20k (23.66) and by 0.03 at 50k (24.27 against
-# 24.24); kept at 1, as every result would be re-made for a few hundredths.
+# in its first line); kept at 1, as every result would be re-made for a few hundredths.
 PRIOR_HITS = 1.0
 PRIOR_PASSES = 1.0
 # A component is seen through in a frame when its samples, taken at least this many
