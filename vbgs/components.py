@@ -22,7 +22,7 @@ AUTO_MAX_COMPONENTS = 131072
 # the best mean validation PSNR over object, room and walk, by `python -m experiments.run
 # tune --scene object room walk --components auto --frames 60 --size 128 --grid
 # growth.auto_points=2,4,8 --out results/tuning/components` (results/tuning/components/
-# mean.md, its code version in its first line): 4 the best, 24.06 dB mean.
+# mean.md, its code version in its first line): 4 the best.
 AUTO_POINTS = 4.0
 # "auto": frames between two rounds of merges scored by the bound (vbgs.inference.merge.
 # bound_pairs); 0: none (at auto:MAX the budget's merges still make room). Off: on
