@@ -113,9 +113,9 @@ At ``recolour_sigmas`` 6 the posterior reference is safe: the static object, roo
 walk streams, and the object and room under the Kinect, are what they are with colour
 off, to the bit (``results/changing/static/*.posterior6.json``; at 4 the object and the
 walk each forget one component more). It is not the default because it then tells
-little: 24.83 dB on object-change against 24.77 by depth alone, room-change the same,
-and on the validation views 22.97 dB against 22.94 without colour and 24.37 with the
-history at 4 (``results/changing/*.posterior6.json``, ``results/tuning/recolour/``).
+little on object-change and room-change against depth alone
+(``results/changing/*.posterior6.json``), and on the validation views hardly more than
+no colour, where the history at 4 gains over a dB (``results/tuning/recolour/``).
 Most of a changed world's colour evidence lies where the static false alarms did, on
 rays that land off the component's Gaussian (a new surface standing within an old one's
 band), and most of its components hold fewer than ``MIN_COLOUR_POINTS`` points at
