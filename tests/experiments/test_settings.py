@@ -17,7 +17,8 @@ NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "rea
                    "splat_scale", "splat_blur", "view", "methods", "anchor",
                    "budget_points", "budget_saturation",  # the nested budget.points, .saturation
                    # the nested evidence.* (None: their defaults)
-                   "forget_after", "recolour_sigmas", "recolour_reference", "doubt_opacity"}
+                   "forget_after", "recolour_sigmas", "recolour_reference", "doubt_opacity",
+                   "hold_seeds", "hold_paid"}  # the nested growth.hold_* (off: their defaults)
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:
@@ -49,6 +50,15 @@ def test_budget_flags_default_to_the_budget_config():
     flags = _defaults("fit-scene")
     assert flags["budget_points"] == BudgetConfig().points == SceneTask().budget.points
     assert flags["budget_saturation"] == BudgetConfig().saturation
+
+
+def test_hold_flags_default_to_the_growth_config():
+    # the nested growth.hold_seeds and .hold_paid: a flag turns one on, its absence is
+    # the map's default (off)
+    from vbgs.mapping import GrowthConfig
+    flags = _defaults("fit-scene")
+    assert flags["hold_seeds"] == GrowthConfig().hold_seeds == SceneTask().growth.hold_seeds
+    assert flags["hold_paid"] == GrowthConfig().hold_paid == SceneTask().growth.hold_paid
 
 
 def test_fit_image_reassign_auto_matches_the_task_default():
