@@ -57,6 +57,12 @@ REFINE_SHARE = 0.05
 # stream meeting new ground every frame merges every few frames, not every frame (each
 # round searches every component's neighbours: 0.1-0.2 s at K = 20k).
 MERGE_AHEAD = 0.02
+def _switch(name: str, value) -> None:
+    """Refuse a setting ``name`` (dotted) that is not a bool."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{name} must be true or false, got {value!r}")
+
+
 def _positive(owner: str, name: str, value, *, upper: float | None = None) -> None:
     ok = isinstance(value, (int, float)) and math.isfinite(value) and value > 0
     if not ok or (upper is not None and value > upper):
@@ -149,11 +155,8 @@ class GrowthConfig:
                 and not isinstance(self.refine_gain, bool)):
             raise ValueError(f"growth.refine_gain must be a finite number (nats: the log "
                              f"Bayes factor a split must exceed), got {self.refine_gain!r}")
-        if not isinstance(self.split, bool):
-            raise ValueError(f"growth.split must be true or false, got {self.split!r}")
-        if not isinstance(self.refine_shape, bool):
-            raise ValueError(f"growth.refine_shape must be true or false, got "
-                             f"{self.refine_shape!r}")
+        _switch("growth.split", self.split)
+        _switch("growth.refine_shape", self.refine_shape)
         _positive("growth", "refine_footprints", self.refine_footprints)
         _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
         _positive("growth", "reach_cells", self.reach_cells)
@@ -161,12 +164,8 @@ class GrowthConfig:
             raise ValueError(f"growth.refine_share must be in [0, 1], got {self.refine_share!r}")
         if not isinstance(self.levels, int) or self.levels < 1:
             raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
-        if not isinstance(self.merge, bool):
-            raise ValueError(f"growth.merge must be true or false, got {self.merge!r}")
-        for name in ("hold_paid", "hold_seeds"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"growth.{name} must be true or false, got "
-                                 f"{getattr(self, name)!r}")
+        for name in ("merge", "hold_paid", "hold_seeds"):
+            _switch(f"growth.{name}", getattr(self, name))
         _positive("growth", "coarse_from", self.coarse_from)
         if not (isinstance(self.merge_ahead, (int, float)) and 0 <= self.merge_ahead < 0.5):
             raise ValueError(f"growth.merge_ahead must be in [0, 0.5), got {self.merge_ahead!r}")
@@ -334,8 +333,7 @@ class BudgetConfig:
         if not isinstance(self.points, int) or isinstance(self.points, bool) or self.points < 0:
             raise ValueError(f"budget.points must be an integer >= 0 (0: every point), got "
                              f"{self.points!r}")
-        if not isinstance(self.weighted, bool):
-            raise ValueError(f"budget.weighted must be true or false, got {self.weighted!r}")
+        _switch("budget.weighted", self.weighted)
         if (not isinstance(self.saturation, int) or isinstance(self.saturation, bool)
                 or self.saturation < 0):
             raise ValueError(f"budget.saturation must be an integer >= 0 (0: no limit), got "
@@ -408,8 +406,7 @@ class Config:
         value = self.local_iters
         if not isinstance(value, int) or isinstance(value, bool) or value < 1:
             raise ValueError(f"local_iters must be a positive integer, got {value!r}")
-        if not isinstance(self.reseed, bool):
-            raise ValueError(f"reseed must be true or false, got {self.reseed!r}")
+        _switch("reseed", self.reseed)
         if self.slow_path and ((self.budget.points and self.budget.weighted)
                                or self.sensor.noisy):
             raise ValueError("local_iters > 1 under posterior assignment and reseed learn "
