@@ -64,9 +64,15 @@ def texture(name: str) -> np.ndarray:
 def texture_planes(name: str) -> np.ndarray:
     """:func:`texture` ``name`` channel-major, float64 ``[3, TEXTURE_SIZE²]`` (the same
     values): the layout :func:`sample` gathers from fastest."""
-    out = np.ascontiguousarray(texture(name).reshape(-1, 3).T, np.float64)
+    out = _channel_major(texture(name))
     out.setflags(write=False)  # shared through the cache
     return out
+
+
+def _channel_major(tex: np.ndarray) -> np.ndarray:
+    """``tex [th, tw, c]`` as float64 ``[c, th * tw]``, contiguous (the same values)."""
+    th, tw = tex.shape[:2]
+    return np.ascontiguousarray(tex.reshape(th * tw, -1).T, np.float64)
 
 
 def sample(tex: np.ndarray, uv: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
@@ -80,7 +86,7 @@ def sample(tex: np.ndarray, uv: np.ndarray, planes: np.ndarray | None = None) ->
     weighted by ``[n, 1]`` columns."""
     th, tw = tex.shape[:2]
     if planes is None:
-        planes = np.ascontiguousarray(tex.reshape(th * tw, -1).T)
+        planes = _channel_major(tex)
     x = uv[:, 0] * tw - 0.5
     y = uv[:, 1] * th - 0.5
     x0, y0 = np.floor(x), np.floor(y)
