@@ -162,3 +162,50 @@ def test_merge_rows_sums_any_per_component_table():
     out = merge.merge_rows(stats, np.array([[2, 0]]))
     assert np.asarray(out.count).tolist() == [0.0, 2.0, 5.0]
     assert out.sum_noise.shape == (3, 3, 3)
+
+
+def _plain_cost(posterior, counts, a, b, colour_noise):
+    """The module docstring's cost of merging ``a`` and ``b``, one pair at a time
+    (float64 matrices, LAPACK's log-determinants): the reference for merge_costs."""
+    d = posterior.space.mean.shape[-1]
+
+    def moments(i):
+        scale = np.asarray(posterior.space.scale[i], np.float64)
+        return (np.asarray(posterior.space.mean[i], np.float64),
+                scale / (float(posterior.space.dof[i]) - d - 1.0))
+
+    (ma, ca), (mb, cb) = moments(a), moments(b)
+    na, nb = counts[a], counts[b]
+    m = (na * ma + nb * mb) / (na + nb)
+    c = (na * (ca + np.outer(ma - m, ma - m)) + nb * (cb + np.outer(mb - m, mb - m))) / (na + nb)
+    logdet = lambda s: np.linalg.slogdet(s)[1]  # noqa: E731
+    colour = np.asarray(posterior.colour.mean, np.float64)
+    gap = ((colour[a] - colour[b]) ** 2).sum()
+    return (0.5 * ((na + nb) * logdet(c) - na * logdet(ca) - nb * logdet(cb))
+            + na * nb / (na + nb) * gap / (2.0 * colour_noise**2))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_merge_costs_are_the_plain_formula_pair_by_pair(dim):
+    """merge_costs' entry-major arithmetic (each component's moments found once) gives
+    the cost written out one pair at a time, in 2-D (an image) and 3-D; a few pairs
+    (their own components' moments only) give the bits of the same pairs among many."""
+    rng = np.random.default_rng(3)
+    k = 40
+    means = rng.normal(0, 1, (k, dim)).astype(np.float32)
+    colours = rng.uniform(0, 1, (k, 3)).astype(np.float32)
+    prior = model.make_prior(means, colours, np.zeros(dim, np.float32), 0.05, CONFIG)
+    x = np.repeat(means, 30, 0) + rng.normal(0, 0.05, (30 * k, dim)) * rng.uniform(
+        0.2, 1, dim)
+    rgb = np.repeat(colours, 30, 0)
+    r = np.eye(k, dtype=np.float32)[np.repeat(np.arange(k), 30)]
+    stats = model.moments_to_stats(_moments(r, x.astype(np.float32), rgb), dim)
+    posterior = model.m_step(prior, stats)
+    counts = np.asarray(stats.count, np.float64)
+    pairs = np.stack(np.triu_indices(k, 1), 1)
+    cost = merge.merge_costs(posterior, counts, pairs, CONFIG.colour_noise)
+    want = [_plain_cost(posterior, counts, a, b, CONFIG.colour_noise) for a, b in pairs]
+    np.testing.assert_allclose(cost, want, rtol=1e-9, atol=1e-6)
+    few = pairs[[5, 77, 300]]
+    assert merge.merge_costs(posterior, counts, few, CONFIG.colour_noise).tobytes() == \
+        cost[[5, 77, 300]].tobytes()
