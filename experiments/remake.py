@@ -16,10 +16,15 @@ How a command's files are found again:
   line of its standard output that reads as a JSON object (``fit-scene --json``);
 - a command with ``--out FOLDER`` (a sweep, ``tune``, ``front``, ``bench``; not
   ``write-scene``, whose ``--out`` is the dataset it writes in the checkout) is given a
-  staging folder in its place, the one of the results folder its stamped files lie in;
-  every file it writes there whose counterpart exists under that results folder is
-  copied (its plots and CSVs with its tables), a file that does not exist there is
-  listed, not copied.
+  staging folder of its own in its place (two commands whose files share a results
+  folder do not overwrite each other's); every file it writes there whose counterpart
+  exists under the results folder its stamped files lie in is copied (its plots and CSVs
+  with its tables). A stamped file renamed when it was committed (``tune``'s
+  ``walk.md`` kept as ``walk50k/merge.md``, or as ``k20000_walk.md`` beside another
+  run's) is found again: the one file of its kind the command wrote in that folder, or
+  the one whose name the committed name ends with after a ``_``; its siblings of the
+  same stem (the CSV, the plot) follow it. A file that has no counterpart is listed, not
+  copied.
 
 Refused, saying why: a table made by ``report`` (it re-reads stored cells: make the sweep
 again), a command that is not ``python -m ...``, a file with no record of its command.
@@ -206,13 +211,15 @@ def last_json_line(text: str) -> str | None:
     return None
 
 
-def run_job(job: Job, tree: Path, stage: Path, results: Path, copy: bool, log) -> bool:
-    """Run one job in ``tree``; its files go under ``stage`` mirroring ``results`` (and
-    into place with ``copy``). Returns whether the command succeeded."""
+def run_job(job: Job, tree: Path, stage: Path, results: Path, copy: bool, log,
+            number: int = 0) -> bool:
+    """Run one job in ``tree``; its files go under ``stage``: a printed record's mirroring
+    ``results`` under ``out/``, an ``--out`` command's in ``jobs/NNN`` (``number``), and
+    into place with ``copy``. Returns whether the command succeeded."""
     command = job.command
     out = None
     if job.out is not None:
-        out = stage / "out" / job.results_dir.relative_to(results)
+        out = stage / "jobs" / f"{number:03d}"
         shutil.rmtree(out, ignore_errors=True)
         command = with_option(command, "--out", str(out))
     words = shlex.split(command)
@@ -233,13 +240,7 @@ def run_job(job: Job, tree: Path, stage: Path, results: Path, copy: bool, log) -
                 target.write_text(line + "\n")
                 made.append((target, r.path))
     elif proc.returncode == 0:
-        here = results / out.relative_to(stage / "out")
-        for f in sorted(p for p in out.rglob("*") if p.is_file()):
-            counterpart = here / f.relative_to(out)
-            if counterpart.exists():
-                made.append((f, counterpart))
-            else:
-                print(f"  not in results, not copied: {f}", file=sys.stderr)
+        made = counterparts(job, out, job.results_dir)
     ok = proc.returncode == 0 and bool(made)
     if ok and copy:
         for source, target in made:
@@ -248,6 +249,35 @@ def run_job(job: Job, tree: Path, stage: Path, results: Path, copy: bool, log) -
               f"rc {proc.returncode}\t{len(made)} files\t{job.command}\n")
     log.flush()
     return ok
+
+
+def counterparts(job: Job, out: Path, here: Path) -> list[tuple[Path, Path]]:
+    """``(staged, committed)`` for each file an ``--out`` command wrote under ``out``
+    whose counterpart exists under ``here`` (the results folder its stamped files lie
+    in), renamed files found again as the module docstring says; the others listed on
+    stderr."""
+    files = sorted(p for p in out.rglob("*") if p.is_file())
+    wrote = {f.relative_to(out) for f in files}
+    stems = {}  # a staged file's path without its suffix -> the committed one's
+    for r in job.records:
+        want = r.path.relative_to(here)
+        if want in wrote:
+            continue
+        kind = [w for w in wrote if w.parent == want.parent and w.suffix == want.suffix]
+        ends = [w for w in kind if want.name.endswith("_" + w.name)]
+        found = ends if len(ends) == 1 else kind
+        if len(found) == 1:
+            stems[found[0].with_suffix("")] = want.with_suffix("")
+    made = []
+    for f in files:
+        rel = f.relative_to(out)
+        stem = stems.get(rel.with_suffix(""))  # renamed: never onto another run's name
+        target = here / (rel if stem is None else stem.with_suffix(rel.suffix))
+        if target.exists():
+            made.append((f, target))
+        else:
+            print(f"  not in results, not copied: {f}", file=sys.stderr)
+    return made
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -298,9 +328,9 @@ def main(argv: list[str] | None = None) -> int:
     failed = []
     try:
         with open(stage / "remake.log", "a") as log:
-            for job in tqdm([j for j in jobs if refusal(j) is None], desc="commands",
-                            unit="cmd"):
-                if not run_job(job, tree, stage, results, args.copy, log):
+            for number, job in enumerate(tqdm([j for j in jobs if refusal(j) is None],
+                                              desc="commands", unit="cmd")):
+                if not run_job(job, tree, stage, results, args.copy, log, number):
                     failed.append(job.command)
     finally:
         remove_checkout(tree)
@@ -309,7 +339,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"refused ({refusal(job)}): {job.command}", file=sys.stderr)
     for command in failed:
         print(f"failed (its log under {stage / 'logs'}): {command}", file=sys.stderr)
-    print(f"made under {stage / 'out'}; log {stage / 'remake.log'}", file=sys.stderr)
+    print(f"made under {stage / 'out'} and {stage / 'jobs'}; log {stage / 'remake.log'}",
+          file=sys.stderr)
     return 1 if failed else 0
 
 

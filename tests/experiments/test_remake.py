@@ -121,3 +121,33 @@ def test_an_unknown_commit_is_refused(tmp_path, bad):
                          capture_output=True, text=True, timeout=60)
     assert out.returncode != 0 and "no-such-commit" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_renamed_tables_are_found_again_among_a_commands_files(tmp_path, capsys):
+    """A tune's tables committed under other names (``walk.md`` kept as ``merge.md``,
+    or with a prefix as ``k20000_object.md``) are matched to what the command wrote
+    again, their CSVs with them; files with no counterpart are listed, not copied."""
+    here, out = tmp_path / "results", tmp_path / "jobs" / "000"
+    for name in ("merge.md", "merge.csv", "k20000_object.md", "k20000_object.csv",
+                 "k20000_mean.md", "k20000_mean.csv", "mean.md", "mean.csv"):
+        (here / name).parent.mkdir(parents=True, exist_ok=True)
+        (here / name).write_text("old\n")
+    for name in ("walk.md", "walk.csv", "walk.png"):
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text("new\n")
+    job = remake.Job("python -m x tune --out /tmp/a", [remake.Record(here / "merge.md", "", "")])
+    made = {s.name: t.name for s, t in remake.counterparts(job, out, here)}
+    assert made == {"walk.md": "merge.md", "walk.csv": "merge.csv"}
+    assert "walk.png" in capsys.readouterr().err
+    other = tmp_path / "jobs" / "001"
+    other.mkdir()
+    for name in ("object.md", "object.csv", "room.md", "mean.md", "mean.csv"):
+        (other / name).write_text("new\n")
+    job = remake.Job("python -m x tune --out /tmp/b", [
+        remake.Record(here / "k20000_object.md", "", ""),
+        remake.Record(here / "k20000_mean.md", "", "")])
+    made = {s.name: t.name for s, t in remake.counterparts(job, other, here)}
+    # mean.md and mean.csv of another run stay as they are
+    assert made == {"object.md": "k20000_object.md", "object.csv": "k20000_object.csv",
+                    "mean.md": "k20000_mean.md", "mean.csv": "k20000_mean.csv"}
+    assert "room.md" in capsys.readouterr().err
