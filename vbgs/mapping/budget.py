@@ -22,31 +22,26 @@ whose grid of kept pixels fits the budget (:func:`stride`). Why this rule:
 Unbiased sums do not make a better posterior when a component gets only a point or two
 of a frame: a weighted point counts ``s^2`` points of scatter that was never seen, and
 the component's covariance collapses onto it. Unweighted (:data:`WEIGHTED`, the
-default), the thinned frame counts as fewer points and the prior keeps its say. Chosen
-on validation views (``results/tuning/budget/room640.md``: the room at 640 x 480, 100k
-components, 18 frames, 2 validation views): every point 23.07 dB; 20k points a frame
-(stride 4) 22.31 dB unweighted, 19.49 dB weighted; 80k (stride 2) 22.99 dB unweighted,
-22.96 dB weighted (depth error 0.035 against 0.056). The budget bounds the cost; it
-cannot go far below a few points per
-component and frame. Measured again on today's stream (the same room and validation
-views, ``results/tuning/budget/room640_points_5k_40k.md`` and ``_60k_120k.md``, each
-naming its command and code): every point 23.07 dB; stride 2 (N = 80000) 22.99;
-stride 3 (40000 and 60000) 22.66; stride 4 (20000) 22.31; 10000 20.92; 5000 19.76.
-Stride 2 is the only thinning within 0.2 dB of every point; with ``budget.saturation``
-64 or 128 on top, 22.96 and 22.99 (``room640_points80k_saturation.md``; alone, at every
-point, ``results/tuning/saturation/``: 16, 32, 64, 128, 256 give 22.34, 22.55, 22.68,
-23.02, 23.03). None was cheaper than stride 2 alone (CPU seconds a frame on 2 cores, at
-an earlier code: stride 2 0.47, with saturation 64 0.50, saturation 128 alone 1.22; the
-hashed counts and the batch-sized compilations cost more than the 6 and 17% of the
-points they skip).
+default), the thinned frame counts as fewer points and the prior keeps its say. The
+rule: the weighting that holds at every budget a user may ask for, on validation views
+(``results/tuning/budget/room640.md``: the room at 640 x 480, 100k components, 18
+frames, 2 validation views, the command and code in its first line). Weighted points
+collapse at stride 4 (three dB under unweighted at 20k points) and lead at stride 2 by
+about a tenth of a dB with a third more depth error: unweighted is the weighting that
+holds. The default budget (:data:`POINTS`) by the rule of its comment, from
+``room640_points_5k_40k.md`` and ``room640_points_60k_120k.md`` beside it;
+``budget.saturation`` on top of it, and alone at every point, in
+``room640_points80k_saturation.md`` and ``results/tuning/saturation/``. None was cheaper
+than stride 2 alone (CPU seconds a frame on 2 cores, at an earlier code: stride 2 0.47,
+with saturation 64 0.50, saturation 128 alone 1.22; the hashed counts and the
+batch-sized compilations cost more than the 6 and 17% of the points they skip).
 
 Scoring each pixel against the map to skip those already explained would need a
 projection of the components or the E-step itself, the expensive work this is meant to
 avoid; :mod:`vbgs.mapping.saturation` skips instead the points of growth cells that have
 already taken ``budget.saturation`` points (a count per cell, no component read). With
-``points = 0``
-(the default) every valid pixel is learned, bit for bit as before; frames whose pixel
-count is within the budget are not thinned either.
+``points = 0`` every valid pixel is learned, bit for bit as before; frames whose pixel
+count is within the budget (fit-scene's 128 px) are not thinned either.
 """
 
 from __future__ import annotations
@@ -62,13 +57,12 @@ from vbgs.render.camera import Camera, valid_depth
 WEIGHTED = False
 # The default budget: a frame of more than this many pixels (a 640 x 480 sensor's) is
 # learned on a lattice of stride 2; a frame of up to 320 x 240 pixels, fit-scene's 128 px
-# among them, is learned whole. Chosen on validation views (the module docstring:
-# stride 2 is the only thinning within 0.2 dB of every point, 23.04 against 23.11 dB; at
-# today's code, the room at 640 x 480 under the Kinect, 20 frames, 2 validation views,
-# one-off val_probe runs: 22.78 against 22.54 dB by projection, 22.79 against 22.60 with
-# the KD-tree), and it halves a frame's time there (docs/performance.md). A fixed count,
-# not a stride: what a frame's points buy is a few points per component, and 100k
-# components at 640 x 480 are what 80k points serve; ``points = 0`` learns every pixel.
+# among them, is learned whole. The rule: the coarsest stride within 0.2 dB of every
+# point on validation views (results/tuning/budget/room640_points_5k_40k.md and
+# _60k_120k.md: stride 2 is, stride 3 is not), and it halves a frame's time there
+# (docs/performance.md). A fixed count, not a stride: what a frame's points buy is a few
+# points per component, and 100k components at 640 x 480 are what 80k points serve;
+# ``points = 0`` learns every pixel.
 POINTS = 80000
 
 

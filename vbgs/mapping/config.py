@@ -33,9 +33,10 @@ ESTEP = ("dense", "sparse")
 SEARCH = ("auto", "kdtree", "projective")
 # search "auto": the projective search for frames of more than this many pixels, the
 # KD-tree up to it. A frame's points run the KD-tree's host queries point by point, where
-# projection bins the map once a frame on the device; the two pick the same validation
-# PSNR at 640 x 480 (results/tuning/search/, made by the command in it), where the
-# projective search takes a third less time a frame. Up to 320 x 240, fit-scene's 128 px
+# projection bins the map once a frame on the device. The rule: the projective search
+# where it scores within 0.1 dB of the KD-tree on validation views and takes less time:
+# at 640 x 480 (results/tuning/search/, made by the commands in them) it does, and takes
+# a third less time a frame. Up to 320 x 240, fit-scene's 128 px
 # among them, frames keep the KD-tree: its candidates are every point's nearest means
 # wherever they lie, where a tile lists a fixed number (far ground loses points).
 PROJECTIVE_PIXELS = 320 * 240

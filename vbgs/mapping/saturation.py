@@ -35,17 +35,17 @@ it); a frame whose every point is skipped still learns one (the step needs a bat
 The compiled step's padding then follows the batch (``Stepper(follow=True)``: one
 compilation per octave of batch size, not one padded size that only grows).
 
-``N`` is off by default (``N = 0`` keeps every point, bit for bit as before). On
-validation views (``results/tuning/saturation/room640_16_64.*`` and ``room640_128_256.*``:
-the room at 640 x 480, 100k components, 18 frames, 2 validation views, every point
-otherwise learned; each table names its command and code) every point gives 23.07 dB
-(``results/tuning/budget/room640_points_5k_40k.md``); N = 16: 22.34, 32: 22.55, 64:
-22.68, 128: 23.02, 256: 23.03. The smallest within 0.2 dB is 128, which skipped 17% of
-the points for about no CPU saved (1.22 against 1.29 s a frame, at an earlier code); a
-point budget of 80000 (stride 2, :mod:`vbgs.mapping.budget`) holds 22.99 dB, at 0.47 s
-then. 128 px frames give a cell few points a frame: there N = 32 skipped 32% of the
-object's points for no time saved (each new octave of batch size compiles) and cost
-0.37 dB (an earlier code's one-off run). ``--budget-saturation N`` asks for it on a
+``N`` is off by default (``N = 0`` keeps every point, bit for bit as before). The rule:
+a limit is worth its place only where it is within 0.2 dB of every point on validation
+views and saves time. On the room at 640 x 480 (``results/tuning/saturation/room640_16_64.*``
+and ``room640_128_256.*``: 100k components, 18 frames, 2 validation views, every point
+otherwise learned; each table names its command and code) the limits within 0.2 dB of
+every point (``results/tuning/budget/room640_points_5k_40k.md``) are 128 and 256, and
+128 skipped 17% of the points for about no CPU saved (1.22 against 1.29 s a frame, at an
+earlier code); the point budget of 80000 (stride 2, :mod:`vbgs.mapping.budget`) is within
+it at 0.47 s then. 128 px frames give a cell few points a frame: there N = 32 skipped
+32% of the object's points for no time saved (each new octave of batch size compiles)
+and cost 0.37 dB (an earlier code's one-off run). ``--budget-saturation N`` asks for it on a
 sensor's frames.
 """
 
