@@ -62,6 +62,10 @@ def add(sub):
     p.add_argument("--hold-paid", action="store_true",
                    help="VBGS: where merged components stood stays held, so a merge pays for "
                         "its ground once (the map's growth.hold_paid)")
+    p.add_argument("--merge-ahead", type=float, default=None, metavar="SHARE",
+                   help="VBGS: once the components are all in use, a round of merges frees "
+                        "at least this share of them, so that rounds come less often "
+                        "(default: the map's growth.merge_ahead)")
     p.add_argument("--forget-after", type=int, default=None, metavar="N",
                    help="VBGS forgets a component its frames have seen through N times in a "
                         "row, none hitting it: what the world no longer holds (default: "
@@ -226,11 +230,13 @@ def run(args) -> dict:
 
 
 def _growth(args) -> dict:
-    """The task's ``growth`` setting where ``--hold-seeds`` or ``--hold-paid`` changes it
-    (else none: the map's defaults)."""
+    """The task's ``growth`` setting where ``--hold-seeds``, ``--hold-paid`` or
+    ``--merge-ahead`` changes it (else none: the map's defaults)."""
     from vbgs.mapping import GrowthConfig
 
     given = {name: True for name in ("hold_seeds", "hold_paid") if getattr(args, name)}
+    if args.merge_ahead is not None:
+        given["merge_ahead"] = args.merge_ahead
     return {"growth": GrowthConfig(**given)} if given else {}
 
 

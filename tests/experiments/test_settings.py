@@ -18,7 +18,8 @@ NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "rea
                    "budget_points", "budget_saturation",  # the nested budget.points, .saturation
                    # the nested evidence.* (None: their defaults)
                    "forget_after", "recolour_sigmas", "recolour_reference", "doubt_opacity",
-                   "hold_seeds", "hold_paid"}  # the nested growth.hold_* (off: their defaults)
+                   "hold_seeds", "hold_paid",  # the nested growth.hold_* (off: their defaults)
+                   "merge_ahead"}  # the nested growth.merge_ahead (None: its default)
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:
@@ -59,6 +60,7 @@ def test_hold_flags_default_to_the_growth_config():
     flags = _defaults("fit-scene")
     assert flags["hold_seeds"] == GrowthConfig().hold_seeds == SceneTask().growth.hold_seeds
     assert flags["hold_paid"] == GrowthConfig().hold_paid == SceneTask().growth.hold_paid
+    assert flags["merge_ahead"] is None  # the map's growth.merge_ahead
 
 
 def test_fit_image_reassign_auto_matches_the_task_default():
