@@ -56,8 +56,16 @@ FIRST_FRAME_SHARE = 0.1
 REFINE_SHARE = 0.05
 # Merging (vbgs.inference.merge) frees at least this share of K at a time, so that a
 # stream meeting new ground every frame merges every few frames, not every frame (each
-# round searches every component's neighbours: 0.1-0.2 s at K = 20k).
+# round scores every component's neighbours). The rule: a larger share only where it
+# scores at least as well on every validation table of results/tuning/merge_ahead/
+# (exact depth at 20k and 50k, the Kinect at 128 px and at 640 x 480, the room at
+# 640 x 480 with exact depth), made by the commands in them. 0.1 gains at 128 px and
+# spaces the rounds out (the room at fit-scene's defaults: 9 rounds in 60 frames against
+# 35, results/stream_rate/merge_ahead/), but loses under the Kinect at 640 x 480, where a
+# round frees 10k slots of a 20-frame stream: 0.02 stays.
 MERGE_AHEAD = 0.02
+
+
 def _switch(name: str, value) -> None:
     """Refuse a setting ``name`` (dotted) that is not a bool."""
     if not isinstance(value, bool):

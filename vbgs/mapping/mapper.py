@@ -583,11 +583,8 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
     """Free slots by merging (:mod:`vbgs.inference.merge`) when the frame shows more new
     ground than the empty slots can take (``growth.merge``); the state with the pairs
     merged (statistics, opacity evidence and colour sums alike) and the slots changed.
-    A round frees what the frame lacks, at least ``growth.merge_ahead`` of K. Freeing
-    more ahead does not space the rounds out: a merged pair leaves a cell without a
-    component, which the next frame that sees it grows again (the room at fit-scene's
-    defaults: 35 rounds in 60 frames freeing what is lacking, 33 freeing three times
-    it, 0.05 dB lower). The pairs are the merge's own choice, redone only where
+    A round frees what the frame lacks, at least ``growth.merge_ahead`` of K (its comment
+    says how it is chosen). The pairs are the merge's own choice, redone only where
     components changed since the last round (:mod:`vbgs.inference.kept_pairs`)."""
     mixture, rule, g = state.mixture, state.rule, config.growth
     none = np.zeros(0, np.int64)
