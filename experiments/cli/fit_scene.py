@@ -62,6 +62,11 @@ def add(sub):
     p.add_argument("--hold-paid", action="store_true",
                    help="VBGS: where merged components stood stays held, so a merge pays for "
                         "its ground once (the map's growth.hold_paid)")
+    p.add_argument("--through-background", action="store_true",
+                   help="VBGS under a measured sensor: pixels that show the background (no "
+                        "depth, joined to the border) count as seen through for components "
+                        "within the sensor's range, so what left the view against the "
+                        "background is forgotten (the map's evidence.through_background)")
     p.add_argument("--merge-ahead", type=float, default=None, metavar="SHARE",
                    help="VBGS: once the components are all in use, a round of merges frees "
                         "at least this share of them, so that rounds come less often "
@@ -242,13 +247,15 @@ def _growth(args) -> dict:
 
 def _evidence(args) -> dict:
     """The task's ``evidence`` setting where ``--forget-after``, ``--recolour-sigmas``,
-    ``--recolour-reference`` or ``--doubt-opacity`` changes it (else none: the map's
-    defaults)."""
+    ``--recolour-reference``, ``--doubt-opacity`` or ``--through-background`` changes it
+    (else none: the map's defaults)."""
     from vbgs.mapping import EvidenceConfig
 
     given = {name: value for name, value in (("forget_after", args.forget_after),
                                              ("recolour_sigmas", args.recolour_sigmas),
                                              ("recolour_reference", args.recolour_reference),
-                                             ("doubt_opacity", args.doubt_opacity))
+                                             ("doubt_opacity", args.doubt_opacity),
+                                             ("through_background",
+                                              args.through_background or None))
              if value is not None}
     return {"evidence": EvidenceConfig(**given)} if given else {}

@@ -19,7 +19,8 @@ NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "rea
                    # the nested evidence.* (None: their defaults)
                    "forget_after", "recolour_sigmas", "recolour_reference", "doubt_opacity",
                    "hold_seeds", "hold_paid",  # the nested growth.hold_* (off: their defaults)
-                   "merge_ahead"}  # the nested growth.merge_ahead (None: its default)
+                   "merge_ahead",  # the nested growth.merge_ahead (None: its default)
+                   "through_background"}  # the nested evidence.through_background (off)
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:
@@ -61,6 +62,8 @@ def test_hold_flags_default_to_the_growth_config():
     assert flags["hold_seeds"] == GrowthConfig().hold_seeds == SceneTask().growth.hold_seeds
     assert flags["hold_paid"] == GrowthConfig().hold_paid == SceneTask().growth.hold_paid
     assert flags["merge_ahead"] is None  # the map's growth.merge_ahead
+    from vbgs.mapping import EvidenceConfig
+    assert flags["through_background"] == EvidenceConfig().through_background
 
 
 def test_fit_image_reassign_auto_matches_the_task_default():

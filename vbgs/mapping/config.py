@@ -214,7 +214,14 @@ class EvidenceConfig:
         component the rays pass about as often as they hit it (thinner than a pixel) is
         never judged gone (:mod:`vbgs.mapping.change`; 0: any component; None, the
         default: :data:`vbgs.mapping.change.EXACT_DOUBT_OPACITY` with exact depth, 0
-        under a measured sensor, :meth:`Config.doubt_opacity`).
+        under a measured sensor, :meth:`Config.doubt_opacity`);
+    through_background: under a measured sensor with a range (the Kinect, the RealSense),
+        a frame's pixels that show the background (no depth, joined to the image's
+        border: :func:`vbgs.render.background.empty_pixels`) count as seen through for
+        the components within the sensor's range, as every pixel without depth does
+        with exact depth (a surface standing there would have returned a depth); its
+        holes never count (off, the default: no pixel without depth does;
+        :mod:`vbgs.mapping.change` says what it changes).
     """
 
     pass_sigmas: float = opacity.PASS_SIGMAS
@@ -225,6 +232,7 @@ class EvidenceConfig:
     recolour_reference: str = "history"
     shaped_points: float = SHAPED_POINTS
     doubt_opacity: float | None = None
+    through_background: bool = False
 
     def __post_init__(self):
         for name in ("pass_sigmas", "prior_hits", "prior_passes"):
@@ -247,6 +255,7 @@ class EvidenceConfig:
                               or not 0 <= o <= 1):
             raise ValueError(f"evidence.doubt_opacity must be an opacity in [0, 1] (0: any "
                              f"component may be doubted), got {o!r}")
+        _switch("evidence.through_background", self.through_background)
 
 
 @dataclass(frozen=True)

@@ -107,6 +107,7 @@ from vbgs.mapping.measurement import depth_sigmas, depth_variance, frame_points
 from vbgs.mapping.stages import stage
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
+from vbgs import sensors
 from vbgs.render.splats import Splats, drawn, from_posterior, mixture_geometry
 
 
@@ -285,7 +286,7 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
         seen = opacity.frame_evidence(  # a sensor's missing pixel is no free space
             *geometry, frame.camera, frame.depth, pass_sigmas=e.pass_sigmas,
             sensor_var=variance, empty=empty,
-            through_empty=None if empty is None else np.zeros_like(empty),
+            **_through(empty, sensor, e.through_background),
             rgb=frame.rgb if reads_colour else None,
             colour_on=e.recolour_reference == "posterior",
             blame=_blame(state, info, frame, background, config)
@@ -300,6 +301,22 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
                                     blur=config.render.splat_blur)
         state = state._replace(colour=colour)
     return state
+
+
+def _through(empty, sensor, background: bool) -> dict:
+    """What a frame's pixels without depth prove for the see-through
+    (:func:`vbgs.render.opacity.frame_evidence`'s ``through_empty`` and ``through_reach``):
+    with exact depth every one is free space; under a measured sensor none, or with
+    ``background`` (``evidence.through_background``) and a sensor with a range, the
+    pixels that show nothing (``empty``, the background) for components within its range
+    (a surface there would have returned a depth); its holes never, nor any pixel of a
+    sensor without a known range (a depth network)."""
+    if empty is None:
+        return {}
+    far = getattr(sensors.sensor(sensor.model), "far", None)
+    if not background or far is None:
+        return {"through_empty": np.zeros_like(empty)}
+    return {"through_empty": empty, "through_reach": float(far)}
 
 
 def _blame(state: MapState, info: MapInfo, frame: Frame, background, config: Config):

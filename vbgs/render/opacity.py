@@ -116,8 +116,9 @@ def added(evidence: Evidence, frame: FrameEvidence) -> Evidence:
 
 
 def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = PASS_SIGMAS,
-                   sensor_var=None, empty=None, through_empty=None, rgb=None,
-                   shaped=None, colour_on: bool = False, blame=None) -> FrameEvidence:
+                   sensor_var=None, empty=None, through_empty=None, through_reach=np.inf,
+                   rgb=None, shaped=None, colour_on: bool = False, blame=None
+                   ) -> FrameEvidence:
     """One frame's evidence for components with world ``means [k, 3]`` and
     ``covs [k, 3, 3]`` seen by ``camera`` with observed z-depth ``depth [h, w]``
     (0, NaN or inf where missing); a hit is within ``pass_sigmas`` sigma (camera z).
@@ -131,7 +132,10 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     every pixel without depth is empty (exact depth: nothing else is missing).
     ``through_empty [h, w]``: the pixels without depth the see-through test takes as
     free space (None: ``empty``; a sensor's missing pixels, out of its range, say
-    nothing about what stands there). ``rgb [h, w, 3]``: the frame's colours, of which
+    nothing about what stands there), and that only for a component whose hit band ends
+    nearer than ``through_reach`` (camera depth): a sensor's range, within which a
+    surface standing there would have returned a depth (inf: at any depth).
+    ``rgb [h, w, 3]``: the frame's colours, of which
     the mean over each component's hit samples is returned (None: no colour read);
     ``colour_on``: over those of its hit samples alone whose surface point lies within
     its own Gaussian, ``pass_sigmas`` Mahalanobis sigmas of it (:func:`_along_ray`; a
@@ -150,7 +154,7 @@ def frame_evidence(means, covs, camera: Camera, depth, *, pass_sigmas: float = P
     through_empty = empty if through_empty is None else through_empty
     return FrameEvidence(*_frame_counts(
         bool(colour_on), jnp.float32(pass_sigmas), jnp.asarray(sensor_var, jnp.float32),
-        jnp.asarray(empty), jnp.asarray(through_empty),
+        jnp.asarray(empty), jnp.asarray(through_empty), jnp.float32(through_reach),
         None if rgb is None else jnp.asarray(rgb, jnp.float32),
         None if shaped is None else jnp.asarray(shaped, bool),
         None if blame is None else tuple(jnp.asarray(b) for b in blame),
@@ -211,8 +215,8 @@ def _along_ray(means, covs, sensor_var, pose, fx, fy, cx, cy):
 
 
 @partial(jax.jit, static_argnums=0)
-def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb, shaped, blame,
-                  means, covs, fx, fy, cx, cy, pose, depth):
+def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, through_reach,
+                  rgb, shaped, blame, means, covs, fx, fy, cx, cy, pose, depth):
     """Hits and passes ``[k]`` of one frame (module docstring), whether it was seen
     through ``[k]`` (the five samples taken at least ``THROUGH_PIXELS`` apart all passed)
     and the mean colour ``[k, 3]`` of ``rgb`` at the samples that hit, with their number
@@ -236,8 +240,9 @@ def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb,
     near_side = proj.depth - pass_sigmas * sigma_z
     far_side = proj.depth + pass_sigmas * sigma_z
 
-    def sample(du, dv, empty, far=None):  # the centre and du, dv [k] px either side:
-        zero = jnp.zeros(k)               # hit, passed (beyond ``far(uv)`` when given)
+    def sample(du, dv, empty, far=None, reach=None):  # the centre and du, dv [k] px either
+        zero = jnp.zeros(k)  # side: hit, passed (beyond ``far(uv)`` when given; an empty
+        #                      pixel only for a band that ends nearer than ``reach``)
         offsets = jnp.stack([jnp.stack([zero, zero], -1), jnp.stack([du, zero], -1),
                              jnp.stack([-du, zero], -1), jnp.stack([zero, dv], -1),
                              jnp.stack([zero, -dv], -1)])  # [N_SAMPLES, k, 2]
@@ -251,6 +256,8 @@ def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb,
         shows_nothing = empty[row, col]
         hit = inside & has_depth & (observed >= near_side) & (observed <= far_side)
         beyond = far_side if far is None else far(uv)
+        if reach is not None:  # inf: every component (the comparison left out)
+            shows_nothing = shows_nothing & (jnp.isinf(reach) | (far_side < reach))[None]
         passed = inside & ((~has_depth & shows_nothing) | (has_depth & (observed > beyond)))
         return hit, passed, row, col, uv, observed
 
@@ -260,7 +267,7 @@ def _frame_counts(colour_on, pass_sigmas, sensor_var, empty, through_empty, rgb,
     far = None if shaped is None else _far_along_ray(  # None: the band alone (no inverse)
         means, covs, sensor_var, pose, fx, fy, cx, cy, pass_sigmas, shaped, far_side)
     _, through, *_ = sample(jnp.maximum(sigma_u, wide), jnp.maximum(sigma_v, wide),
-                              through_empty, far)
+                              through_empty, far, through_reach)
     n_hit = hit.sum(0)
     if rgb is not None:  # the colours the hits show (on the component's own Gaussian)
         on = hit

@@ -151,3 +151,23 @@ def test_colour_on_reads_only_the_rays_whose_surface_lies_on_the_component():
     on = opacity.frame_evidence(means, covs, cam, depth, rgb=rgb, colour_on=True)
     assert int(np.asarray(every.n_shown)[0]) == 5 and int(np.asarray(on.n_shown)[0]) == 3
     np.testing.assert_array_equal(np.asarray(every.hits), np.asarray(on.hits))
+
+
+def test_the_background_is_seen_through_only_within_the_sensors_range():
+    """Under a sensor, a pixel that shows the background (no depth, the sky) proves free
+    space for the see-through only where a surface would have returned a depth: the
+    component 2 units in front of the sky is seen through with a range of 4.5, not with
+    a range of 1.5 (beyond it the sensor returns nothing either), nor when no pixel
+    without depth counts (holes); with exact depth (no empty pixels given) it is."""
+    cam, depth, means, covs = toy()
+    empty = np.zeros_like(depth, bool)
+    empty[:, 24:] = True  # the sky
+
+    def through(**kw):
+        return np.asarray(opacity.frame_evidence(means, covs, cam, depth, **kw).seen_through)
+
+    assert through()[3]  # exact depth: every pixel without depth is free space
+    assert through(empty=empty, through_empty=empty, through_reach=4.5)[3]
+    assert not through(empty=empty, through_empty=empty, through_reach=1.5)[3]
+    assert not through(empty=empty, through_empty=np.zeros_like(empty))[3]
+    assert not through(empty=empty, through_empty=empty, through_reach=4.5)[0]  # on the wall
