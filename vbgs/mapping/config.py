@@ -36,9 +36,10 @@ SEARCH = ("auto", "kdtree", "projective")
 # projection bins the map once a frame on the device. The rule: the projective search
 # where it scores within 0.1 dB of the KD-tree on validation views and takes less time:
 # at 640 x 480 (results/tuning/search/, made by the commands in them) it does, and takes
-# a third less time a frame. Up to 320 x 240, fit-scene's 128 px
-# among them, frames keep the KD-tree: its candidates are every point's nearest means
-# wherever they lie, where a tile lists a fixed number (far ground loses points).
+# a third less time a frame. At fit-scene's 128 px it does not (0.31 dB under the KD-tree
+# on the mean of object, room and walk, results/tuning/search/size128/): up to 320 x 240
+# frames keep the KD-tree, whose candidates are every point's nearest means wherever they
+# lie, where a tile lists a fixed number (far ground loses points).
 PROJECTIVE_PIXELS = 320 * 240
 OPACITY_RULES = ("evidence", "constant")
 COLOUR_RULES = ("posterior", "fit")
@@ -232,6 +233,9 @@ class EvidenceConfig:
     recolour_reference: str = "history"
     shaped_points: float = SHAPED_POINTS
     doubt_opacity: float | None = None
+    # off for now. The rule is the validation views' (results/tuning/through_background/,
+    # the changing and static object and room under the Kinect), which it wins on each:
+    # it moves every record under a measured sensor, re-made when the default moves.
     through_background: bool = False
 
     def __post_init__(self):
