@@ -5,7 +5,9 @@ Every results file names the command that made it and the code it ran at
 table's first line). This reads those records under the paths given, groups the files by
 command (one run serves every file it made) and says how far each lies behind the code:
 how many commits changed the code paths (``vbgs``, ``depth``, ``experiments``,
-``pyproject.toml``) since the commit it names. With ``--run`` it makes them again, one
+``pyproject.toml``) since the commit it names, and how many of them changed the code
+itself, not only its comments and docstrings (a Python file's syntax tree without its
+docstrings; any change to another file counts). With ``--run`` it makes them again, one
 command after another, from a clean detached checkout of one commit (``--at``, HEAD by
 default) under a staging folder, never from the working tree; with ``--copy`` each file
 is copied into place as soon as its command succeeds.
@@ -38,6 +40,7 @@ before and after, seconds, exit status) goes to ``STAGE/remake.log``: the result
 from __future__ import annotations
 
 import argparse
+import ast
 import functools
 import json
 import os
@@ -163,15 +166,69 @@ def behind(version: str, commit: str = "HEAD") -> int | None:
         return None
 
 
+def behind_in_code(version: str, commit: str = "HEAD") -> int | None:
+    """Of :func:`behind`'s commits, those that changed the code itself (:func:`changes_code`;
+    None: the version is not a commit of this repository)."""
+    base = version.removesuffix("+dirty")
+    try:
+        commits = git("rev-list", f"{base}..{commit}", "--", *CODE_PATHS).split()
+    except subprocess.SubprocessError:
+        return None
+    return sum(changes_code(c) for c in commits)
+
+
+@functools.cache  # a commit is read once, however many versions lie before it
+def changes_code(commit: str) -> bool:
+    """Whether ``commit`` changed the code paths' code, not only comments and docstrings:
+    each Python file it changed compared by :func:`same_code` with its first parent's
+    (added and removed files, and files of other kinds, count as changes)."""
+    names = git("diff", "--name-only", "--no-renames", f"{commit}^", commit, "--",
+                *CODE_PATHS).split()
+    for name in names:
+        if not name.endswith(".py"):
+            return True
+        try:
+            old, new = (git("show", f"{c}:{name}") for c in (f"{commit}^", commit))
+        except subprocess.CalledProcessError:  # added or removed
+            return True
+        if not same_code(old, new):
+            return True
+    return False
+
+
+def same_code(old: str, new: str) -> bool:
+    """Whether two Python sources differ at most in comments, docstrings and layout: their
+    syntax trees, docstrings left out, are equal (a source that does not parse is
+    compared as text)."""
+    try:
+        return _bare(ast.parse(old)) == _bare(ast.parse(new))
+    except SyntaxError:
+        return old == new
+
+
+def _bare(tree: ast.AST) -> str:
+    """``tree`` dumped without the docstrings of its module, classes and functions."""
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
+                and body and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree)
+
+
 def listing(jobs: list[Job], commit: str) -> list[dict]:
     """One row per job: its command, files, the code versions they name, how far behind."""
     rows = []
     for job in jobs:
         versions = sorted({r.version for r in job.records})
         lags = [behind(v, commit) for v in versions]
+        code = [behind_in_code(v, commit) for v in versions]
         rows.append({"command": job.command, "files": [str(r.path) for r in job.records],
                      "versions": versions,
                      "behind": None if None in lags else max(lags, default=0),
+                     "in_code": None if None in code else max(code, default=0),
                      "refused": refusal(job)})
     return rows
 
@@ -314,10 +371,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.run:
         for row in rows:
             lag = "?" if row["behind"] is None else row["behind"]
+            code = "?" if row["in_code"] is None else row["in_code"]
             why = f"  REFUSED: {row['refused']}" if row["refused"] else ""
-            print(f"{lag:>4} behind  {len(row['files']):3d} files  {row['command']}{why}")
+            print(f"{lag:>4} behind {code:>4} in code  {len(row['files']):3d} files  "
+                  f"{row['command']}{why}")
         print(f"{len(rows)} commands, {sum(len(r['files']) for r in rows)} files, "
-              f"{sum(1 for r in rows if r['behind'])} behind {commit}", file=sys.stderr)
+              f"{sum(1 for r in rows if r['behind'])} behind {commit}, "
+              f"{sum(1 for r in rows if r['in_code'])} behind in code", file=sys.stderr)
         return 0
     from tqdm import tqdm
 

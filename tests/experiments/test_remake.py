@@ -151,3 +151,23 @@ def test_renamed_tables_are_found_again_among_a_commands_files(tmp_path, capsys)
     assert made == {"object.md": "k20000_object.md", "object.csv": "k20000_object.csv",
                     "mean.md": "k20000_mean.md", "mean.csv": "k20000_mean.csv"}
     assert "room.md" in capsys.readouterr().err
+
+
+def test_comments_and_docstrings_are_not_code():
+    """What counts as a change of the code: not a comment, a docstring or the layout;
+    a changed constant, call or name does."""
+    old = 'def f(x):\n    """Twice x."""\n    return 2 * x  # doubled\nK = 3\n'
+    assert remake.same_code(old, 'def f(x):\n    """Twice x, said again."""\n'
+                                 '    return 2 * x\n\n\nK = 3  # the count\n')
+    assert remake.same_code(old, '"""A module."""\ndef f(x):\n    return 2*x\nK = 3\n')
+    assert not remake.same_code(old, old.replace("K = 3", "K = 4"))
+    assert not remake.same_code(old, old.replace("2 * x", "x + x"))
+    assert not remake.same_code(old, "def f(x:\n")  # does not parse: compared as text
+
+
+def test_how_far_behind_in_code_counts_only_code_changes():
+    assert remake.behind_in_code(head()) == 0
+    assert remake.behind_in_code("unknown") is None
+    if not SHALLOW:  # a shallow clone has no history to count
+        start = remake.git("rev-list", "--skip=12", "-n", "1", "HEAD", "--", *remake.CODE_PATHS)
+        assert 0 <= remake.behind_in_code(start) <= remake.behind(start) == 12
