@@ -89,6 +89,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from vbgs import sensors
 from vbgs.data.scene import Frame
 from vbgs.inference import capacity, cells, expfam, grow, kept_pairs, merge, model
 from vbgs.inference.pixel_patches import PixelGrid
@@ -107,7 +108,6 @@ from vbgs.mapping.measurement import depth_sigmas, depth_variance, frame_points
 from vbgs.mapping.stages import stage
 from vbgs.render import colour_fit, opacity
 from vbgs.render.background import empty_pixels
-from vbgs import sensors
 from vbgs.render.splats import Splats, drawn, from_posterior, mixture_geometry
 
 
@@ -283,7 +283,7 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
             if sensor.noisy else None
         e = config.evidence
         reads_colour = state.growing and e.forget_after > 0 and e.recolour_sigmas > 0
-        seen = opacity.frame_evidence(  # a sensor's missing pixel is no free space
+        seen = opacity.frame_evidence(  # a sensor's hole is no free space (_through)
             *geometry, frame.camera, frame.depth, pass_sigmas=e.pass_sigmas,
             sensor_var=variance, empty=empty,
             **_through(empty, sensor, e.through_background),
