@@ -301,10 +301,10 @@ def test_a_setting_in_code_is_not_held_to_the_named_file(values):
 
 
 def test_a_percentage_is_held_by_its_fraction(values):
-    # results/splat_scale/default_walk_50000.json: "uncovered": 0.02237...
-    assert not unheld("2.2% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
-    assert unheld("2.2 uncovered (`results/splat_scale/default_walk_50000.json`)", values)
-    assert unheld("2.3% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
+    # results/splat_scale/default_walk_50000.json: "uncovered": 0.02325...
+    assert not unheld("2.3% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
+    assert unheld("2.3 uncovered (`results/splat_scale/default_walk_50000.json`)", values)
+    assert unheld("2.5% uncovered (`results/splat_scale/default_walk_50000.json`)", values)
 
 
 # A page's own ``results/`` that is not ours: Replica's layout (docs/datasets.md)
