@@ -156,25 +156,28 @@ def refusal(job: Job) -> str | None:
 
 
 @functools.cache  # one git call per version, however many files name it
-def behind(version: str, commit: str = "HEAD") -> int | None:
-    """Commits that changed the code paths between ``version`` and ``commit`` (None: the
-    version is not a commit of this repository)."""
+def _commits_behind(version: str, commit: str) -> tuple[str, ...] | None:
+    """The commits that changed the code paths between ``version`` and ``commit`` (None:
+    the version is not a commit of this repository)."""
     base = version.removesuffix("+dirty")
     try:
-        return int(git("rev-list", "--count", f"{base}..{commit}", "--", *CODE_PATHS))
-    except (subprocess.SubprocessError, ValueError):
+        return tuple(git("rev-list", f"{base}..{commit}", "--", *CODE_PATHS).split())
+    except subprocess.SubprocessError:
         return None
+
+
+def behind(version: str, commit: str = "HEAD") -> int | None:
+    """How many commits changed the code paths between ``version`` and ``commit`` (None:
+    the version is not a commit of this repository)."""
+    commits = _commits_behind(version, commit)
+    return None if commits is None else len(commits)
 
 
 def behind_in_code(version: str, commit: str = "HEAD") -> int | None:
     """Of :func:`behind`'s commits, those that changed the code itself (:func:`changes_code`;
     None: the version is not a commit of this repository)."""
-    base = version.removesuffix("+dirty")
-    try:
-        commits = git("rev-list", f"{base}..{commit}", "--", *CODE_PATHS).split()
-    except subprocess.SubprocessError:
-        return None
-    return sum(changes_code(c) for c in commits)
+    commits = _commits_behind(version, commit)
+    return None if commits is None else sum(changes_code(c) for c in commits)
 
 
 @functools.cache  # a commit is read once, however many versions lie before it

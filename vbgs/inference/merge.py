@@ -92,9 +92,8 @@ def _moments(space: expfam.NIW, rows: np.ndarray | None = None):
     (None: all), in float64 on the host and entry-major: each entry of every row in one
     contiguous array (:func:`vbgs.inference.expfam.niw_expected_covariance` on the
     rows)."""
-    take = (lambda field: np.asarray(field)) if rows is None else \
-        (lambda field: np.asarray(field)[rows])
-    q = expfam.NIW(*(take(field).astype(np.float64) for field in space))
+    rows = slice(None) if rows is None else rows
+    q = expfam.NIW(*(np.asarray(field)[rows].astype(np.float64) for field in space))
     return (np.ascontiguousarray(q.mean.T),
             np.ascontiguousarray(expfam.niw_expected_covariance(q).transpose(1, 2, 0)))
 
