@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from experiments.cli.options import (
@@ -62,11 +63,13 @@ def add(sub):
     p.add_argument("--hold-paid", action="store_true",
                    help="VBGS: where merged components stood stays held, so a merge pays for "
                         "its ground once (the map's growth.hold_paid)")
-    p.add_argument("--through-background", action="store_true",
+    p.add_argument("--through-background", action=argparse.BooleanOptionalAction,
+                   default=None,
                    help="VBGS under a measured sensor: pixels that show the background (no "
                         "depth, joined to the border) count as seen through for components "
                         "within the sensor's range, so what left the view against the "
-                        "background is forgotten (the map's evidence.through_background)")
+                        "background is forgotten (the map's evidence.through_background; "
+                        "on by default, --no-through-background turns it off)")
     p.add_argument("--merge-ahead", type=float, default=None, metavar="SHARE",
                    help="VBGS: once the components are all in use, a round of merges frees "
                         "at least this share of them, so that rounds come less often "
@@ -256,6 +259,6 @@ def _evidence(args) -> dict:
                                              ("recolour_reference", args.recolour_reference),
                                              ("doubt_opacity", args.doubt_opacity),
                                              ("through_background",
-                                              args.through_background or None))
+                                              args.through_background))
              if value is not None}
     return {"evidence": EvidenceConfig(**given)} if given else {}

@@ -20,7 +20,7 @@ NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "rea
                    "forget_after", "recolour_sigmas", "recolour_reference", "doubt_opacity",
                    "hold_seeds", "hold_paid",  # the nested growth.hold_* (off: their defaults)
                    "merge_ahead",  # the nested growth.merge_ahead (None: its default)
-                   "through_background"}  # the nested evidence.through_background (off)
+                   "through_background"}  # the nested evidence.through_background (None: its default)
 
 
 def _defaults(command: str, argv: list[str] = ()) -> dict:
@@ -63,7 +63,8 @@ def test_hold_flags_default_to_the_growth_config():
     assert flags["hold_paid"] == GrowthConfig().hold_paid == SceneTask().growth.hold_paid
     assert flags["merge_ahead"] is None  # the map's growth.merge_ahead
     from vbgs.mapping import EvidenceConfig
-    assert flags["through_background"] == EvidenceConfig().through_background
+    assert flags["through_background"] is None  # the map's evidence.through_background
+    assert EvidenceConfig().through_background is SceneTask().evidence.through_background
 
 
 def test_fit_image_reassign_auto_matches_the_task_default():
