@@ -38,7 +38,7 @@ smoothing 24.60 dB; a radius of 2 with the noise left at the reading's 24.98, at
 of it 25.02, at 0.3 of it 25.24, at 0.2 of it 25.38; radius 3 (the reading's noise)
 24.70; radius 1 at 0.33 of it 25.22 (one-off runs patching the learner; the radius
 itself is chosen in ``results/tuning/denoise/``: radius 1, 25.22). Test views, fit-scene's
-defaults (``results/sensors/``): object 24.32 dB (exact 25.92), room 21.85 (22.59), walk
+defaults (``results/sensors/``): object 24.44 dB (exact 26.00), room 21.84 (22.82), walk
 13.94 (its far ground lies beyond the Kinect's range); without the averaging, at an
 earlier code (one-off runs), 23.76, 21.83 and 14.01. The
 RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``), validation views at today's code
