@@ -68,7 +68,7 @@ OPACITY_RULE = Choice(("evidence", "constant"), "evidence",
                       "(evidence) or the constant --opacity")
 # The fit scores more on validation views (about a tenth of a dB over the object and the
 # room, results/tuning/colour/mean.md; more on the walk, colour_walk/, and on the object
-# under the Kinect, colour_kinect/) at 1.4 to 3.7 times the seconds a frame
+# under the Kinect, colour_kinect/) at 2.4 to 3.7 times the seconds a frame
 # (results/tuning/colour_cost/, single runs on a loaded machine). Off by default: a frame's time is
 # what a stream at a sensor's rate cannot spare, and turning it on would re-make every
 # VBGS result.
