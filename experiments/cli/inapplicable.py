@@ -93,7 +93,7 @@ RULES = {
                              ("doubt_opacity", "--doubt-opacity"),
                              ("hold_seeds", "--hold-seeds"), ("hold_paid", "--hold-paid"),
                              ("merge_ahead", "--merge-ahead"),
-                             ("through_background", "--through-background"))),
+                             ("through_background", "--[no-]through-background"))),
         _SENSOR_LEVEL,
     ),
     "tune": (_SENSOR_LEVEL,),

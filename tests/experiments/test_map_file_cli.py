@@ -56,6 +56,8 @@ def test_projective_search_learns_the_scene(capsys):
     (["--save-map", "out.ply"], "must end in .npz"),
     (["--method", "gradient", "--save-map", "m.npz"], "--save-map is a setting of --method vbgs"),
     (["--method", "gradient", "--search", "projective"], "--search is a setting of"),
+    (["--method", "gradient", "--no-through-background"],
+     "--[no-]through-background is a setting of --method vbgs"),
 ])
 def test_map_flags_refuse_what_they_cannot_do(argv, message, capsys):
     assert main([*TINY, *argv]) == 2
