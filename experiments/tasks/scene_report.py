@@ -100,7 +100,7 @@ UNCOVERED_WARNING = 0.02
 # splats may be too small. The walk at 128 px / 60 frames: 50k components hold a median
 # 5.8 points and leave 2.2 % of the test surface uncovered (21.46 dB), 20k hold 12.8 and
 # leave 0.6 % (22.55 dB); at 50k a splat scale of 1.5 draws the walk's validation views
-# at 22.63 dB against 21.41 at the default 1.2 (results/tuning/walk50k/splat_scale.md), and
+# at 22.70 dB against 21.35 at the default 1.2 (results/tuning/walk50k/splat_scale.md), and
 # --splat-scale auto chooses it (vbgs.render.scale_fit).
 FEW_POINTS = 10.0
 
