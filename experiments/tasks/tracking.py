@@ -144,7 +144,7 @@ def _ranges(numbers: list[int]) -> str:
 # summed ATE over the tracking study's nine tracked streams on validation trajectories
 # (seed 1, never the reported seed 0; results/tuning/tracking/tracking.md, made by
 # python -m experiments.tune_tracking): 2048 points and 6 steps were better than 1024 and 4
-# on every stream, and on eight of the nine (24.43 against 33.12 mm summed) when the table
+# on every stream, and on eight of the nine (24.10 against 33.60 mm summed) when the table
 # was re-made at a later code. The cost bound (results/tracking/cost/) is
 # measured at these settings.
 AFTER_DIRECT = dict(levels=(2048,), inflate=(0.0,), passes=(1,), iterations=6)

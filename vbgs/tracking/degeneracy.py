@@ -38,8 +38,8 @@ from vbgs.tracking.se3 import relative, se3_exp, se3_log
 # frame of 60 under 0.01); in tests/vbgs/tracking a synthetic plane's three smallest
 # 4e-4 to 2e-3, a box corner's 0.024. Checked on validation trajectories (seed 1; rule:
 # the lowest summed ATE of the nine tracked streams): at 3e-3 the walk's near road is no
-# longer found planar under a Kinect and its track drifts to 56 mm, a sum of 126.65 mm
-# against the default's 24.43 (results/tuning/tracking/ratio/ against
+# longer found planar under a Kinect and its track drifts to 57 mm, a sum of 126.32 mm
+# against the default's 24.10 (results/tuning/tracking/ratio/ against
 # results/tuning/tracking/tracking.md's default row); 1e-2 kept.
 RATIO = 1e-2
 # The frame's depth points lie near one plane when PLANAR of them lie within FLAT of

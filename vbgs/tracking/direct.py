@@ -77,7 +77,7 @@ FACTORS = (4, 2, 1)
 # 3) steps at 0.065 / 0.041 s of CPU a frame; blocks (4, 2) alone left the walk at 15.6.
 # Re-checked on validation trajectories (seed 1; rule: the lowest summed ATE of the nine
 # tracked streams, results/tuning/tracking/tracking.md, python -m experiments.tune_tracking):
-# (10, 8, 6) sums 25.02 mm against the default's 24.43, lower on four streams and higher
+# (10, 8, 6) sums 24.95 mm against the default's 24.10, lower on four streams and higher
 # on five, at more CPU a frame, so (6, 4, 3) is kept.
 ITERATIONS = (6, 4, 3)
 # Cauchy scale c in units of each term's robust scale.
@@ -91,7 +91,7 @@ ROBUST = 2.5
 # / 1e-2 (1 / scene units), under a Kinect 5.8 / 5.8 / 2.8 / 8.7 mm; 3e-3 is 0.013 of
 # the walk's median inverse depth (0.23 per unit). Re-checked on validation trajectories
 # (seed 1; rule: the lowest summed ATE of the nine tracked streams): 0.0043 (1e-3 per
-# unit on the walk) sums 31.87 mm against the default's 24.43, worse on the walk under a
+# unit on the walk) sums 31.86 mm against the default's 24.10, worse on the walk under a
 # Kinect though a little better on the object (results/tuning/tracking/floor_d/ against
 # results/tuning/tracking/tracking.md's default row); 0.013 kept.
 FLOOR_I, FLOOR_D = 1e-3, 0.013
