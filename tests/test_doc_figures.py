@@ -1,5 +1,8 @@
 """Every decimal figure in the README and the docs pages is found in a committed results
-file: some value rounds to it. A figure that no file holds (or that was measured once and
+file: some value rounds to it. So is every whole number that reads as a measurement by
+its unit: seconds, milliseconds, megabytes or gigabytes (``391 s``, ``1069 MB``) and counts
+of components forgotten or merged (``6632 forgotten``); other whole numbers (``60
+frames``, ``128 px``, ``20k``) are settings more often than results and are not read. A figure that no file holds (or that was measured once and
 never kept) fails here; drop it or commit the file and its command (``results/COMMANDS.md``).
 
 Two rules, by what the page says about a figure's source:
@@ -53,6 +56,8 @@ RESULTS = ROOT / "results"
 PAGES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md")
                               if p.name not in ("ARCHITECTURE.md", "validation.md"))]
 FIGURE = re.compile(r"(?<![\w.])-?\d+\.\d+(?![\w.])")  # signed: -0.15 is not 0.15
+# a whole number measured by its unit (the docstring): the number alone is the figure
+MEASURED = re.compile(r"(?<![\w.,])-?\d+(?= ?(?:s|ms|MB|GB)\b| (?:components )?(?:forgotten|merged)\b)")
 NUMBER = re.compile(r"-?\d+(?:\.\d+)?(?:[eE]-?\d+)?")
 DATA = (".csv", ".json", ".md", ".txt", ".toml")
 NOT_A_SOURCE = {"COMMANDS.md", "UNSTAMPED.txt"}  # indexes written by hand, not results
@@ -167,7 +172,7 @@ def held(figure: str, values, percent: bool = False) -> bool:
     (-0.15) needs a value of its sign; an unsigned one is a magnitude ("loses 3.30 dB" is
     held by -3.3). A percentage (``percent``) is also held by a fraction that rounds to it
     (0.022 holds 2.2%)."""
-    decimals = len(figure.split(".")[1])
+    decimals = len(figure.split(".")[1]) if "." in figure else 0
     signs = (1,) if figure.startswith("-") else (1, -1)
     for x, half in [(float(figure), 0.5 * 10.0 ** -decimals)] + (
             [(float(figure) / 100, 0.5 * 10.0 ** -(decimals + 2))] if percent else []):
@@ -209,7 +214,7 @@ def unheld(text: str, values: list[float]) -> list[tuple[int, str, tuple[str, ..
             named = sources(line) or around
             pool = sorted({v for rel in named for v in file_values(rel)}) if named else values
             spans = [m.span() for m in CODE_SPAN.finditer(line)]
-            for m in FIGURE.finditer(line):
+            for m in [*FIGURE.finditer(line), *MEASURED.finditer(line)]:
                 # a figure in code (`--opacity 0.5`, a code block) is a setting: loose rule
                 setting = code or any(a < m.start() < b for a, b in spans)
                 if m.group(0) not in CONSTANTS and not held(
@@ -298,6 +303,15 @@ def test_a_setting_in_code_is_not_held_to_the_named_file(values):
     assert not unheld(f"`--opacity 0.75` is the old rule {named}", values)
     assert unheld(f"--opacity 0.75 is the old rule {named}", values)
     assert not unheld("```bash\nrun --out results/example/object.json --opacity 0.75\n```", values)
+
+
+def test_a_whole_number_with_a_unit_of_measure_is_a_figure(values):
+    # results/stream_rate/sensor/room640_kinect_default20.json: "peak_memory_mb": 1068.78...
+    named = "(`results/stream_rate/sensor/room640_kinect_default20.json`)"
+    assert [f for _, f, _ in unheld(f"peak memory 1234 MB {named}", values)] == ["1234"]
+    assert [f for _, f, _ in unheld(f"it forgets 1234 components {named}", values)] == []
+    assert [f for _, f, _ in unheld(f"1234 forgotten, 77 s {named}", values)] == ["1234", "77"]
+    assert not unheld(f"60 frames at 128 px, 20k components {named}", values)  # settings
 
 
 def test_a_percentage_is_held_by_its_fraction(values):
