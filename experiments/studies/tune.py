@@ -110,8 +110,14 @@ BOOLS = {"true": True, "on": True, "1": True, "false": False, "off": False, "0":
 
 def typed(kind: type, text: str):
     """``text`` read as a ``kind`` value; a bool only from true/false, on/off or 1/0
-    (``bool("false")`` would be True)."""
+    (``bool("false")`` would be True). A constant whose default is None (chosen per case,
+    ``growth.denoise_radius``) reads ``none`` as None and a number as an int where it is
+    one, else a float."""
     text = text.strip()
+    if kind is type(None):
+        if text.lower() == "none":
+            return None
+        return int(text) if text.lstrip("-").isdigit() else float(text)
     if kind is bool:
         if text.lower() not in BOOLS:
             raise ValueError(text)

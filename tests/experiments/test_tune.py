@@ -65,6 +65,16 @@ def test_every_method_constant_is_reached_by_its_dotted_name():
         parse_grid(["growth.reach_cells=0"], TINY)
 
 
+def test_a_constant_chosen_per_case_reads_none_and_whole_numbers():
+    """``growth.denoise_radius`` defaults to None (the sensor's own window): the grid
+    reads ``none`` as that and a number as the int the config takes."""
+    grid = parse_grid(["growth.denoise_radius=none,1,3"], TINY)
+    assert grid == {"growth.denoise_radius": [None, 1, 3]}
+    assert isinstance(grid["growth.denoise_radius"][1], int)
+    with pytest.raises(ValueError, match="growth.denoise_radius must be an integer"):
+        parse_grid(["growth.denoise_radius=1.5"], TINY)
+
+
 @pytest.mark.parametrize("spec, message", [
     (["prior.bogus=1"], "'prior.bogus' is not a method constant"),
     (["prior.cov_scale=-1"], "cov_scale must be a positive finite number"),

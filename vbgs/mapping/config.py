@@ -21,7 +21,6 @@ from vbgs.inference.candidates import default_candidates
 from vbgs.inference.model import SURFACE_PRIOR, PriorConfig
 from vbgs.mapping.change import (EXACT_DOUBT_OPACITY, FORGET_AFTER, RECOLOUR_REFERENCES,
                                  SHAPED_POINTS)
-from vbgs.mapping.denoise import DENOISE_RADIUS
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
 from vbgs.render import colour_fit, opacity
@@ -110,7 +109,8 @@ class GrowthConfig:
         per channel (:mod:`vbgs.mapping.holes`; radius 0: holes stay holes);
     denoise_radius: noise independent between pixels only (``sensor.white``): each
         reading is replaced by the plane fitted to its surface's readings within this
-        many px (:mod:`vbgs.mapping.denoise`; 0: read as measured);
+        many px (:mod:`vbgs.mapping.denoise`; 0: read as measured; None: the sensor's
+        own, ``denoise.SENSOR_RADII``: 1 for the Kinect, 3 for the RealSense);
     hold_seeds: a component's seed (its prior mean) holds its cell as its posterior mean
         does, so ground whose components' means moved out of it is not grown again;
     hold_paid: the cells where merged components stood stay held (a merge pays for the
@@ -142,7 +142,7 @@ class GrowthConfig:
     refine_shape: bool = AUTO_REFINE_SHAPE
     hole_radius: int = HOLE_RADIUS
     hole_colour_tol: float = HOLE_COLOUR_TOL
-    denoise_radius: int = DENOISE_RADIUS
+    denoise_radius: int | None = None
 
     def __post_init__(self):
         _positive("growth", "first_frame_share", self.first_frame_share, upper=1.0)
@@ -150,9 +150,12 @@ class GrowthConfig:
             raise ValueError(f"growth.hole_radius must be an integer >= 0 (pixels; 0: holes "
                              f"stay holes), got {self.hole_radius!r}")
         _positive("growth", "hole_colour_tol", self.hole_colour_tol)
-        if not isinstance(self.denoise_radius, int) or self.denoise_radius < 0:
+        if self.denoise_radius is not None and (
+                not isinstance(self.denoise_radius, int) or isinstance(self.denoise_radius, bool)
+                or self.denoise_radius < 0):
             raise ValueError(f"growth.denoise_radius must be an integer >= 0 (pixels; 0: the "
-                             f"depth read as measured), got {self.denoise_radius!r}")
+                             f"depth read as measured) or None (the sensor's own), got "
+                             f"{self.denoise_radius!r}")
         if not (isinstance(self.auto_points, (int, float)) and math.isfinite(self.auto_points)
                 and self.auto_points >= 1):
             raise ValueError(f"growth.auto_points must be a number >= 1 (a level-0 cell holds "

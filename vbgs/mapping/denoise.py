@@ -41,10 +41,11 @@ itself is chosen in ``results/tuning/denoise/``: radius 1, 25.22). Test views, f
 defaults (``results/sensors/``): object 24.44 dB (exact 26.00), room 21.84 (22.82), walk
 13.94 (its far ground lies beyond the Kinect's range); without the averaging, at an
 earlier code (one-off runs), 23.76, 21.83 and 14.01. The
-RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``), validation views at today's code
-(``results/tuning/denoise/realsense/``): object 15.23 -> 18.62 dB, room 17.27 -> 19.47 at
-radius 1; at radius 2 21.29 and 20.53, a noise of several footprints wanting the wider
-window (the default radius is the Kinect's; one radius per sensor is not yet chosen). Cost, jitted (the window's offsets unrolled into one fused pass):
+RealSense at 128 px (``sigma_z`` grows as ``1 / f_px``), validation views
+(``results/tuning/denoise/realsense/``): object 15.64 -> 19.16 dB, room 17.29 -> 19.49 at
+radius 1; at radius 2 21.45 and 20.56, at 3 21.90 and 20.68 (``realsense/wide/``), a noise
+of several footprints wanting the wider window: each sensor has its own
+(:data:`SENSOR_RADII`). Cost, jitted (the window's offsets unrolled into one fused pass):
 15 ms a frame at 640 x 480 at radius 1, 26 ms at radius 2, on a quiet 2-core CPU (the
 NumPy version it replaced: 180 and 360 ms with the cores shared), against some 0.25 s for
 the rest of a budgeted frame. End to end it saves time: ``python -m experiments.run
@@ -71,10 +72,19 @@ DENOISE_RADIUS = 1  # window half-side in pixels (3 x 3); 0: no smoothing. Chose
 # object room --simulate-sensor kinect --sensor kinect --val-views 8 --grid
 # growth.denoise_radius=...`, results/tuning/denoise/mean.md and its size64/; rule: the
 # best mean validation PSNR over the object and the room at both sizes): at 128 px / 20k /
-# 60 frames (re-made at the code in the table's first line) 2 and 1 tie, 23.67 and 23.62 dB;
+# 60 frames (re-made at the code in the table's first line) 1 and 2 tie, 23.66 and 23.65 dB;
 # at 64 px / 5000 / 20 frames 1 is the best, 21.51 against 21.14 at 2. A window is
 # some 4 cm a pixel at 64 px: 5 x 5 spans the object's curves. Without the holes 2 is the
-# better at 128 px (the object 25.77 against 25.36 dB; results/tuning/denoise/noise_only/).
+# better at 128 px (the object 25.78 against 25.36 dB; results/tuning/denoise/noise_only/).
+# The window each sensor's readings are averaged over, by its model's name (DENOISE_RADIUS
+# for any other sensor whose noise is white): the RealSense's noise spans several
+# footprints and wants the wider window. Chosen as the Kinect's is, on its own validation
+# views (the same commands with `--simulate-sensor realsense --sensor realsense`): 3 is the
+# best mean of the object and the room at both sizes, 21.29 dB against 21.00 at 2 and
+# 20.96 at 4 at 128 px (results/tuning/denoise/realsense/wide/mean.md; 1 scores 19.32,
+# results/tuning/denoise/realsense/mean.md), 18.36 against 18.13 at 4, 17.79 at 2 and 16.78
+# at 1 at 64 px (results/tuning/denoise/realsense/size64/mean.md).
+SENSOR_RADII = {"kinect": DENOISE_RADIUS, "realsense": 3}
 K_SIGMA = 3.0  # a neighbour farther than this many standard deviations is another surface
 SLOPE_FOOTPRINTS = 2.0  # first pass: a neighbour d px away may differ by d times this
 #                         many footprints more (a surface inclined up to 63 degrees)
@@ -127,6 +137,13 @@ def _smoothed(z: jax.Array, sig: jax.Array, focal, radius: int):
     take = ok & (count >= MIN_POINTS) & (a > 0) & (leverage < 1.0)
     return (jnp.where(take, 1.0 / jnp.where(take, a, 1.0), z),
             jnp.where(take, jnp.sqrt(leverage), 1.0))
+
+
+def sensor_radius(sensor_name: str, chosen: int | None = None) -> int:
+    """The averaging window's half-side in pixels for a sensor: ``chosen`` where given
+    (``growth.denoise_radius``), else the sensor's own (:data:`SENSOR_RADII`, by its
+    model's name; :data:`DENOISE_RADIUS` for one not listed)."""
+    return SENSOR_RADII.get(sensor_name, DENOISE_RADIUS) if chosen is None else chosen
 
 
 def smoothed(depth: np.ndarray, sigma: np.ndarray, focal: float,
