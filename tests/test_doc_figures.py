@@ -2,8 +2,9 @@
 file: some value rounds to it. So is every whole number that reads as a measurement by
 its unit: seconds, milliseconds, megabytes or gigabytes (``391 s``, ``1069 MB``) and counts
 of components forgotten or merged (``6632 forgotten``); other whole numbers (``60
-frames``, ``128 px``, ``20k``) are settings more often than results and are not read. A figure that no file holds (or that was measured once and
-never kept) fails here; drop it or commit the file and its command (``results/COMMANDS.md``).
+frames``, ``128 px``, ``20k``) are settings more often than results and are not read.
+A figure that no file holds (or that was measured once and never kept) fails here; drop
+it or commit the file and its command (``results/COMMANDS.md``).
 
 Two rules, by what the page says about a figure's source:
 

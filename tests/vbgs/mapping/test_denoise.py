@@ -1,11 +1,14 @@
 """A frame's depth averaged over its surface (vbgs.mapping.denoise): the noise left is
 the one the fit predicts, edges stay edges, holes stay holes."""
 
+import jax
 import numpy as np
 import pytest
 
 from vbgs import mapping
+from vbgs.data.synthetic import make_scene
 from vbgs.mapping.denoise import noise_left, sensor_radius, smoothed
+from vbgs.sensors import simulate
 
 FOCAL = 100.0
 SIGMA = 0.02
@@ -111,10 +114,6 @@ def test_each_sensor_averages_over_its_own_window_unless_one_is_chosen():
 def test_the_realsense_frame_is_averaged_over_its_wider_window():
     """A map learned under the RealSense model is, to the bit, the one learned with radius
     3 chosen, and not the one with radius 1."""
-    import jax
-    from vbgs.data.synthetic import make_scene
-    from vbgs.sensors import simulate
-
     scene = make_scene("object", size=32, n_train=1, n_test=1, seed=0)
     frame = scene.train[0]
     frame = frame._replace(depth=simulate("realsense", frame.depth, frame.camera,
