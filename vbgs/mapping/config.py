@@ -23,6 +23,7 @@ from vbgs.mapping.change import (EXACT_DOUBT_OPACITY, FORGET_AFTER, RECOLOUR_REF
                                  SHAPED_POINTS)
 from vbgs.mapping.holes import HOLE_COLOUR_TOL, HOLE_RADIUS
 from vbgs.mapping.budget import POINTS as BUDGET_POINTS, WEIGHTED as BUDGET_WEIGHTED
+from vbgs.mapping.denoise import sensor_radius
 from vbgs.render import colour_fit, opacity
 from vbgs.render.splats import VBGS_BLUR, VBGS_COV_SCALE, VBGS_OPACITY
 from vbgs.sensors import SENSOR_NAMES, WHITE_NOISE_SENSORS
@@ -110,7 +111,8 @@ class GrowthConfig:
     denoise_radius: noise independent between pixels only (``sensor.white``): each
         reading is replaced by the plane fitted to its surface's readings within this
         many px (:mod:`vbgs.mapping.denoise`; 0: read as measured; None: the sensor's
-        own, ``denoise.SENSOR_RADII``: 1 for the Kinect, 3 for the RealSense);
+        own, ``denoise.SENSOR_RADII``: 1 for the Kinect, 3 for the RealSense; the
+        radius a map uses is :attr:`Config.denoise_radius`);
     hold_seeds: a component's seed (its prior mean) holds its cell as its posterior mean
         does, so ground whose components' means moved out of it is not grown again;
     hold_paid: the cells where merged components stood stay held (a merge pays for the
@@ -448,6 +450,14 @@ class Config:
         (:func:`vbgs.inference.candidates.default_candidates`: 8 with exact depth, 16
         under a measured sensor)."""
         return self.candidates or default_candidates(self.sensor.exact)
+
+    @property
+    def denoise_radius(self) -> int:
+        """The window (pixels) a white-noise sensor's depth is averaged over:
+        ``growth.denoise_radius``, or when None the sensor's own
+        (:func:`vbgs.mapping.denoise.sensor_radius`: 1 for the Kinect, 3 for the
+        RealSense)."""
+        return sensor_radius(self.sensor.model, self.growth.denoise_radius)
 
     @property
     def doubt_opacity(self) -> float:

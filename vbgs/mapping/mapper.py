@@ -102,7 +102,7 @@ import vbgs.mapping.change as change
 import vbgs.mapping.splits as splits
 from vbgs.mapping.budget import on_lattice, stride, thin
 from vbgs.mapping.config import Config, frame_search
-from vbgs.mapping.denoise import noise_left, sensor_radius, smoothed
+from vbgs.mapping.denoise import noise_left, smoothed
 from vbgs.mapping.holes import fill_holes
 from vbgs.mapping.measurement import depth_sigmas, depth_variance, frame_points
 from vbgs.mapping.stages import stage
@@ -232,7 +232,7 @@ def _prepare(state: MapState, frame: Frame, config: Config, background):
         empty = empty_pixels(frame.depth, holes=True, rgb=frame.rgb, background=background)
         g, cam = config.growth, frame.camera
         focal = 0.5 * (float(cam.fx) + float(cam.fy))
-        radius = sensor_radius(sensor.model, g.denoise_radius)
+        radius = config.denoise_radius
         if sensor.white and radius:  # the noise averaged over each surface
             depth, factor = smoothed(frame.depth, depth_sigmas(
                 frame.depth, cam, sensor.model, sensor.level), focal, radius)

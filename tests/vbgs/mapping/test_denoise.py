@@ -107,6 +107,12 @@ def test_each_sensor_averages_over_its_own_window_unless_one_is_chosen():
     assert mapping.GrowthConfig().denoise_radius is None
     assert sensor_radius("kinect") == 1 and sensor_radius("realsense") == 3
     assert sensor_radius("realsense", 0) == 0 and sensor_radius("kinect", 2) == 2
+    sensed = {name: mapping.Config(sensor=mapping.SensorConfig(name))
+              for name in ("kinect", "realsense")}
+    assert {n: c.denoise_radius for n, c in sensed.items()} == {"kinect": 1, "realsense": 3}
+    chosen = mapping.Config(sensor=mapping.SensorConfig("realsense"),
+                            growth=mapping.GrowthConfig(denoise_radius=2))
+    assert chosen.denoise_radius == 2
     with pytest.raises(ValueError, match=r"or None \(the sensor's own\)"):
         mapping.GrowthConfig(denoise_radius=True)
 
