@@ -285,7 +285,7 @@ def plot_changes(df: pd.DataFrame, style: list[str], path: Path):
     over the unchanged ones, the final-state PSNR over all pixels written beside them."""
     if df.empty or "psnr_changed" not in df or not df["psnr_changed"].notna().any():
         return None, ("skipped: no cell reports `psnr_changed` (scenes that change: "
-                      "object-change, room-change)")
+                      "object-change, room-change, walk-change)")
     df = df[df["psnr_changed"].notna()]
     cols = _line_columns(df, style)
     df = df.assign(_label=df.apply(lambda row: _learner(row, cols), axis=1))

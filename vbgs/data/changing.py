@@ -1,15 +1,19 @@
 """Synthetic scenes that change while they are streamed: the harness of continual
 learning's second half, forgetting what is gone while keeping what is still there.
 
-``"object-change"`` and ``"room-change"`` are the object and the room
-(:mod:`vbgs.data.synthetic`) walked twice along the training path, ``n_train / 2``
-frames a lap. The first lap sees the scene as it was; before the second, every change
-event happens at once (the frame index is the scene's ``changes``):
+``"object-change"``, ``"room-change"`` and ``"walk-change"`` are the object, the room and
+the walk (:mod:`vbgs.data.synthetic`) walked twice along the training path, ``n_train /
+2`` frames a lap (the walk's path twice from its start, forward). The first lap sees the
+scene as it was; before the second, every change event happens at once (the frame index
+is the scene's ``changes``):
 
 * object: the sphere is taken away, the crate moved onto its place, a new ball added
   where the platform was bare, and the cylinder's texture replaced;
 * room: the ball on the table is taken away, the ball on the floor moved across the
-  room, a crate added by a wall, and the stool's texture replaced.
+  room, a crate added by a wall, and the stool's texture replaced;
+* walk: a rock is taken away, a lamp post moved across the road, a crate added on the
+  left verge, and a house's street front repainted, all along the second half of the
+  path, which the forward-looking frames see from the start.
 
 The test and validation views show the final state; ``Scene.first_state`` holds the
 test views rendered in the first state (the same poses), so a run can say what the map

@@ -327,6 +327,14 @@ WALK_HOUSES = (
 WALK_TREES = ((8.0, -1), (15.0, 1), (23.0, -1), (30.0, 1), (38.0, -1))  # (x, side)
 WALK_ROCKS = ((3.0, -1, 0.5), (17.0, -1, 0.7), (25.0, 1, 0.45), (31.5, -1, 0.6))  # (x, side, r)
 WALK_LAMPS = ((9.5, 1), (21.0, -1))  # (x, side): a post with a lamp ball on top
+# "walk-change" (vbgs.data.changing), its events along the second half of the path where
+# the forward-looking frames see them longest: the rock taken away and the lamp post moved
+# (their indices above; the post across the road and this far along x), the crate added
+# on the left verge ((centre), (half extents)) and the house repainted (index, photo).
+WALK_GONE_ROCK = 1
+WALK_MOVED_LAMP, WALK_LAMP_MOVE = 1, 2.0
+WALK_CRATE = ((28.5, -3.2, 0.45), (0.5, 0.45, 0.45))
+WALK_REPAINT = (2, "camera")
 # Far buildings, (centre x, centre y, half extents): beyond the end of the path, so
 # they are seen from the first frame on at 40-55 units and come closer (depth > 30).
 WALK_FAR = (
@@ -337,10 +345,14 @@ WALK_FAR = (
 WALK_GROUND = ((-4.0, 66.0), 26.0, 1.8)  # ground x range, half width, half width of the road
 
 
-def walk_primitives(seed: int = 0, length: float = WALK_LENGTH) -> list:
+def walk_primitives(seed: int = 0, length: float = WALK_LENGTH, changed: bool = False
+                    ) -> list:
     """Primitives of the ``"walk"`` scene (of ``"walk-long"`` with ``length =
     WALK_LONG_LENGTH``); ``seed`` jitters every object's place (and a house's yaw) along
-    the street.
+    the street. ``changed``: the walk after its change events (:mod:`vbgs.data.changing`;
+    the first block only, :func:`_walk_block`): a rock taken away, a lamp post moved
+    across the road, a crate added on the left verge and a house's street front
+    repainted.
 
     A path ``length`` units long gets the street's objects repeated every ``WALK_BLOCK``
     units until they pass its end by as much as the walk's do (8 units), the ground
@@ -361,7 +373,7 @@ def walk_primitives(seed: int = 0, length: float = WALK_LENGTH) -> list:
         Quad((x0, half_width, 0.0), (ground, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
         Quad((x0, -road, 0.0), (ground, 0.0, 0.0), (0.0, road - half_width, 0.0), grass),
     ]
-    prims += _walk_block(rng, 0)
+    prims += _walk_block(rng, 0, changed)
     for x, y, (hx, hy, hz), photo in WALK_FAR:
         dx, dy = rng.uniform(-1.0, 1.0, 2)
         facade = Surface(photo, (0.85, 0.85, 0.95), (1.0, 2.0))
@@ -371,14 +383,18 @@ def walk_primitives(seed: int = 0, length: float = WALK_LENGTH) -> list:
     return prims
 
 
-def _walk_block(rng: np.random.Generator, block: int) -> list:
+def _walk_block(rng: np.random.Generator, block: int, changed: bool = False) -> list:
     """The street's houses, trees, rocks and lamp posts moved ``block * WALK_BLOCK``
-    units along x, each jittered by ``rng``; the house photos rotated by ``block``."""
+    units along x, each jittered by ``rng``; the house photos rotated by ``block``.
+    ``changed``: the block after the walk's change events (:func:`walk_primitives`), every
+    random draw made as without them, so all else is the same to the bit."""
     shift = block * WALK_BLOCK
     photos = [h[3] for h in WALK_HOUSES]
     prims = []
     for i, (x, side, (hx, hy, hz), _, tint) in enumerate(WALK_HOUSES):
         photo = photos[(i + block) % len(photos)]
+        if changed and i == WALK_REPAINT[0]:
+            photo = WALK_REPAINT[1]
         dx, dy = rng.uniform(-0.6, 0.6), rng.uniform(0.0, 0.8)
         yaw = rng.uniform(-0.15, 0.15)
         brick = Surface("brick", tint, (2.0, 1.0))
@@ -393,17 +409,24 @@ def _walk_block(rng: np.random.Generator, block: int) -> list:
             Cylinder((tx, ty), 0.18, 0.0, 2.2, Surface("camera", (0.65, 0.45, 0.3), (2.0, 1.0))),
             Sphere((tx, ty, 2.9), 1.0, Surface("grass", (0.5, 0.9, 0.4), (3.0, 2.0))),
         ]
-    for x, side, r in WALK_ROCKS:
+    for k, (x, side, r) in enumerate(WALK_ROCKS):
         dx, dy = rng.uniform(-0.6, 0.6, 2)
+        if changed and k == WALK_GONE_ROCK:  # taken away
+            continue
         prims.append(Sphere((x + shift + dx, side * (3.0 + 0.4 * dy), 0.5 * r), r,
                             Surface("gravel", (0.8, 0.78, 0.75), (2.0, 1.0))))
-    for x, side in WALK_LAMPS:
+    for k, (x, side) in enumerate(WALK_LAMPS):
         dx = rng.uniform(-0.6, 0.6)
+        if changed and k == WALK_MOVED_LAMP:  # moved across the road, a little further on
+            x, side = x + WALK_LAMP_MOVE, -side
         prims += [
             Cylinder((x + shift + dx, side * 2.4), 0.08, 0.0, 2.8,
                      Surface("rocket", (0.5, 0.5, 0.55))),
             Sphere((x + shift + dx, side * 2.4, 2.95), 0.2, Surface("colorwheel")),
         ]
+    if changed:  # added on the left verge
+        centre, half = WALK_CRATE
+        prims += box(centre, half, 0.4, Surface("coffee"), Surface("astronaut"))
     return prims
 
 
@@ -506,15 +529,16 @@ _VIEWING = {"object": (OBJECT_FOV_X, OBJECT_BACKGROUND), "room": (ROOM_FOV_X, (0
 
 def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed: int = 0,
                    n_val: int = N_VAL, samples: int = SAMPLES) -> Scene:
-    """The scene ``base`` ("object" or "room") whose world changes between two laps of
-    its path (:mod:`vbgs.data.changing`): ``n_train`` frames in all, the first half before
-    the change; test and validation views of the final state, ``first_state`` the test
-    views before it."""
-    if base not in ("object", "room"):
-        raise ValueError(f"no changing version of {base!r}: use object or room")
+    """The scene ``base`` ("object", "room" or "walk") whose world changes between two
+    laps of its path (:mod:`vbgs.data.changing`): ``n_train`` frames in all, the first
+    half before the change; test and validation views of the final state,
+    ``first_state`` the test views before it."""
+    if base not in ("object", "room", "walk"):
+        raise ValueError(f"no changing version of {base!r}: use object, room or walk")
     primitives, poses, val_poses = {
         "object": (object_primitives, object_poses, object_val_poses),
         "room": (room_primitives, room_poses, room_val_poses),
+        "walk": (walk_primitives, walk_poses, walk_val_poses),
     }[base]
     fov, background = _VIEWING[base]
 
@@ -529,11 +553,13 @@ def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed
 SCENES = {"object": object_scene, "room": room_scene, "walk": walk_scene,
           "walk-long": walk_long_scene,
           "object-change": partial(changing_scene, "object"),
-          "room-change": partial(changing_scene, "room")}
+          "room-change": partial(changing_scene, "room"),
+          "walk-change": partial(changing_scene, "walk")}
 PRIMITIVES = {"object": object_primitives, "room": room_primitives, "walk": walk_primitives,
               "walk-long": lambda seed=0: walk_primitives(seed, WALK_LONG_LENGTH),
               "object-change": lambda seed=0: object_primitives(seed, changed=True),
-              "room-change": lambda seed=0: room_primitives(seed, changed=True)}
+              "room-change": lambda seed=0: room_primitives(seed, changed=True),
+              "walk-change": lambda seed=0: walk_primitives(seed, changed=True)}
 
 
 def make_scene(name: str, **kw) -> Scene:

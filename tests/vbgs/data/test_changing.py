@@ -7,7 +7,7 @@ from vbgs.data.changing import changed_pixels
 from vbgs.data.synthetic import changing_scene, make_scene
 
 
-@pytest.mark.parametrize("base", ["object", "room"])
+@pytest.mark.parametrize("base", ["object", "room", "walk"])
 def test_the_first_state_is_the_static_scene_and_the_second_lap_differs(base):
     scene = changing_scene(base, size=24, n_train=6, n_test=2, n_val=1)
     static = make_scene(base, size=24, n_train=3, n_test=2, n_val=1)
@@ -36,7 +36,7 @@ def test_changed_pixels_sees_colour_and_depth_apart():
 
 
 def test_bad_requests_are_refused():
-    with pytest.raises(ValueError, match="no changing version of 'walk'"):
-        changing_scene("walk")
+    with pytest.raises(ValueError, match="no changing version of 'walk-long'"):
+        changing_scene("walk-long")
     with pytest.raises(ValueError, match="n_train must be at least 2"):
         changing_scene("object", n_train=1)
