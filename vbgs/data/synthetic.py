@@ -26,6 +26,8 @@ primitives, so colour and z-depth are exact up to float32 rounding:
   ``WALK_BLOCK`` units (each repeat jittered afresh, the house photos rotated), the
   path weaves and the gaze wanders at the walk's rate per unit, and the far buildings
   and the end of the ground stand as far beyond the longer path's end.
+* ``"object-change"``, ``"room-change"``, ``"walk-change"``: each walked twice, its world
+  changed between the laps (:mod:`vbgs.data.changing`, :func:`changing_scene`).
 
 World axes: z up, units are metres-like scene units. Training views follow a
 continuous path (frame i and i + 1 are neighbouring views, so streaming order
