@@ -3,7 +3,7 @@ baseline at several step counts); CSV, markdown and a PNG."""
 
 from __future__ import annotations
 
-from experiments.cli.options import add_frames, add_json, add_seed, add_test_views
+from experiments.cli.options import SCENE_HELP, add_frames, add_json, add_seed, add_test_views
 from experiments.cli.output import check_fewer_components
 from experiments.tasks.settings import FORMAT, add_choice
 
@@ -13,7 +13,7 @@ def add(sub):
                                      "memory: VBGS, VBGS-polish and the gradient baseline at "
                                      "several step counts; CSV, markdown and a PNG")
     what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--scene", help="object | room | walk | a dataset folder")
+    what.add_argument("--scene", help=SCENE_HELP)
     what.add_argument("--image", help="a bundled photo or an image file: VBGS against the "
                                       "2-D gradient baseline")
     what.add_argument("--replot", metavar="CSV", help="draw a front's PNG again from its "

@@ -10,8 +10,10 @@ from experiments.tasks.settings import (
     SENSOR_HOLES_DEFAULT,
     SENSOR_HOLES_HELP,
 )
+from vbgs.data.stereo import REAL_SCENES
+from vbgs.data.synthetic import SCENES
 
-SCENE_HELP = "object | room | walk | a dataset folder"
+SCENE_HELP = f"a built-in scene ({', '.join([*SCENES, *REAL_SCENES])}) or a dataset folder"
 
 
 def add_json(p) -> None:

@@ -4,6 +4,7 @@ views); writes a table per scene and, for several scenes, their mean."""
 from __future__ import annotations
 
 from experiments.cli.options import (
+    SCENE_HELP,
     add_frames,
     add_json,
     add_scene_size,
@@ -32,8 +33,8 @@ def add(sub):
     p = sub.add_parser("tune", help="learn one stream, then score a grid of render settings "
                                     "on validation views; writes OUT/SCENE.csv and .md")
     p.add_argument("--scene", nargs="+", default=["object"],
-                   help="object | room | walk | a dataset folder; several: each gets its table and "
-                        "OUT/mean.csv ranks the settings by their mean over the scenes")
+                   help=f"{SCENE_HELP}; several: each gets its table and OUT/mean.csv "
+                        "ranks the settings by their mean over the scenes")
     add_choice(p, "--format", FORMAT)
     add_choice(p, "--method", METHOD)
     p.add_argument("--components", type=components_arg, default=20000, metavar="K|auto[:MAX]")
