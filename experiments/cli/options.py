@@ -10,10 +10,9 @@ from experiments.tasks.settings import (
     SENSOR_HOLES_DEFAULT,
     SENSOR_HOLES_HELP,
 )
-from vbgs.data.stereo import REAL_SCENES
-from vbgs.data.synthetic import SCENES
+from vbgs.data.scene_names import REAL, SYNTHETIC
 
-SCENE_HELP = f"a built-in scene ({', '.join([*SCENES, *REAL_SCENES])}) or a dataset folder"
+SCENE_HELP = f"a built-in scene ({', '.join([*SYNTHETIC, *REAL])}) or a dataset folder"
 
 
 def add_json(p) -> None:

@@ -11,7 +11,7 @@ from experiments.cli.options import (
     add_test_views,
     add_val_views,
 )
-from vbgs.data.synthetic import SCENES
+from vbgs.data.scene_names import SYNTHETIC
 
 WRITE_FORMATS = ("blender",)  # the layouts with separate train, test and val splits
 
@@ -19,7 +19,7 @@ WRITE_FORMATS = ("blender",)  # the layouts with separate train, test and val sp
 def add(sub):
     p = sub.add_parser("write-scene", help="write a synthetic scene as a dataset folder, a "
                                            "simulated sensor's depth on its training frames")
-    p.add_argument("--scene", default="object", help=f"a synthetic scene: {', '.join(SCENES)}")
+    p.add_argument("--scene", default="object", help=f"a synthetic scene: {', '.join(SYNTHETIC)}")
     add_scene_size(p)
     add_frames(p, help="training frames")
     add_test_views(p)
