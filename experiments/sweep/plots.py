@@ -23,6 +23,7 @@ from matplotlib.ticker import (  # noqa: E402
 
 from experiments.sweep.cells import as_picture  # noqa: E402
 from vbgs.data.images import read_rgb  # noqa: E402
+from vbgs.data.scene_names import SYNTHETIC  # noqa: E402
 
 # Settings that tell lines apart (when they vary), with any dotted setting of a nested
 # config (``evidence.forget_after``); the others are averaged over.
@@ -284,8 +285,8 @@ def plot_changes(df: pd.DataFrame, style: list[str], path: Path):
     averaged over seeds), its final map's PSNR over the test views' changed pixels and
     over the unchanged ones, the final-state PSNR over all pixels written beside them."""
     if df.empty or "psnr_changed" not in df or not df["psnr_changed"].notna().any():
-        return None, ("skipped: no cell reports `psnr_changed` (scenes that change: "
-                      "object-change, room-change, walk-change)")
+        changing = ", ".join(n for n in SYNTHETIC if n.endswith("-change"))
+        return None, f"skipped: no cell reports `psnr_changed` (scenes that change: {changing})"
     df = df[df["psnr_changed"].notna()]
     cols = _line_columns(df, style)
     df = df.assign(_label=df.apply(lambda row: _learner(row, cols), axis=1))

@@ -535,13 +535,14 @@ def changing_scene(base: str, size=128, n_train: int = 60, n_test: int = 8, seed
     laps of its path (:mod:`vbgs.data.changing`): ``n_train`` frames in all, the first
     half before the change; test and validation views of the final state,
     ``first_state`` the test views before it."""
-    if base not in ("object", "room", "walk"):
-        raise ValueError(f"no changing version of {base!r}: use object, room or walk")
-    primitives, poses, val_poses = {
+    bases = {
         "object": (object_primitives, object_poses, object_val_poses),
         "room": (room_primitives, room_poses, room_val_poses),
         "walk": (walk_primitives, walk_poses, walk_val_poses),
-    }[base]
+    }
+    if base not in bases:
+        raise ValueError(f"no changing version of {base!r}: use {', '.join(bases)}")
+    primitives, poses, val_poses = bases[base]
     fov, background = _VIEWING[base]
 
     def frames(prims, at):
