@@ -91,6 +91,12 @@ def add(sub):
                         "the distance expected where nothing changed; at 6 the static "
                         "scenes forget nothing; default: the map's "
                         "evidence.recolour_reference)")
+    p.add_argument("--recolour-gate", type=float, default=None, metavar="SHARE",
+                   help="VBGS: with --recolour-sigmas, a recoloured component is forgotten "
+                        "only once the frames' depth has forgotten this share of the "
+                        "components (the world has shown it changes): a static scene is "
+                        "then what it is with colour off (default: the map's "
+                        "evidence.recolour_gate, 0: no gate)")
     p.add_argument("--doubt-opacity", type=float, default=None, metavar="O",
                    help="VBGS: frames count toward forgetting a component only once its "
                         "rays' hits against passes give it an expected opacity of O or "
@@ -250,13 +256,15 @@ def _growth(args) -> dict:
 
 def _evidence(args) -> dict:
     """The task's ``evidence`` setting where ``--forget-after``, ``--recolour-sigmas``,
-    ``--recolour-reference``, ``--doubt-opacity`` or ``--through-background`` changes it
+    ``--recolour-reference``, ``--recolour-gate``, ``--doubt-opacity`` or
+    ``--through-background`` changes it
     (else none: the map's defaults)."""
     from vbgs.mapping import EvidenceConfig
 
     given = {name: value for name, value in (("forget_after", args.forget_after),
                                              ("recolour_sigmas", args.recolour_sigmas),
                                              ("recolour_reference", args.recolour_reference),
+                                             ("recolour_gate", args.recolour_gate),
                                              ("doubt_opacity", args.doubt_opacity),
                                              ("through_background",
                                               args.through_background))

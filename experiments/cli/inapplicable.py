@@ -90,6 +90,7 @@ RULES = {
                              ("forget_after", "--forget-after"),
                              ("recolour_sigmas", "--recolour-sigmas"),
                              ("recolour_reference", "--recolour-reference"),
+                             ("recolour_gate", "--recolour-gate"),
                              ("doubt_opacity", "--doubt-opacity"),
                              ("hold_seeds", "--hold-seeds"), ("hold_paid", "--hold-paid"),
                              ("merge_ahead", "--merge-ahead"),

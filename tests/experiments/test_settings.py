@@ -17,7 +17,8 @@ NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "rea
                    "splat_scale", "splat_blur", "view", "methods", "anchor",
                    "budget_points", "budget_saturation",  # the nested budget.points, .saturation
                    # the nested evidence.* (None: their defaults)
-                   "forget_after", "recolour_sigmas", "recolour_reference", "doubt_opacity",
+                   "forget_after", "recolour_sigmas", "recolour_reference", "recolour_gate",
+                   "doubt_opacity",
                    "hold_seeds", "hold_paid",  # the nested growth.hold_* (off: their defaults)
                    "merge_ahead",  # the nested growth.merge_ahead (None: its default)
                    "through_background"}  # the nested evidence.through_background (None: its default)

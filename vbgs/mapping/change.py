@@ -148,6 +148,29 @@ components along that ray, which this per-component test does not read.
   explains, a new surface's colour learned by the components about it within a frame
   or two of the change (``results/changing/``).
 
+**A colour gate.** Every colour test above false-alarms somewhere on a static stream,
+and for one reason: a component at a rim between two differently coloured faces is a
+surface of both, and a view from the other side lands its rays, within its own Gaussian,
+on the face its earlier frames did not show (the static object's recoloured components
+lie in lines along the platform's and the crate's rims; reading every ray rather than
+their mean, or only rays on the component's own Gaussian, leaves tens to hundreds of
+them). A single component cannot tell that from a repainting; the stream can. Whether
+the world changes at all is one question for the whole map, with a prior that a static
+world answers no, and depth answers it without false alarms: with exact depth a static
+stream's see-throughs forget no component, or a handful (the thin posts of the walk),
+where a world that changed loses its removed objects' components by the hundred or
+thousand. So under ``EvidenceConfig.recolour_gate`` colour keeps a run of frames of its
+own per component (``Doubt.runs``, apart from the see-throughs' ``frames``), and a
+component recoloured ``forget_after`` frames in a row is forgotten only once the map
+has forgotten at least that share of its slots (counting the frame's own see-throughs):
+the world has shown that it changes, and a colour that stays changed is then taken as
+the change it most likely is. A static world never opens the gate, so its stream is
+what it is with colour off, to the bit (colour is read, but nothing it counts reaches
+the map). The runs are counted from the first frame, so the components repainted with
+the change are forgotten as soon as the gate opens, not ``forget_after`` frames later.
+What it gives up: a world that changes only in colour (a repainting and nothing moved)
+never opens it, and is drawn as depth alone draws it.
+
 Only a measured return beyond the component is free space for this test: with exact
 depth a pixel without depth shows nothing (sky, empty space) and counts as well, but a
 sensor's missing pixel (out of its range, a hole) says nothing about what stands there.
@@ -192,6 +215,7 @@ a fixed reference still equals one batch.
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -247,42 +271,45 @@ class Doubt(NamedTuple):
     frames: jax.Array  # [k] int32
     colour: jax.Array  # [k, 3]
     weight: jax.Array  # [k]
+    runs: jax.Array  # [k] int32: frames in a row recoloured, counted apart from ``frames``
+    #                  under a colour gate (EvidenceConfig.recolour_gate; 0 without one)
 
 
 def no_doubt(k: int) -> Doubt:
     """Before any frame: no component doubted, no colour known."""
     return Doubt(jnp.zeros(k, jnp.int32), jnp.zeros((k, 3), jnp.float32),
-                 jnp.zeros(k, jnp.float32))
+                 jnp.zeros(k, jnp.float32), jnp.zeros(k, jnp.int32))
 
 
-@jax.jit
+@partial(jax.jit, static_argnames="apart")
 def _history(doubt: Doubt, hits, seen_through, judged, shown, n_shown, colour_tol,
-             blamed=None):
+             blamed=None, apart: bool = False):
     """The history's test; with ``blamed [k]`` (the ``"map"`` reference) a disagreeing
     frame counts against a component only where ``MIN_COLOUR_HITS`` of its rays are
-    blamed (the map as a whole does not explain them either)."""
+    blamed (the map as a whole does not explain them either); ``apart``: recolourings
+    counted in their own run (:func:`_runs`)."""
     readable = n_shown >= MIN_COLOUR_HITS
     before = doubt.colour / jnp.maximum(doubt.weight, 1.0)[:, None]
     off = (readable & (doubt.weight >= MIN_COLOUR_FRAMES)
            & (((shown - before) ** 2).sum(-1) > colour_tol**2))
     agrees = readable & ~off  # the colour the component is known by
     recoloured = off if blamed is None else off & (blamed >= MIN_COLOUR_HITS)
-    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
-                 doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
-                 doubt.weight + agrees)
+    frames, runs = _runs(doubt, hits, seen_through, recoloured, judged, apart)
+    return Doubt(frames, doubt.colour + jnp.where(agrees[:, None], shown, 0.0),
+                 doubt.weight + agrees, runs)
 
 
-@jax.jit
+@partial(jax.jit, static_argnames="apart")
 def _posterior(doubt: Doubt, hits, seen_through, judged, shown, n_shown, spread, mean, kappa,
-               sigmas, colour_noise):
+               sigmas, colour_noise, apart: bool = False):
     held = doubt.frames > 0  # in a run of doubt: judged against the colour before it
     kappa = jnp.where(held, doubt.weight, kappa)
     mean = jnp.where(held[:, None], doubt.colour / jnp.maximum(kappa, 1e-6)[:, None], mean)
     expected = 3.0 * colour_noise**2 * (1.0 + 1.0 / jnp.maximum(kappa, 1e-6)) + spread
     recoloured = ((n_shown >= MIN_COLOUR_HITS) & (kappa >= MIN_COLOUR_POINTS)
                   & (((shown - mean) ** 2).sum(-1) > sigmas**2 * expected))
-    return Doubt(_count(doubt, hits, seen_through | recoloured, judged),
-                 mean * kappa[:, None], kappa)
+    frames, runs = _runs(doubt, hits, seen_through, recoloured, judged, apart)
+    return Doubt(frames, mean * kappa[:, None], kappa, runs)
 
 
 @jax.jit
@@ -315,11 +342,19 @@ def blame(splats, camera, rgb, background, sigmas: float, colour_noise: float,
     return bad, tolerance, splats.colours
 
 
-def _count(doubt: Doubt, hits, against, judged):
+def _count(frames, hits, against, judged):
     """The frames in a row: one more where the frame counts ``against`` a ``judged``
     component, 0 where it hit it otherwise, kept where it said nothing."""
-    return jnp.where(against & judged, doubt.frames + 1,
-                     jnp.where(hits > 0, 0, doubt.frames))
+    return jnp.where(against & judged, frames + 1, jnp.where(hits > 0, 0, frames))
+
+
+def _runs(doubt: Doubt, hits, seen_through, recoloured, judged, apart: bool):
+    """``(frames, runs)`` after a frame: see-throughs and recolourings in one run
+    (``runs`` stays 0), or ``apart`` in a run each (a colour gate, module docstring)."""
+    if not apart:
+        return _count(doubt.frames, hits, seen_through | recoloured, judged), doubt.runs
+    return (_count(doubt.frames, hits, seen_through, judged),
+            _count(doubt.runs, hits, recoloured, judged))
 
 
 def colour_tolerance(recolour_sigmas: float, colour_noise: float) -> float:
@@ -333,7 +368,8 @@ def colour_tolerance(recolour_sigmas: float, colour_noise: float) -> float:
 def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
             reference: str = "history", colour=None, recolour_sigmas: float = 0.0,
             colour_noise: float = 0.0, doubt_opacity: float = 0.0,
-            prior: tuple[float, float] = (PRIOR_HITS, PRIOR_PASSES)) -> Doubt:
+            prior: tuple[float, float] = (PRIOR_HITS, PRIOR_PASSES),
+            apart: bool = False) -> Doubt:
     """``doubt`` after one frame's evidence ``frame``: a see-through of an ``active [k]``
     component hit ``MIN_HITS`` rays or more before (``evidence``, the counts before the
     frame), or a recolouring, adds one; any other hit resets the count; a frame without
@@ -349,7 +385,9 @@ def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
     (``frame.blamed``: the map as a whole and the component's own colour both fail to
     explain their pixels, :func:`blame`). With ``doubt_opacity`` above 0 a run starts only
     on a component whose expected opacity under the evidence's Beta ``prior`` (hits,
-    passes) is at least that (module docstring, "Who may be doubted")."""
+    passes) is at least that (module docstring, "Who may be doubted"). ``apart``:
+    recolourings counted in their own run, ``doubt.runs`` (a colour gate, module
+    docstring; :func:`gone`)."""
     judged = jnp.asarray(active) & (evidence.hits >= MIN_HITS)
     if doubt_opacity > 0:
         judged = judged & ((doubt.frames > 0)
@@ -357,16 +395,30 @@ def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
     args = (doubt, frame.hits, frame.seen_through, judged, frame.shown, frame.n_shown)
     if reference == "posterior" and recolour_sigmas > 0:
         return _posterior(*args, frame.spread, colour.mean, colour.kappa,
-                          jnp.float32(recolour_sigmas), jnp.float32(colour_noise))
+                          jnp.float32(recolour_sigmas), jnp.float32(colour_noise), apart=apart)
     return _history(*args, jnp.float32(colour_tolerance(recolour_sigmas, colour_noise)),
-                    frame.blamed if reference == "map" and recolour_sigmas > 0 else None)
+                    frame.blamed if reference == "map" and recolour_sigmas > 0 else None,
+                    apart=apart)
 
 
-def gone(doubt: Doubt, forget_after: int) -> np.ndarray:
-    """``[m]`` the components seen through ``forget_after`` frames in a row (none when 0)."""
+def gone(doubt: Doubt, forget_after: int, recoloured: bool = False) -> np.ndarray:
+    """``[m]`` the components seen through ``forget_after`` frames in a row (none when
+    0); with ``recoloured`` also those recoloured that many frames in a row in their own
+    run (``doubt.runs``, under a colour gate once it is open)."""
     if forget_after <= 0:
         return np.zeros(0, np.int64)
-    return np.flatnonzero(np.asarray(doubt.frames) >= forget_after)
+    out = np.asarray(doubt.frames) >= forget_after
+    if recoloured:
+        out = out | (np.asarray(doubt.runs) >= forget_after)
+    return np.flatnonzero(out)
+
+
+def gate_open(n_forgotten: int, n_components: int, gate: float) -> bool:
+    """Whether recoloured components may be forgotten under a colour gate of ``gate``
+    (a share of the slots; module docstring): the map has forgotten at least that share
+    of its ``n_components`` slots by its frames' depth (``n_forgotten``, with the frame's
+    own see-throughs). Never without a gate (0)."""
+    return gate > 0 and n_forgotten >= max(gate * n_components, 1)
 
 
 def emptied(state: model.State, slots: np.ndarray, empty: Mixture) -> model.State:

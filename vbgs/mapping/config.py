@@ -210,6 +210,13 @@ class EvidenceConfig:
         :mod:`vbgs.mapping.change`); ``"map"``, the history's test where the map as a
         whole, drawn at the frame's pose, and the component's own colour both fail to
         explain the pixels its rays read, beyond ``recolour_sigmas`` colour sigmas;
+    recolour_gate: with colour read (``recolour_sigmas`` above 0), the share of the slots
+        the frames' depth must have forgotten before a recoloured component is forgotten:
+        colour then counts in a run of its own, apart from the see-throughs, and a world
+        that never showed change by depth is never recoloured, so a static stream is what
+        it is with colour off, to the bit (:mod:`vbgs.mapping.change`, "A colour gate";
+        0, the default: no gate, colour counts in the see-throughs' run from the first
+        frame);
     shaped_points: a component holding at least this many points is seen through when
         the rays pass beyond it along its own shape (the Gaussian taken along each ray),
         one with fewer when they pass beyond its extent along the camera axis
@@ -236,6 +243,7 @@ class EvidenceConfig:
     forget_after: int = FORGET_AFTER
     recolour_sigmas: float = 0.0
     recolour_reference: str = "history"
+    recolour_gate: float = 0.0
     shaped_points: float = SHAPED_POINTS
     doubt_opacity: float | None = None
     # On. The rule is the best mean PSNR on the validation views of the changing and the
@@ -255,6 +263,10 @@ class EvidenceConfig:
             raise ValueError(f"evidence.recolour_sigmas must be a number >= 0 (0: colour "
                              f"tells no change), got {r!r}")
         _choice("evidence.recolour_reference", self.recolour_reference, RECOLOUR_REFERENCES)
+        g = self.recolour_gate
+        if isinstance(g, bool) or not isinstance(g, int | float) or not 0 <= g < 1:
+            raise ValueError(f"evidence.recolour_gate must be a share of the slots in [0, 1) "
+                             f"(0: no gate), got {g!r}")
         p = self.shaped_points
         if isinstance(p, bool) or not isinstance(p, int | float) or not p >= 0:
             raise ValueError(f"evidence.shaped_points must be a number of points >= 0 "

@@ -338,15 +338,18 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
     after = config.evidence.forget_after
     if not state.growing or after <= 0:
         return state
-    prior = state.mixture.prior
+    prior, gate = state.mixture.prior, config.evidence.recolour_gate
     doubt = change.observe(change.no_doubt(prior.n_components) if state.doubt is None
                            else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA,
                            reference=config.evidence.recolour_reference, colour=colour,
                            recolour_sigmas=config.evidence.recolour_sigmas,
                            colour_noise=config.prior.colour_noise,
                            doubt_opacity=config.doubt_opacity,
-                           prior=(config.evidence.prior_hits, config.evidence.prior_passes))
-    slots = change.gone(doubt, after)
+                           prior=(config.evidence.prior_hits, config.evidence.prior_passes),
+                           apart=gate > 0)
+    by_depth = change.gone(doubt, after)
+    slots = change.gone(doubt, after, recoloured=change.gate_open(
+        state.n_forgotten + len(by_depth), prior.n_components, gate)) if gate > 0 else by_depth
     if len(slots) == 0:
         return state._replace(doubt=doubt)
     empty = grow.empty_prior(prior.n_components, prior.origin, state.rule.cell, config.prior,

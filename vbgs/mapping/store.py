@@ -32,7 +32,8 @@ from vbgs.inference.stepper import Stepper
 from vbgs.mapping.config import Config
 from vbgs.mapping.mapper import MapState, _sync_stepper
 
-FORMAT = 3  # bumped when the file's layout changes (3: the change doubt's colour and weight)
+FORMAT = 4  # bumped when the file's layout changes (3: the change doubt's colour and weight;
+#            4: its colour runs, counted apart under a colour gate)
 _SCHEMA = "__schema__"
 
 

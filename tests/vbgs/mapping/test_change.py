@@ -18,10 +18,10 @@ SIZE, FRAMES, K = 64, 24, 4000  # twelve frames a lap
 
 
 def config(forget_after=change.FORGET_AFTER, sensor=SensorConfig(), recolour=0.0,
-           shaped=change.SHAPED_POINTS, reference="history"):
+           shaped=change.SHAPED_POINTS, reference="history", gate=0.0):
     return mapping.Config(components=K, sensor=sensor, evidence=EvidenceConfig(
         forget_after=forget_after, recolour_sigmas=recolour, shaped_points=shaped,
-        recolour_reference=reference))
+        recolour_reference=reference, recolour_gate=gate))
 
 
 def repainted(frame):
@@ -195,6 +195,47 @@ def test_judged_by_colour_a_static_stream_forgets_nothing_to_the_bit(reference, 
         for a, b in zip(jax.tree_util.tree_leaves(on.mixture),
                         jax.tree_util.tree_leaves(off.mixture), strict=True):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_behind_a_colour_gate_a_static_stream_forgets_nothing_to_the_bit():
+    """The history's colour test at 4 sigmas forgets rims of a static stream; behind a
+    gate (``recolour_gate``) it forgets none until the depth has forgotten a share of
+    the slots, which a static world never does: the map is depth's alone, to the bit."""
+    scene = make_scene("object", size=SIZE, n_train=FRAMES, n_test=1, n_val=0)
+    ungated = stream(scene.train, config(recolour=4.0), scene.background)
+    assert ungated.n_forgotten > 0  # the test has something to hold back
+    on = stream(scene.train, config(recolour=4.0, gate=0.01), scene.background)
+    off = stream(scene.train, config(), scene.background)
+    assert on.n_forgotten == 0 and off.n_forgotten == 0
+    assert int(np.asarray(on.doubt.runs).max()) >= change.FORGET_AFTER  # held back
+    for a, b in zip(jax.tree_util.tree_leaves(on.mixture),
+                    jax.tree_util.tree_leaves(off.mixture), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_behind_a_colour_gate_a_changed_world_is_recoloured_once_depth_saw_change(changed):
+    """The changing object: until its frames' depth has forgotten a share of the slots
+    (the removed crate) the gated map forgets what depth alone forgets, frame by frame;
+    from then on components recoloured six frames in a row are forgotten too."""
+    gate = 0.01
+    gated, depth = [], []
+    stream(changed.train, config(recolour=4.0, gate=gate), changed.background,
+           lambda state: gated.append(state.n_forgotten))
+    stream(changed.train, config(), changed.background,
+           lambda state: depth.append(state.n_forgotten))
+    opens = next(i for i, n in enumerate(depth) if n >= gate * K)
+    assert gated[:opens] == depth[:opens]
+    assert gated[-1] > depth[-1] > 0, (gated, depth)
+
+
+def test_a_colour_gate_is_a_share():
+    assert EvidenceConfig().recolour_gate == 0.0
+    for bad in (-0.1, 1.0, True):
+        with pytest.raises(ValueError, match="recolour_gate"):
+            EvidenceConfig(recolour_gate=bad)
+    assert not change.gate_open(1000, K, 0.0)  # no gate: never
+    assert not change.gate_open(0, K, 1e-9)  # at least one component forgotten by depth
+    assert change.gate_open(40, K, 0.01) and not change.gate_open(39, K, 0.01)
 
 
 def test_judged_against_its_posterior_a_repainted_surface_is_forgotten():
