@@ -82,8 +82,8 @@ def add(sub):
                    help="VBGS: a frame whose rays on a component show a mean colour more "
                         "than S colour sigmas from what earlier frames' rays showed on it "
                         "counts toward forgetting it, as a see-through does (a repainted "
-                        "surface; default: the map's evidence.recolour_sigmas, 0: colour "
-                        "tells no change)")
+                        "surface; default: 4 with exact depth, behind --recolour-gate, "
+                        "0, colour tells no change, under a measured --sensor)")
     p.add_argument("--recolour-reference", default=None, metavar="REF",  # the map checks it
                    help="VBGS: what --recolour-sigmas judges a frame's colour against: "
                         "history, the mean of what earlier frames' rays showed (S colour "
@@ -95,8 +95,8 @@ def add(sub):
                    help="VBGS: with --recolour-sigmas, a recoloured component is forgotten "
                         "only once the frames' depth has forgotten this share of the "
                         "components (the world has shown it changes): a static scene is "
-                        "then what it is with colour off (default: the map's "
-                        "evidence.recolour_gate, 0: no gate)")
+                        "then what it is with colour off (default: 0.005, the map's "
+                        "evidence.recolour_gate; 0: no gate)")
     p.add_argument("--doubt-opacity", type=float, default=None, metavar="O",
                    help="VBGS: frames count toward forgetting a component only once its "
                         "rays' hits against passes give it an expected opacity of O or "

@@ -274,7 +274,9 @@ def _learner(row: pd.Series, cols: list[str]) -> str:
         elif c == "evidence.forget_after":
             parts.append(f"forget after {v}" if v else "no forgetting")
         elif c == "evidence.recolour_sigmas":
-            parts.append(f"colour {v} sigmas" if v else "")
+            parts.append(f"colour {v} sigmas" if v else "no colour")
+        elif c == "evidence.recolour_gate":
+            parts.append("no colour gate" if not v else f"colour gate {v}")
         else:
             parts.append(f"{c}={v}")
     return ", ".join(p for p in parts if p) or "all cells"

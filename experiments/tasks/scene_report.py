@@ -52,13 +52,19 @@ def warn_forgotten(details: dict, task) -> None:
     n = details.get("components_forgotten", 0)
     if not n:
         return
-    colour = task.evidence.recolour_sigmas > 0  # --recolour-sigmas: colour counts too
+    from experiments.learners.vbgs_learner import task_config  # a VBGS task's alone
+
+    config = task_config(task)
+    colour = config.recolour_sigmas > 0  # colour counts too (by default with exact depth)
+    gated = config.evidence.recolour_gate > 0  # a static world never opens the gate
+    shown = (" or, once their depth had shown that the world changes, showed them in "
+             "another colour" if gated else " or showed them in another colour")
     print(f"note: {n} components were forgotten: later frames saw through them"
-          f"{' or showed them in another colour' if colour else ''} "
+          f"{shown if colour else ''} "
           f"{task.evidence.forget_after} frames in a row, so the map took what they showed "
           f"as gone and grew what stands there now; on a world that did not change this "
           f"removes thin structures the depth misses (posts, branches)"
-          f"{' and, by colour, rims between differently coloured faces' if colour else ''}, "
+          f"{' and, by colour, rims between differently coloured faces' if colour and not gated else ''}, "
           f"and --forget-after 0 keeps everything (the JSON's components_forgotten)",
           file=sys.stderr)
 

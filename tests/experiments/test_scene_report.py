@@ -13,7 +13,20 @@ def test_forgotten_components_are_said_with_the_count_and_the_way_back(capsys):
     warn_forgotten({"components_forgotten": 0}, SceneTask())  # nothing forgotten: silent
     warn_forgotten({}, SceneTask())  # a learner without a map: silent
     assert capsys.readouterr().err == ""
-    assert "another colour" not in _forgotten(capsys, SceneTask())
+
+
+def test_colour_is_said_where_it_counts(capsys):
+    """By default colour counts with exact depth, behind the colour gate, and the note
+    says so; not under a measured sensor, nor with colour off."""
+    from vbgs.mapping import with_dotted
+
+    exact = _forgotten(capsys, SceneTask())
+    assert "once their depth had shown that the world changes, showed them in another " \
+           "colour" in exact
+    assert "rims" not in exact  # a static world never opens the gate
+    assert "another colour" not in _forgotten(capsys, SceneTask(sensor="kinect"))
+    off = with_dotted(SceneTask(), "evidence.recolour_sigmas", 0.0)
+    assert "another colour" not in _forgotten(capsys, off)
 
 
 def _forgotten(capsys, task) -> str:
@@ -24,7 +37,9 @@ def _forgotten(capsys, task) -> str:
 def test_forgetting_by_colour_is_said_when_colour_counts(capsys):
     from vbgs.mapping import with_dotted
 
-    err = _forgotten(capsys, with_dotted(SceneTask(), "evidence.recolour_sigmas", 4.0))
+    ungated = with_dotted(with_dotted(SceneTask(), "evidence.recolour_sigmas", 4.0),
+                          "evidence.recolour_gate", 0.0)
+    err = _forgotten(capsys, ungated)
     assert "saw through them or showed them in another colour" in err
     assert "rims between differently coloured faces" in err
 

@@ -41,13 +41,17 @@ def test_a_changing_sweep_reports_changed_and_unchanged_pixels(tmp_path):
 
 def test_a_learner_is_named_in_words():
     cols = ["method", "replay", "from_frame", "evidence.forget_after",
-            "evidence.recolour_sigmas"]
+            "evidence.recolour_sigmas", "evidence.recolour_gate"]
     row = pd.Series({"method": "vbgs", "replay": "none", "from_frame": 0,
-                     "evidence.forget_after": 6.0, "evidence.recolour_sigmas": 4.0})
-    assert _learner(row, cols) == "VBGS, forget after 6, colour 4 sigmas"
+                     "evidence.forget_after": 6.0, "evidence.recolour_sigmas": 4.0,
+                     "evidence.recolour_gate": 0.0})
+    assert _learner(row, cols) == "VBGS, forget after 6, colour 4 sigmas, no colour gate"
+    row = pd.Series({"method": "vbgs", "replay": "none", "from_frame": 0,
+                     "evidence.forget_after": 6.0})  # the defaults: nothing more to say
+    assert _learner(row, cols) == "VBGS, forget after 6"
     row = pd.Series({"method": "vbgs", "replay": "none", "from_frame": 15,
                      "evidence.forget_after": 0, "evidence.recolour_sigmas": 0})
-    assert _learner(row, cols) == "VBGS, fresh map from frame 15, no forgetting"
+    assert _learner(row, cols) == "VBGS, fresh map from frame 15, no forgetting, no colour"
     row = pd.Series({"method": "gradient", "replay": "fifo:8", "from_frame": 0,
                      "evidence.forget_after": float("nan")})
     assert _learner(row, cols) == "gradient, replay fifo:8"

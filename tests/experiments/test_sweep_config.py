@@ -265,5 +265,6 @@ def test_a_nested_constant_is_a_dotted_setting():
 def test_the_changing_study_config_plans_each_learner():
     cells = [c.as_dict() for c in expand(load_config(CONFIGS / "continual_changing.toml")).cells]
     learners = {(c["method"], c.get("replay", "none"), c.get("evidence.forget_after"),
-                 c.get("evidence.recolour_sigmas"), c.get("from_frame", 0)) for c in cells}
-    assert len(cells) == 6 * len(learners) == 54  # three scenes, two seeds
+                 c.get("evidence.recolour_sigmas"), c.get("evidence.recolour_gate"),
+                 c.get("from_frame", 0)) for c in cells}
+    assert len(cells) == 6 * len(learners) == 60  # three scenes, two seeds

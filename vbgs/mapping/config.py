@@ -65,6 +65,21 @@ REFINE_SHARE = 0.05
 # 35, results/stream_rate/merge_ahead/), but loses under the Kinect at 640 x 480, where a
 # round frees 10k slots of a 20-frame stream: 0.02 stays.
 MERGE_AHEAD = 0.02
+# Colour read as evidence of change with exact depth, behind the colour gate
+# (vbgs.mapping.change, "A colour gate"). The rule: the best mean validation PSNR over the
+# changing scenes (object-change, room-change, walk-change) among the settings under which
+# a static stream with exact depth is what it is with colour off, to the bit. Without a
+# gate colour scores best (23.40 dB) but forgets the static object's rims; behind one, 4
+# colour sigmas at a gate of 0.5% of the slots is best (23.30 dB, against 23.28 at 1% and
+# 2%, where the walk's few changes no longer open it, and 23.19 at 2 sigmas;
+# results/tuning/recolour_gate/mean.md), 4 sigmas also the best of 2 to 8 without one
+# (results/tuning/recolour/). A static stream with exact depth forgets no component by
+# depth, or a handful of thin posts (the 200-frame walk 3 of 20000, 0.015%): far below
+# the gate. Under a measured sensor depth's own tails forget floaters by the hundred (the
+# RealSense's static object 4% of its slots, as many as the changing room's removed
+# furniture), so no gate tells a static world there: colour stays off (0).
+EXACT_RECOLOUR_SIGMAS = 4.0
+RECOLOUR_GATE = 0.005
 
 
 def _switch(name: str, value) -> None:
@@ -200,7 +215,9 @@ class EvidenceConfig:
     recolour_sigmas: a frame whose rays that hit a component show a mean colour farther
         than this many colour sigmas (``prior.colour_noise``) from what earlier frames'
         rays showed on it counts against it as a see-through does (a repainted surface;
-        0, the default: colour tells no change, :mod:`vbgs.mapping.change` says why);
+        0: colour tells no change; None, the default: :data:`EXACT_RECOLOUR_SIGMAS` with
+        exact depth behind the colour gate, 0 under a measured sensor,
+        :meth:`Config.recolour_sigmas`; :mod:`vbgs.mapping.change` says why);
     recolour_reference: what a frame's colour is judged against (``RECOLOUR_REFERENCES``):
         ``"history"``, the mean of what earlier frames' rays showed, the tolerance
         ``recolour_sigmas`` colour sigmas; ``"posterior"``, the component's colour
@@ -215,8 +232,8 @@ class EvidenceConfig:
         colour then counts in a run of its own, apart from the see-throughs, and a world
         that never showed change by depth is never recoloured, so a static stream is what
         it is with colour off, to the bit (:mod:`vbgs.mapping.change`, "A colour gate";
-        0, the default: no gate, colour counts in the see-throughs' run from the first
-        frame);
+        default :data:`RECOLOUR_GATE`; 0: no gate, colour counts in the see-throughs' run
+        from the first frame);
     shaped_points: a component holding at least this many points is seen through when
         the rays pass beyond it along its own shape (the Gaussian taken along each ray),
         one with fewer when they pass beyond its extent along the camera axis
@@ -241,9 +258,9 @@ class EvidenceConfig:
     prior_hits: float = opacity.PRIOR_HITS
     prior_passes: float = opacity.PRIOR_PASSES
     forget_after: int = FORGET_AFTER
-    recolour_sigmas: float = 0.0
+    recolour_sigmas: float | None = None
     recolour_reference: str = "history"
-    recolour_gate: float = 0.0
+    recolour_gate: float = RECOLOUR_GATE
     shaped_points: float = SHAPED_POINTS
     doubt_opacity: float | None = None
     # On. The rule is the best mean PSNR on the validation views of the changing and the
@@ -259,7 +276,8 @@ class EvidenceConfig:
             raise ValueError(f"evidence.forget_after must be a whole number of frames >= 0 "
                              f"(0: never forget), got {self.forget_after!r}")
         r = self.recolour_sigmas
-        if isinstance(r, bool) or not isinstance(r, int | float) or not 0 <= r < math.inf:
+        if r is not None and (isinstance(r, bool) or not isinstance(r, int | float)
+                              or not 0 <= r < math.inf):
             raise ValueError(f"evidence.recolour_sigmas must be a number >= 0 (0: colour "
                              f"tells no change), got {r!r}")
         _choice("evidence.recolour_reference", self.recolour_reference, RECOLOUR_REFERENCES)
@@ -470,6 +488,14 @@ class Config:
         (:func:`vbgs.mapping.denoise.sensor_radius`: 1 for the Kinect, 3 for the
         RealSense)."""
         return sensor_radius(self.sensor.model, self.growth.denoise_radius)
+
+    @property
+    def recolour_sigmas(self) -> float:
+        """``evidence.recolour_sigmas``, or when None the sensor's default
+        (:data:`EXACT_RECOLOUR_SIGMAS` with exact depth, 0, colour off, under a measured
+        sensor: :mod:`vbgs.mapping.change`, "A colour gate")."""
+        r = self.evidence.recolour_sigmas
+        return r if r is not None else (EXACT_RECOLOUR_SIGMAS if self.sensor.exact else 0.0)
 
     @property
     def doubt_opacity(self) -> float:

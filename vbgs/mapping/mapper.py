@@ -283,7 +283,7 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
         variance = depth_variance(geometry[0], frame.camera, sensor.model, level) \
             if sensor.noisy else None
         e = config.evidence
-        reads_colour = state.growing and e.forget_after > 0 and e.recolour_sigmas > 0
+        reads_colour = state.growing and e.forget_after > 0 and config.recolour_sigmas > 0
         seen = opacity.frame_evidence(  # a sensor's hole is no free space (_through)
             *geometry, frame.camera, frame.depth, pass_sigmas=e.pass_sigmas,
             sensor_var=variance, empty=empty,
@@ -325,7 +325,7 @@ def _blame(state: MapState, info: MapInfo, frame: Frame, background, config: Con
     the map before the frame (``info.before``), drawn as :func:`splats` draws it."""
     before = state._replace(mixture=state.mixture._replace(posterior=info.before))
     return change.blame(_splats(before, config), frame.camera, frame.rgb, background,
-                        config.evidence.recolour_sigmas, config.prior.colour_noise,
+                        config.recolour_sigmas, config.prior.colour_noise,
                         config.render.splat_blur)
 
 
@@ -342,7 +342,7 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
     doubt = change.observe(change.no_doubt(prior.n_components) if state.doubt is None
                            else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA,
                            reference=config.evidence.recolour_reference, colour=colour,
-                           recolour_sigmas=config.evidence.recolour_sigmas,
+                           recolour_sigmas=config.recolour_sigmas,
                            colour_noise=config.prior.colour_noise,
                            doubt_opacity=config.doubt_opacity,
                            prior=(config.evidence.prior_hits, config.evidence.prior_passes),

@@ -11,14 +11,17 @@ from vbgs import mapping
 from vbgs.data.synthetic import changing_scene, make_scene
 from vbgs.inference.grow import is_active
 from vbgs.mapping import change
-from vbgs.mapping.config import EvidenceConfig, SensorConfig
+from vbgs.mapping.config import (EXACT_RECOLOUR_SIGMAS, RECOLOUR_GATE, EvidenceConfig,
+                                 SensorConfig)
 from vbgs.sensors import simulate
 
 SIZE, FRAMES, K = 64, 24, 4000  # twelve frames a lap
 
 
-def config(forget_after=change.FORGET_AFTER, sensor=SensorConfig(), recolour=0.0,
-           shaped=change.SHAPED_POINTS, reference="history", gate=0.0):
+def config(forget_after=change.FORGET_AFTER, sensor=SensorConfig(), recolour=None,
+           shaped=change.SHAPED_POINTS, reference="history", gate=RECOLOUR_GATE):
+    """The map's config, its defaults where not given (colour behind the gate with exact
+    depth; ``recolour=0.0``: depth's evidence alone)."""
     return mapping.Config(components=K, sensor=sensor, evidence=EvidenceConfig(
         forget_after=forget_after, recolour_sigmas=recolour, shaped_points=shaped,
         recolour_reference=reference, recolour_gate=gate))
@@ -147,7 +150,7 @@ def test_a_repainted_world_is_learned_in_its_new_colours():
     background = (np.asarray(scene.background) + 0.5) % 1.0
     scores, forgotten = {}, {}
     for after in (change.FORGET_AFTER, 0):
-        c = config(forget_after=after, recolour=4.0)
+        c = config(forget_after=after, recolour=4.0, gate=0.0)
         state = stream(frames, c, background)
         splats = mapping.splats(state, c)
         mse = [float(((np.asarray(rasterize(splats, v.camera, background=background).rgb)
@@ -156,6 +159,8 @@ def test_a_repainted_world_is_learned_in_its_new_colours():
     assert forgotten[0] == 0 and forgotten[change.FORGET_AFTER] > 1000, (forgotten, scores)
     # measured 16.21 dB against 14.47: six frames of the twelve after the change relearn
     assert scores[change.FORGET_AFTER] > scores[0] + 1.3, scores
+    # behind the default gate a world that changed only in colour is depth's alone
+    assert stream(frames, config(), background).n_forgotten == 0
 
 
 def test_a_static_stream_forgets_nothing_to_the_bit():
@@ -188,9 +193,9 @@ def test_judged_by_colour_a_static_stream_forgets_nothing_to_the_bit(reference, 
     noisy = [f._replace(depth=simulate("kinect", f.depth, f.camera, seed=[0, i]))
              for i, f in enumerate(scene.train)]
     for frames, sensor in ((scene.train, SensorConfig()), (noisy, SensorConfig("kinect"))):
-        on = stream(frames, config(sensor=sensor, recolour=sigmas, reference=reference),
-                    scene.background)
-        off = stream(frames, config(sensor=sensor), scene.background)
+        on = stream(frames, config(sensor=sensor, recolour=sigmas, reference=reference,
+                                   gate=0.0), scene.background)
+        off = stream(frames, config(sensor=sensor, recolour=0.0), scene.background)
         assert on.n_forgotten == 0 and off.n_forgotten == 0
         for a, b in zip(jax.tree_util.tree_leaves(on.mixture),
                         jax.tree_util.tree_leaves(off.mixture), strict=True):
@@ -202,10 +207,10 @@ def test_behind_a_colour_gate_a_static_stream_forgets_nothing_to_the_bit():
     gate (``recolour_gate``) it forgets none until the depth has forgotten a share of
     the slots, which a static world never does: the map is depth's alone, to the bit."""
     scene = make_scene("object", size=SIZE, n_train=FRAMES, n_test=1, n_val=0)
-    ungated = stream(scene.train, config(recolour=4.0), scene.background)
+    ungated = stream(scene.train, config(recolour=4.0, gate=0.0), scene.background)
     assert ungated.n_forgotten > 0  # the test has something to hold back
     on = stream(scene.train, config(recolour=4.0, gate=0.01), scene.background)
-    off = stream(scene.train, config(), scene.background)
+    off = stream(scene.train, config(recolour=0.0), scene.background)
     assert on.n_forgotten == 0 and off.n_forgotten == 0
     assert int(np.asarray(on.doubt.runs).max()) >= change.FORGET_AFTER  # held back
     for a, b in zip(jax.tree_util.tree_leaves(on.mixture),
@@ -221,7 +226,7 @@ def test_behind_a_colour_gate_a_changed_world_is_recoloured_once_depth_saw_chang
     gated, depth = [], []
     stream(changed.train, config(recolour=4.0, gate=gate), changed.background,
            lambda state: gated.append(state.n_forgotten))
-    stream(changed.train, config(), changed.background,
+    stream(changed.train, config(recolour=0.0), changed.background,
            lambda state: depth.append(state.n_forgotten))
     opens = next(i for i, n in enumerate(depth) if n >= gate * K)
     assert gated[:opens] == depth[:opens]
@@ -229,7 +234,6 @@ def test_behind_a_colour_gate_a_changed_world_is_recoloured_once_depth_saw_chang
 
 
 def test_a_colour_gate_is_a_share():
-    assert EvidenceConfig().recolour_gate == 0.0
     for bad in (-0.1, 1.0, True):
         with pytest.raises(ValueError, match="recolour_gate"):
             EvidenceConfig(recolour_gate=bad)
@@ -247,17 +251,23 @@ def test_judged_against_its_posterior_a_repainted_surface_is_forgotten():
     frames = scene.train[:lap] + [repainted(f) for f in scene.train[lap:]]
     background = (np.asarray(scene.background) + 0.5) % 1.0
     counts = []
-    stream(frames, config(recolour=6.0, reference="posterior"), background,
+    stream(frames, config(recolour=6.0, reference="posterior", gate=0.0), background,
            each=lambda state: counts.append(state.n_forgotten))
     first = lap + change.FORGET_AFTER - 1  # the frame that completes the first run
     assert counts[first - 1] == 0 and counts[first] > 20, counts  # measured 29, then 36
     assert stream(frames, config(), background).n_forgotten == 0
 
 
-def test_colour_is_read_only_when_asked():
-    """Off by default (the records of static scenes stay what they were: colour is not
-    read); a tolerance that is not a number >= 0 is refused."""
-    assert EvidenceConfig().recolour_sigmas == 0.0
+def test_colour_is_read_by_default_with_exact_depth_only():
+    """By default colour counts with exact depth, behind the gate (so the records of
+    static scenes stay what they were: the gate never opens there), and not under a
+    measured sensor; a tolerance that is not a number >= 0 is refused."""
+    assert EvidenceConfig().recolour_sigmas is None
+    assert EvidenceConfig().recolour_gate == RECOLOUR_GATE > 0
+    assert mapping.Config(components=K).recolour_sigmas == EXACT_RECOLOUR_SIGMAS
+    assert mapping.Config(components=K, sensor=SensorConfig("kinect")).recolour_sigmas == 0.0
+    assert mapping.Config(components=K, sensor=SensorConfig("kinect"), evidence=EvidenceConfig(
+        recolour_sigmas=2.0)).recolour_sigmas == 2.0
     with pytest.raises(ValueError, match="recolour_sigmas"):
         EvidenceConfig(recolour_sigmas=-1.0)
     with pytest.raises(ValueError, match="recolour_sigmas"):

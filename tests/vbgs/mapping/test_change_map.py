@@ -77,12 +77,14 @@ def test_an_edge_component_seen_from_one_side_is_not_blamed():
 
 def test_against_the_map_a_repainted_surface_is_forgotten():
     """The object repainted after its first lap (the same depth): judged against the map,
-    its components are forgotten; by depth's evidence alone none is."""
+    its components are forgotten (no gate); by depth's evidence alone none is, nor behind
+    the default gate (nothing moved)."""
     scene = make_scene("object", size=SIZE, n_train=FRAMES, n_test=1, n_val=0)
     lap = FRAMES // 2
     frames = scene.train[:lap] + [repainted(f) for f in scene.train[lap:]]
     background = (np.asarray(scene.background) + 0.5) % 1.0
-    on = stream(frames, config(recolour=2.0, reference="map"), background)
-    off = stream(frames, config(), background)
+    on = stream(frames, config(recolour=2.0, reference="map", gate=0.0), background)
+    off = stream(frames, config(recolour=0.0), background)
+    assert stream(frames, config(recolour=2.0, reference="map"), background).n_forgotten == 0
     assert off.n_forgotten == 0
     assert on.n_forgotten > 300, on.n_forgotten  # measured 572 of about 4000
