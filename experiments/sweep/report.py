@@ -166,11 +166,23 @@ def _mean_std(values: pd.Series) -> str:
     return f"{mean:.{digits}f} ± {values.std(ddof=1):.{digits}f}"
 
 
+def _same_where_it_applies(df: pd.DataFrame, column: str) -> bool:
+    """Whether a setting has one value in every cell it applies to: one value where set,
+    and, with a ``method`` column, set in all or none of each method's cells (a cell that
+    leaves a setting its method reads unset runs its default, which may differ: the
+    default VBGS row beside one that sets ``evidence.recolour_gate = 0``)."""
+    if df[column].dropna().astype(str).nunique() != 1:
+        return False
+    if "method" not in df:
+        return True
+    set_by = df[column].notna().groupby(df["method"])
+    return bool((set_by.any() == set_by.all()).all())
+
+
 def summary_table(df: pd.DataFrame, settings: list[str]) -> tuple[str, dict]:
     """Markdown table of one task's ok cells, and the settings constant across them."""
     cols = [c for c in settings if c in df and c not in NOT_GROUPED and df[c].notna().any()]
-    fixed = {c: _cell(df[c].dropna().iloc[0]) for c in cols
-             if df[c].dropna().astype(str).nunique() == 1}
+    fixed = {c: _cell(df[c].dropna().iloc[0]) for c in cols if _same_where_it_applies(df, c)}
     group = [c for c in cols if c not in fixed]
     metrics = [(m, label) for m, label in METRICS if m in df and df[m].notna().any()]
     rows = []

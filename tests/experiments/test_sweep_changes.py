@@ -78,3 +78,20 @@ def test_a_setting_only_some_cells_name_tells_their_lines_apart():
     cols = _line_columns(df, list(df.columns))
     assert cols == ["from_frame"]
     assert _labels(df, cols).tolist() == ["", "from_frame=15"]
+
+
+def test_a_setting_left_at_its_default_in_some_cells_of_a_method_is_not_said_fixed():
+    """The changing study's default VBGS row leaves ``evidence.recolour_gate`` unset (its
+    default) beside a row that sets it to 0: the table keeps the column, and does not say
+    the setting is 0 for every row; a setting only one method reads, set in all its cells,
+    is still said once."""
+    from experiments.sweep.report import summary_table
+
+    df = pd.DataFrame([
+        {"method": "vbgs", "evidence.recolour_gate": None, "steps": None, "psnr": 20.0},
+        {"method": "vbgs", "evidence.recolour_gate": 0.0, "steps": None, "psnr": 21.0},
+        {"method": "gradient", "evidence.recolour_gate": None, "steps": 50, "psnr": 19.0},
+    ])
+    table, fixed = summary_table(df, ["method", "evidence.recolour_gate", "steps"])
+    assert "evidence.recolour_gate" not in fixed and "evidence.recolour_gate" in table
+    assert fixed == {"steps": 50}
