@@ -81,9 +81,9 @@ def add(sub):
     p.add_argument("--recolour-sigmas", type=float, default=None, metavar="S",
                    help="VBGS: a frame whose rays on a component show a mean colour more "
                         "than S colour sigmas from what earlier frames' rays showed on it "
-                        "counts toward forgetting it, as a see-through does (a repainted "
-                        "surface; default: 4 with exact depth, behind --recolour-gate, "
-                        "0, colour tells no change, under a measured --sensor)")
+                        "counts toward forgetting it (a repainted surface; in a run of its "
+                        "own behind --recolour-gate; default: 4 with exact depth, 0, colour "
+                        "tells no change, under a measured --sensor)")
     p.add_argument("--recolour-reference", default=None, metavar="REF",  # the map checks it
                    help="VBGS: what --recolour-sigmas judges a frame's colour against: "
                         "history, the mean of what earlier frames' rays showed (S colour "
