@@ -310,7 +310,8 @@ def _history(doubt: Doubt, hits, seen_through, judged, shown, n_shown, colour_to
 @partial(jax.jit, static_argnames="apart")
 def _posterior(doubt: Doubt, hits, seen_through, judged, shown, n_shown, spread, mean, kappa,
                sigmas, colour_noise, apart: bool = False):
-    held = doubt.frames > 0  # in a run of doubt: judged against the colour before it
+    held = (doubt.runs if apart else doubt.frames) > 0  # in a run of doubt (of colour,
+    #                                    apart): judged against the colour before it
     kappa = jnp.where(held, doubt.weight, kappa)
     mean = jnp.where(held[:, None], doubt.colour / jnp.maximum(kappa, 1e-6)[:, None], mean)
     expected = 3.0 * colour_noise**2 * (1.0 + 1.0 / jnp.maximum(kappa, 1e-6)) + spread

@@ -233,6 +233,25 @@ def test_behind_a_colour_gate_a_changed_world_is_recoloured_once_depth_saw_chang
     assert gated[-1] > depth[-1] > 0, (gated, depth)
 
 
+def test_in_a_colour_run_of_its_own_the_posterior_reference_is_held():
+    """Under a gate (colour counted apart), the posterior reference is held at the colour
+    before the run while a run of recolourings lasts, as it is within a see-through run
+    without one: the frames after a change do not drag the reference after them."""
+    k = 2
+    held = change.no_doubt(k)._replace(runs=jnp.array([2, 0], jnp.int32),
+                                       colour=jnp.array([[0.2, 0.2, 0.2]] * k) * 20.0,
+                                       weight=jnp.full(k, 20.0))
+    mean, kappa = jnp.full((k, 3), 0.8), jnp.full(k, 50.0)
+    ones = jnp.ones(k)
+    out = change._posterior(held, ones, jnp.zeros(k, bool), jnp.ones(k, bool),
+                            jnp.full((k, 3), 0.8), jnp.full(k, 5, jnp.int32), jnp.zeros(k),
+                            mean, kappa, jnp.float32(4.0), jnp.float32(0.05), apart=True)
+    reference = np.asarray(out.colour) / np.asarray(out.weight)[:, None]
+    np.testing.assert_allclose(reference[0], 0.2, rtol=1e-6)  # held: the run goes on
+    np.testing.assert_allclose(reference[1], 0.8, rtol=1e-6)  # no run: the posterior
+    assert np.asarray(out.runs).tolist() == [3, 0] and np.asarray(out.frames).tolist() == [0, 0]
+
+
 def test_a_colour_gate_is_a_share():
     for bad in (-0.1, 1.0, True):
         with pytest.raises(ValueError, match="recolour_gate"):
