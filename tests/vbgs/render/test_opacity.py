@@ -171,3 +171,18 @@ def test_the_background_is_seen_through_only_within_the_sensors_range():
     assert not through(empty=empty, through_empty=empty, through_reach=1.5)[3]
     assert not through(empty=empty, through_empty=np.zeros_like(empty))[3]
     assert not through(empty=empty, through_empty=empty, through_reach=4.5)[0]  # on the wall
+
+
+def test_the_samples_are_summed_in_pairs_to_the_same_totals():
+    """The frame's colours are summed over their samples plane by plane, adjacent pairs
+    first (``_over_samples``): the same totals as a sum over the samples' axis, for any
+    count of samples."""
+    from vbgs.render.opacity import _over_samples
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3, 5, 8):
+        planes = rng.random((n, 64, 3)).astype(np.float32)
+        out = np.asarray(_over_samples([jnp.asarray(p) for p in planes]))
+        np.testing.assert_allclose(out, planes.sum(0), rtol=1e-6)
+    ints = [jnp.full((4,), float(i)) for i in range(5)]
+    assert np.asarray(_over_samples(ints)).tolist() == [10.0] * 4
