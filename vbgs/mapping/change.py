@@ -410,14 +410,16 @@ def observe(doubt: Doubt, frame: FrameEvidence, evidence: Evidence, active, *,
                     apart=apart)
 
 
-def gone(doubt: Doubt, forget_after: int, recoloured: bool = False) -> np.ndarray:
+def gone(doubt: Doubt, forget_after: int, gate: float = 0.0, n_forgotten: int = 0
+         ) -> np.ndarray:
     """``[m]`` the components seen through ``forget_after`` frames in a row (none when
-    0); with ``recoloured`` also those recoloured that many frames in a row in their own
-    run (``doubt.runs``, under a colour gate once it is open)."""
+    0), and under a colour ``gate`` those recoloured that many frames in a row in their
+    own run (``doubt.runs``) once the gate is open: :func:`gate_open` with the map's
+    ``n_forgotten`` before the frame and the frame's own see-throughs."""
     if forget_after <= 0:
         return np.zeros(0, np.int64)
     out = np.asarray(doubt.frames) >= forget_after
-    if recoloured:
+    if gate_open(n_forgotten + int(out.sum()), len(out), gate):
         out = out | (np.asarray(doubt.runs) >= forget_after)
     return np.flatnonzero(out)
 

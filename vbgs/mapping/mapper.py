@@ -347,9 +347,7 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
                            doubt_opacity=config.doubt_opacity,
                            prior=(config.evidence.prior_hits, config.evidence.prior_passes),
                            apart=gate > 0)
-    by_depth = change.gone(doubt, after)
-    slots = change.gone(doubt, after, recoloured=change.gate_open(
-        state.n_forgotten + len(by_depth), prior.n_components, gate)) if gate > 0 else by_depth
+    slots = change.gone(doubt, after, gate, state.n_forgotten)
     if len(slots) == 0:
         return state._replace(doubt=doubt)
     empty = grow.empty_prior(prior.n_components, prior.origin, state.rule.cell, config.prior,
