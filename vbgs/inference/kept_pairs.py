@@ -91,7 +91,7 @@ def pairs_and_costs(posterior: Mixture, counts: np.ndarray, active: np.ndarray,
                    | (now["colour"] != last.colour).any(1) | (now["counts"] != last.counts))
     means = now["mean"][idx].astype(np.float64)
     near, reach = _nearest(means, idx, moved, last, c)
-    pairs = _pairs(idx, near, k)
+    pairs = merge.listed_pairs(idx, near[idx])
     cost = _costs(posterior, now["counts"], pairs, changed, last, k, colour_noise)
     _last[0] = _Kept(**now, near=near, reach=reach, pairs=pairs, cost=cost, settings=settings)
     return pairs, cost
@@ -121,19 +121,6 @@ def _nearest(means: np.ndarray, idx: np.ndarray, moved: np.ndarray, last: _Kept 
         dist, pos = np.asarray(dist).reshape(-1, c), np.asarray(pos).reshape(-1, c)
         near[idx[redo]], reach[idx[redo]] = idx[pos], dist[:, -1]
     return near, reach
-
-
-def _pairs(idx: np.ndarray, near: np.ndarray, k: int) -> np.ndarray:
-    """``[p, 2]`` the pairs ``(a, b)`` with ``b`` among ``a``'s nearest (past itself) and
-    ``a < b``, each once, sorted: :func:`vbgs.inference.merge.neighbour_pairs`' pairs,
-    in slots (the active slots are in the order of their positions)."""
-    c = near.shape[1]
-    a = np.repeat(idx, c - 1)
-    b = near[idx, 1:].reshape(-1)
-    keep = a < b
-    key = np.sort(a[keep] * k + b[keep])
-    key = key[np.concatenate([[True], key[1:] != key[:-1]])]
-    return np.stack([key // k, key % k], 1)
 
 
 def _costs(posterior: Mixture, counts: np.ndarray, pairs: np.ndarray, changed: np.ndarray,

@@ -139,8 +139,8 @@ def test_the_greedy_rounds_hand_a_long_chain_to_the_pair_by_pair_loop(n):
 
 
 def test_neighbour_pairs_are_the_active_components_with_their_nearest_once():
-    """Against the pairs written out from all distances: the tree search and the sorted
-    dedup of the packed pairs give each pair once, in order."""
+    """Against the pairs written out from all distances: the tree search and the rows'
+    pairs sorted row by row (merge.listed_pairs) give each pair once, in order."""
     rng = np.random.default_rng(2)
     means = rng.uniform(-1.0, 1.0, (300, 3)).astype(np.float32)
     active = rng.random(300) < 0.8

@@ -2,6 +2,7 @@
 KD-tree's nearest points (the reference), and the masked quadric they are fitted with."""
 
 import numpy as np
+import pytest
 
 from vbgs.inference import grow, pixel_patches, quadric
 from vbgs.inference.pixel_patches import PixelGrid
@@ -235,3 +236,20 @@ def test_a_masked_point_counts_for_nothing():
         np.testing.assert_allclose(normal[m], n1[0], rtol=1e-4, atol=1e-5)
         np.testing.assert_allclose(height[m], h1[0], rtol=1e-4, atol=1e-6)
     assert len(idx[2][weight[2] > 0]) < quadric.QUADRIC_MIN_POINTS
+
+
+def test_the_images_hold_each_point_at_its_padded_pixel_and_refuse_more_than_the_lattice():
+    depth = _plane_depth(30, 40, TILT, -2.0)
+    x, grid = _frame(depth, step=2)
+    ray = np.tile([0.0, 0.0, 0.01], (len(x), 1))
+    im = pixel_patches.images(x, grid, 3, ray)
+    h, w = grid.shape
+    at = (grid.flat // w + 3) * im.width + grid.flat % w + 3
+    index = np.asarray(im.index)
+    assert index.shape == ((h + 6) * (w + 6),) and (index[at] == np.arange(len(x))).all()
+    assert (np.delete(index, at) == -1).all()  # the rest, the pad among it, hold nothing
+    assert np.array_equal(np.asarray(im.xyz)[at], x.astype(np.float32))
+    assert np.array_equal(np.asarray(im.noise)[at], ray.astype(np.float32))
+    assert not np.asarray(im.xyz)[np.delete(np.arange(len(index)), at)].any()
+    with pytest.raises(ValueError, match="lattice of step 2"):
+        pixel_patches.images(np.zeros((15 * 20 + 1, 3)), grid, 3)
