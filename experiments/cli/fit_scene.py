@@ -74,6 +74,11 @@ def add(sub):
                    help="VBGS: once the components are all in use, a round of merges frees "
                         "at least this share of them, so that rounds come less often "
                         "(default: the map's growth.merge_ahead)")
+    p.add_argument("--spent-levels", type=int, default=None, metavar="J",
+                   help="VBGS: once the components are all in use, new ground takes cells "
+                        "J levels coarser (2^J times the side), so ground met late costs "
+                        "fewer merges of what was learned first (default: the map's "
+                        "growth.spent_levels; 0: the same cells throughout)")
     p.add_argument("--forget-after", type=int, default=None, metavar="N",
                    help="VBGS forgets a component its frames have seen through N times in a "
                         "row, none hitting it: what the world no longer holds (default: "
@@ -244,13 +249,15 @@ def run(args) -> dict:
 
 
 def _growth(args) -> dict:
-    """The task's ``growth`` setting where ``--hold-seeds``, ``--hold-paid`` or
-    ``--merge-ahead`` changes it (else none: the map's defaults)."""
+    """The task's ``growth`` setting where ``--hold-seeds``, ``--hold-paid``,
+    ``--merge-ahead`` or ``--spent-levels`` changes it (else none: the map's defaults)."""
     from vbgs.mapping import GrowthConfig
 
     given = {name: True for name in ("hold_seeds", "hold_paid") if getattr(args, name)}
     if args.merge_ahead is not None:
         given["merge_ahead"] = args.merge_ahead
+    if args.spent_levels is not None:
+        given["spent_levels"] = args.spent_levels
     return {"growth": GrowthConfig(**given)} if given else {}
 
 

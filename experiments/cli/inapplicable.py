@@ -94,6 +94,7 @@ RULES = {
                              ("doubt_opacity", "--doubt-opacity"),
                              ("hold_seeds", "--hold-seeds"), ("hold_paid", "--hold-paid"),
                              ("merge_ahead", "--merge-ahead"),
+                             ("spent_levels", "--spent-levels"),
                              ("through_background", "--[no-]through-background"))),
         _SENSOR_LEVEL,
     ),

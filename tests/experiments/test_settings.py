@@ -21,6 +21,7 @@ NOT_TASK_FIELDS = {"json", "save", "ply", "plot", "out", "grid", "command", "rea
                    "doubt_opacity",
                    "hold_seeds", "hold_paid",  # the nested growth.hold_* (off: their defaults)
                    "merge_ahead",  # the nested growth.merge_ahead (None: its default)
+                   "spent_levels",  # the nested growth.spent_levels (None: its default)
                    "through_background"}  # the nested evidence.through_background (None: its default)
 
 
@@ -63,6 +64,7 @@ def test_hold_flags_default_to_the_growth_config():
     assert flags["hold_seeds"] == GrowthConfig().hold_seeds == SceneTask().growth.hold_seeds
     assert flags["hold_paid"] == GrowthConfig().hold_paid == SceneTask().growth.hold_paid
     assert flags["merge_ahead"] is None  # the map's growth.merge_ahead
+    assert flags["spent_levels"] is None  # the map's growth.spent_levels
     from vbgs.mapping import EvidenceConfig
     assert flags["through_background"] is None  # the map's evidence.through_background
     assert EvidenceConfig().through_background is SceneTask().evidence.through_background

@@ -65,6 +65,9 @@ REFINE_SHARE = 0.05
 # 35, results/stream_rate/merge_ahead/), but loses under the Kinect at 640 x 480, where a
 # round frees 10k slots of a 20-frame stream: 0.02 stays.
 MERGE_AHEAD = 0.02
+# New ground once the budget is spent: cells this many levels coarser. Placeholder 0
+# until tuned.
+SPENT_LEVELS = 0
 # Colour read as evidence of change with exact depth, behind the colour gate
 # (vbgs.mapping.change, "A colour gate"). The rule: the best mean validation PSNR over the
 # changing scenes (object-change, room-change, walk-change) among the settings under which
@@ -131,7 +134,11 @@ class GrowthConfig:
     hold_seeds: a component's seed (its prior mean) holds its cell as its posterior mean
         does, so ground whose components' means moved out of it is not grown again;
     hold_paid: the cells where merged components stood stay held (a merge pays for the
-        ground once; ``vbgs.mapping.mapper._paid``).
+        ground once; ``vbgs.mapping.mapper._paid``);
+    spent_levels: once the budget is spent (a round of merges has made room), new ground
+        takes cells this many levels coarser (side ``cell * 2^j`` more), so the ground a
+        stream meets late costs fewer components and fewer merges of what it learned
+        first (``vbgs.mapping.mapper._spent_levels``; 0: the same cells throughout).
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -150,6 +157,7 @@ class GrowthConfig:
     # 23.61 against 23.66 dB): off.
     hold_paid: bool = False
     hold_seeds: bool = False
+    spent_levels: int = SPENT_LEVELS
     coarse_from: float = grow.COARSE_FROM
     auto_points: float = AUTO_POINTS
     auto_merge_every: int = AUTO_MERGE_EVERY
@@ -192,6 +200,11 @@ class GrowthConfig:
         _positive("growth", "reach_cells", self.reach_cells)
         if not (isinstance(self.refine_share, (int, float)) and 0 <= self.refine_share <= 1):
             raise ValueError(f"growth.refine_share must be in [0, 1], got {self.refine_share!r}")
+        if not isinstance(self.spent_levels, int) or isinstance(self.spent_levels, bool) \
+                or self.spent_levels < 0:
+            raise ValueError(f"growth.spent_levels must be a whole number of cell levels >= 0 "
+                             f"(0: new ground takes the same cells once the budget is "
+                             f"spent), got {self.spent_levels!r}")
         if not isinstance(self.levels, int) or self.levels < 1:
             raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
         for name in ("merge", "hold_paid", "hold_seeds"):
