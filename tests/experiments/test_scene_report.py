@@ -2,6 +2,7 @@
 
 from experiments.tasks.scene_report import warn_all, warn_forgotten
 from experiments.tasks.scene_task import SceneTask
+from vbgs.mapping import GrowthConfig
 
 
 def test_forgotten_components_are_said_with_the_count_and_the_way_back(capsys):
@@ -61,8 +62,13 @@ def test_a_spent_budget_is_said_with_what_it_cost_the_first_views(capsys):
     err = capsys.readouterr().err
     assert "all 20000 components were in use, so 4 rounds merged 1600 neighbours" in err
     assert "26.10 dB when seen and 25.60 dB at the end (lost 0.50 dB" in err
+    assert "--spent-levels 1 grows the ground met once they are all in use" in err
+    coarse = SceneTask(components=20000, growth=GrowthConfig(spent_levels=1))
+    warn_budget_spent(details, coarse, (26.10, 25.60))  # already coarser: not offered again
+    assert "lost 0.50 dB" in (err := capsys.readouterr().err) and "--spent-levels" not in err
     warn_budget_spent(details, SceneTask(components=20000), (22.71, 23.61))
-    assert "(gained 0.90 dB meanwhile" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "(gained 0.90 dB meanwhile" in err and "--spent-levels" not in err
     warn_budget_spent({"merge_rounds": 0}, SceneTask(), (1.0, 2.0))  # room to spare: silent
     warn_budget_spent(details, SceneTask(components="auto"), (1.0, 2.0))  # auto: its own
     assert capsys.readouterr().err == ""
