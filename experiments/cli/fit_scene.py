@@ -74,10 +74,11 @@ def add(sub):
                    help="VBGS: once the components are all in use, a round of merges frees "
                         "at least this share of them, so that rounds come less often "
                         "(default: the map's growth.merge_ahead)")
-    p.add_argument("--spent-levels", type=int, default=None, metavar="J",
+    p.add_argument("--spent-levels", type=_spent_levels, default=None, metavar="J|ground",
                    help="VBGS: once the components are all in use, new ground takes cells "
                         "J levels coarser (2^J times the side), so ground met late costs "
-                        "fewer merges of what was learned first (default: the map's "
+                        "fewer merges of what was learned first; ground: as many levels "
+                        "as the ground met so far allows (default: the map's "
                         "growth.spent_levels; 0: the same cells throughout)")
     p.add_argument("--forget-after", type=int, default=None, metavar="N",
                    help="VBGS forgets a component its frames have seen through N times in a "
@@ -246,6 +247,17 @@ def run(args) -> dict:
         save_trajectory_plot(args.plot, out, f"{args.scene}, --poses {args.poses}: ATE RMSE "
                                              f"{out['ate_rmse']:.4f}")
     return out
+
+
+def _spent_levels(text: str) -> int | str:
+    """``--spent-levels``' value: ``ground`` or a whole number (the map checks its range)."""
+    if text == "ground":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a whole number of levels or ground, got {text!r}"
+                                         ) from None
 
 
 def _growth(args) -> dict:

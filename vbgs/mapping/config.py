@@ -141,7 +141,9 @@ class GrowthConfig:
     spent_levels: once the budget is spent (a round of merges has made room), new ground
         takes cells this many levels coarser (side ``cell * 2^j`` more), so the ground a
         stream meets late costs fewer components and fewer merges of what it learned
-        first (``vbgs.mapping.mapper._spent_levels``; 0: the same cells throughout).
+        first (``vbgs.mapping.mapper._spent_levels``; 0: the same cells throughout;
+        ``"ground"``: as many as the ground met so far allows,
+        ``vbgs.mapping.mapper.ground_levels``).
     """
 
     first_frame_share: float = FIRST_FRAME_SHARE
@@ -160,7 +162,7 @@ class GrowthConfig:
     # 23.61 against 23.66 dB): off.
     hold_paid: bool = False
     hold_seeds: bool = False
-    spent_levels: int = SPENT_LEVELS
+    spent_levels: int | str = SPENT_LEVELS
     coarse_from: float = grow.COARSE_FROM
     auto_points: float = AUTO_POINTS
     auto_merge_every: int = AUTO_MERGE_EVERY
@@ -203,11 +205,12 @@ class GrowthConfig:
         _positive("growth", "reach_cells", self.reach_cells)
         if not (isinstance(self.refine_share, (int, float)) and 0 <= self.refine_share <= 1):
             raise ValueError(f"growth.refine_share must be in [0, 1], got {self.refine_share!r}")
-        if not isinstance(self.spent_levels, int) or isinstance(self.spent_levels, bool) \
-                or self.spent_levels < 0:
+        j = self.spent_levels
+        if j != "ground" and (not isinstance(j, int) or isinstance(j, bool) or j < 0):
             raise ValueError(f"growth.spent_levels must be a whole number of cell levels >= 0 "
                              f"(0: new ground takes the same cells once the budget is "
-                             f"spent), got {self.spent_levels!r}")
+                             f"spent) or \"ground\" (as many as the ground met allows), "
+                             f"got {j!r}")
         if not isinstance(self.levels, int) or self.levels < 1:
             raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
         for name in ("merge", "hold_paid", "hold_seeds"):

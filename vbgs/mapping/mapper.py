@@ -547,15 +547,30 @@ def _spent_levels(state: MapState, levels: np.ndarray | None, n: int, config: Co
     """The growth levels of a frame's ``n`` points (``levels [n]``, their coarse levels,
     or None: all 0) once the budget is spent: ``growth.spent_levels`` coarser after the
     map's first round of merges (the points as they are before it, or with the setting
-    0). Why: a stream that keeps meeting new ground with every slot in use pays for each
-    new component by merging two it learned before, and at the cells it started with it
-    pays as much for the ground it meets last as for the ground it met first: a 200-frame
-    walk over new ground at 20k components merged 104k components in 161 rounds and its
-    first views fell 2 dB from when they were seen."""
+    0); ``"ground"``: as many as the ground the stream has met allows
+    (:func:`ground_levels`). Why: a stream that keeps meeting new ground with every slot
+    in use pays for each new component by merging two it learned before, and at the
+    cells it started with it pays as much for the ground it meets last as for the ground
+    it met first: a 200-frame walk over new ground at 20k components merged 104k
+    components in 161 rounds and its first views fell 2 dB from when they were seen."""
     up = config.growth.spent_levels
+    if up == "ground":
+        up = ground_levels(state.n_merged, config.max_components)
     if up <= 0 or state.n_merge_rounds == 0:
         return levels
     return np.full(n, up, np.int64) if levels is None else levels + up
+
+
+def ground_levels(merged: int, k: int) -> int:
+    """The cell levels new ground may take coarser once ``merged`` components have been
+    merged to make room in ``k`` slots: each merge paid for a component of new ground, so
+    the stream has met about ``1 + merged / k`` times the ground its ``k`` slots first
+    held, and the same ``k`` slots spread over it hold surfaces at that many times the
+    area each, a side ``sqrt`` of it: ``floor(log4(1 + merged / k))`` levels (a level
+    doubles the side). A stream that meets its ground once and stays in it (one lap of a
+    room, which merges about ``k`` in all) never reaches a level; a 200-frame walk over
+    new ground reaches one after merging ``3 k``."""
+    return int(np.floor(np.log(1.0 + merged / k) / np.log(4.0)))
 
 
 def _within_budget(state: MapState, frame: Frame, config: Config

@@ -1,6 +1,7 @@
 """vbgs.mapping: the scene learner as pure functions over a MapState, one nested Config."""
 
 import dataclasses
+import importlib
 
 import jax
 import numpy as np
@@ -315,3 +316,32 @@ def test_new_ground_takes_coarser_cells_once_the_budget_is_spent():
     assert scale[1] > 3.0 * scale[0]  # most components now a coarse cell's (measured 3.4x)
     with pytest.raises(ValueError, match="growth.spent_levels must be a whole number"):
         mapping.GrowthConfig(spent_levels=-1)
+
+
+def test_ground_levels_follow_the_ground_the_stream_has_met():
+    """``growth.spent_levels = "ground"``: a level coarser once the merges have paid for
+    three times the slots' ground (the same slots over four times the ground: twice the
+    side), two at fifteen; the walk at 32 px with 300 slots over 24 frames grows as it
+    does without it until it has merged 900, then far less (measured: 339 grown in the
+    last six frames against 1467)."""
+    mapper_module = importlib.import_module("vbgs.mapping.mapper")
+    assert [mapper_module.ground_levels(m, 300) for m in (0, 899, 900, 4499, 4500)] == \
+        [0, 0, 1, 1, 2]
+    walk = load_scene("walk", size=32, n_train=24, n_test=2, seed=0)
+    runs = {}
+    for up in (0, "ground"):
+        config = mapping.Config(components=300)
+        config = dataclasses.replace(config, growth=dataclasses.replace(
+            config.growth, first_frame_share=0.5, spent_levels=up))
+        state, log = mapping.init(config, key=jax.random.key(0)), []
+        for frame in walk.train:
+            before = state.n_merged
+            state, info = mapping.update(state, frame, config)
+            log.append((before, info.n_new))
+        runs[up] = log
+    first = next(i for i, (before, _) in enumerate(runs["ground"]) if before >= 900)
+    assert 0 < first < len(walk.train) - 2 and runs[0][:first] == runs["ground"][:first]
+    late = {up: sum(n for _, n in log[first:]) for up, log in runs.items()}
+    assert late["ground"] < 0.5 * late[0], late
+    with pytest.raises(ValueError, match='or "ground"'):
+        mapping.GrowthConfig(spent_levels="all")
