@@ -125,6 +125,18 @@ def typed(kind: type, text: str):
     return kind(text)
 
 
+def _nested_value(kind: type, text: str):
+    """A method constant's grid value: :func:`typed`, except that a whole-number constant
+    that also takes a word (``growth.spent_levels = ground``) reads a word as itself; the
+    nested config then refuses a word it does not take, in its own words."""
+    try:
+        return typed(kind, text)
+    except ValueError:
+        if kind is int and text.strip().isalpha():
+            return text.strip()
+        raise
+
+
 def parse_grid(specs: list[str], task) -> dict[str, list]:
     """``["name=v1,v2", ...]`` -> ``{name: [v1, v2]}``, each value converted to the type
     of the task's current value of ``name`` (float when that is None)."""
@@ -154,7 +166,7 @@ def parse_grid(specs: list[str], task) -> dict[str, list]:
         if is_nested_setting(name):
             kind = type(get_dotted(task, name))
             try:
-                grid[name] = [typed(kind, v) for v in values.split(",")]
+                grid[name] = [_nested_value(kind, v) for v in values.split(",")]
             except ValueError:
                 raise ValueError(f"--grid {name}: cannot read {values!r} as {kind.__name__} "
                                  f"values") from None

@@ -75,6 +75,17 @@ def test_a_constant_chosen_per_case_reads_none_and_whole_numbers():
         parse_grid(["growth.denoise_radius=1.5"], TINY)
 
 
+def test_a_whole_number_constant_that_takes_a_word_reads_it():
+    """``growth.spent_levels`` takes a number of levels or the word ``ground``: the grid
+    reads both, and the map refuses a word it does not take, in its own words."""
+    grid = parse_grid(["growth.spent_levels=0,1,ground"], TINY)
+    assert grid == {"growth.spent_levels": [0, 1, "ground"]}
+    with pytest.raises(ValueError, match='growth.spent_levels must be a whole number'):
+        parse_grid(["growth.spent_levels=0,all"], TINY)
+    with pytest.raises(ValueError, match="cannot read '1,2.5' as int"):
+        parse_grid(["growth.levels=1,2.5"], TINY)
+
+
 @pytest.mark.parametrize("spec, message", [
     (["prior.bogus=1"], "'prior.bogus' is not a method constant"),
     (["prior.cov_scale=-1"], "cov_scale must be a positive finite number"),
