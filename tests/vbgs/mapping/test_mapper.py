@@ -285,30 +285,35 @@ def test_ground_a_merge_paid_for_stays_held_until_its_component_is_forgotten():
     assert not any(tuple(c) in gone for c in cells.cell_index(left, on.rule.cell))
 
 
+def _spent_walk(n_train: int, levels) -> list[tuple[int, int, int, mapping.MapState]]:
+    """The walk at 32 px with 300 slots (half of them for its first frame) under
+    ``growth.spent_levels = levels``: per frame, the merge rounds and merged components
+    before it, the components it grew and the state after it."""
+    walk = load_scene("walk", size=32, n_train=n_train, n_test=2, seed=0)
+    config = mapping.Config(components=300)
+    config = dataclasses.replace(config, growth=dataclasses.replace(
+        config.growth, first_frame_share=0.5, spent_levels=levels))
+    state, log = mapping.init(config, key=jax.random.key(0)), []
+    for frame in walk.train:
+        rounds, merged = state.n_merge_rounds, state.n_merged
+        state, info = mapping.update(state, frame, config)
+        log.append((rounds, merged, info.n_new, state))
+    return log
+
+
 def test_new_ground_takes_coarser_cells_once_the_budget_is_spent():
     """``growth.spent_levels``: up to the first round of merges the stream is the one
     without it, to the bit; after it new ground takes cells a level coarser, so the walk
     at 32 px with 300 slots grows fewer components after its budget is spent (each a
     coarse cell's, its prior scale four times a fine one's) and merges fewer of what it
     learned first to pay for them."""
-    walk = load_scene("walk", size=32, n_train=12, n_test=2, seed=0)
-    runs = {}
-    for up in (0, 1):
-        config = mapping.Config(components=300)
-        config = dataclasses.replace(config, growth=dataclasses.replace(
-            config.growth, first_frame_share=0.5, spent_levels=up))
-        state, log = mapping.init(config, key=jax.random.key(0)), []
-        for frame in walk.train:
-            before = state.n_merge_rounds
-            state, info = mapping.update(state, frame, config)
-            log.append((before, info.n_new, state))
-        runs[up] = log
-    first = next(i for i, (before, _, _) in enumerate(runs[0]) if before > 0)
+    runs = {up: _spent_walk(12, up) for up in (0, 1)}
+    first = next(i for i, row in enumerate(runs[0]) if row[0] > 0)
     for i in range(first):  # no round of merges before frame `first`: the same stream
-        same = runs[0][i][2].mixture.posterior.space.mean, runs[1][i][2].mixture.posterior.space.mean
-        assert np.array_equal(np.asarray(same[0]), np.asarray(same[1]))
-    after = {up: sum(n for before, n, _ in log if before > 0) for up, log in runs.items()}
-    end = {up: log[-1][2] for up, log in runs.items()}
+        same = (runs[up][i][3].mixture.posterior.space.mean for up in (0, 1))
+        assert np.array_equal(*(np.asarray(m) for m in same))
+    after = {up: sum(row[2] for row in log if row[0] > 0) for up, log in runs.items()}
+    end = {up: log[-1][3] for up, log in runs.items()}
     # measured: 591 grown after the first round against 2094, 247 merged against 748
     assert 0 < after[1] < 0.5 * after[0] and end[1].n_merged < 0.5 * end[0].n_merged
     scale = {up: np.median(np.trace(np.asarray(s.mixture.prior.space.scale), axis1=1, axis2=2)[
@@ -327,20 +332,9 @@ def test_ground_levels_follow_the_ground_the_stream_has_met():
     mapper_module = importlib.import_module("vbgs.mapping.mapper")
     assert [mapper_module.ground_levels(m, 300) for m in (0, 899, 900, 4499, 4500)] == \
         [0, 0, 1, 1, 2]
-    walk = load_scene("walk", size=32, n_train=24, n_test=2, seed=0)
-    runs = {}
-    for up in (0, "ground"):
-        config = mapping.Config(components=300)
-        config = dataclasses.replace(config, growth=dataclasses.replace(
-            config.growth, first_frame_share=0.5, spent_levels=up))
-        state, log = mapping.init(config, key=jax.random.key(0)), []
-        for frame in walk.train:
-            before = state.n_merged
-            state, info = mapping.update(state, frame, config)
-            log.append((before, info.n_new))
-        runs[up] = log
-    first = next(i for i, (before, _) in enumerate(runs["ground"]) if before >= 900)
-    assert 0 < first < len(walk.train) - 2 and runs[0][:first] == runs["ground"][:first]
+    runs = {up: [row[1:3] for row in _spent_walk(24, up)] for up in (0, "ground")}
+    first = next(i for i, (merged, _) in enumerate(runs["ground"]) if merged >= 900)
+    assert 0 < first < len(runs[0]) - 2 and runs[0][:first] == runs["ground"][:first]
     late = {up: sum(n for _, n in log[first:]) for up, log in runs.items()}
     assert late["ground"] < 0.5 * late[0], late
     with pytest.raises(ValueError, match='or "ground"'):
