@@ -203,7 +203,7 @@ def listed_pairs(idx: np.ndarray, near: np.ndarray) -> np.ndarray:
     left out) with ``a < b``, sorted: each pair once, as one row lists a slot once.
     Sorted row by row (``c`` entries each) rather than as one packed key over all of
     them: the same order (rows in slot order, each row's in slot order), a fifth of the
-    time (100k slots, 8 nearest: 3 ms against 14)."""
+    time (one of the 640x480 room's rounds, 100k slots: 3 ms against 14)."""
     b = near[:, 1:].astype(np.int64)
     none = np.iinfo(np.int64).max
     b = np.sort(np.where(b > idx[:, None], b, none), axis=1)

@@ -123,7 +123,7 @@ def images(x: np.ndarray, grid: PixelGrid, pad: int, ray: np.ndarray | None = No
     size = (h + 2 * pad) * width
     most = -(-h // grid.step) * -(-w // grid.step)  # the lattice's pixels, any offset
     if len(x) > most:
-        raise ValueError(f"{len(x)} points do not lie one a pixel on the {h} x {w} grid's "
+        raise ValueError(f"{len(x)} points do not lie one to a pixel on the {h} x {w} grid's "
                          f"lattice of step {grid.step} ({most} pixels)")
     at = np.full(most, size, np.int32)  # padding: past the end, dropped
     at[:len(x)] = (grid.flat // w + pad) * width + grid.flat % w + pad
