@@ -126,14 +126,18 @@ def typed(kind: type, text: str):
 
 
 def _nested_value(kind: type, text: str):
-    """A method constant's grid value: :func:`typed`, except that a whole-number constant
-    that also takes a word (``growth.spent_levels = ground``) reads a word as itself; the
-    nested config then refuses a word it does not take, in its own words."""
+    """A method constant's grid value: :func:`typed`, except that a constant that takes a
+    whole number or a word (``growth.spent_levels``: levels, or ``ground``) reads a whole
+    number as an int and a word as itself, whichever its default is; the nested config
+    then refuses what it does not take, in its own words."""
+    text = text.strip()
+    if kind is str and text.lstrip("-").isdigit():
+        return int(text)
     try:
         return typed(kind, text)
     except ValueError:
-        if kind is int and text.strip().isalpha():
-            return text.strip()
+        if kind is int and text.isalpha():
+            return text
         raise
 
 

@@ -94,9 +94,10 @@ def warn_budget_spent(details: dict, task, early: tuple[float, float] | None) ->
         cost = (f"; the views seen first scored {when:.2f} dB when seen and {end:.2f} dB at "
                 f"the end ({change}")
         cost += ", the JSON's early_psnr_when_seen and early_psnr_at_end)"
-        if end < when and not task.growth.spent_levels:
-            coarser = (", or --spent-levels 1 grows the ground met once they are all in use "
-                       "on coarser cells, so fewer merges coarsen what was learned first")
+        levels = task.growth.spent_levels  # a number of levels, or "ground" (the default)
+        if end < when and not (isinstance(levels, int) and levels > 0):
+            coarser = (", or --spent-levels 1 grows all the ground met once they are all in "
+                       "use on coarser cells, so fewer merges coarsen what was learned first")
     print(f"note: all {task.components} components were in use, so {rounds} rounds merged "
           f"{details.get('components_merged', 0)} neighbours the data tell apart least to "
           f"make room for new ground{cost}; more --components keeps more detail{coarser}",

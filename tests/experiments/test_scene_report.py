@@ -62,7 +62,7 @@ def test_a_spent_budget_is_said_with_what_it_cost_the_first_views(capsys):
     err = capsys.readouterr().err
     assert "all 20000 components were in use, so 4 rounds merged 1600 neighbours" in err
     assert "26.10 dB when seen and 25.60 dB at the end (lost 0.50 dB" in err
-    assert "--spent-levels 1 grows the ground met once they are all in use" in err
+    assert "--spent-levels 1 grows all the ground met once they are all in use" in err
     coarse = SceneTask(components=20000, growth=GrowthConfig(spent_levels=1))
     warn_budget_spent(details, coarse, (26.10, 25.60))  # already coarser: not offered again
     assert "lost 0.50 dB" in (err := capsys.readouterr().err) and "--spent-levels" not in err

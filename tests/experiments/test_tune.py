@@ -84,6 +84,8 @@ def test_a_whole_number_constant_that_takes_a_word_reads_it():
         parse_grid(["growth.spent_levels=0,all"], TINY)
     with pytest.raises(ValueError, match="cannot read '1,2.5' as int"):
         parse_grid(["growth.levels=1,2.5"], TINY)
+    with pytest.raises(ValueError, match="recolour_reference must be one of"):
+        parse_grid(["evidence.recolour_reference=history,2"], TINY)
 
 
 @pytest.mark.parametrize("spec, message", [
