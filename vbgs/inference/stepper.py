@@ -307,6 +307,7 @@ class Stepper:
         self.spacing = spacing
         self.tiling: projective.Tiling | None = None  # fixed by the first frame
         self._spare = FOLLOW_MIN  # the padded size of a tiled frame's missed points
+        self._missing = False  # the last tiled frame missed points (Stepper._missed)
 
     def grow(self, prior: Mixture, rows) -> Stepper:
         """A stepper for the grown reference ``prior``, which differs from this one's only
@@ -424,13 +425,16 @@ class Stepper:
         posterior, stats, info, within = _tile_step(
             state, x, c, w, flat, self.fixed, config, self.tiling,
             projective.view(camera, self._origin, x.dtype), limit, rays)
+        if self._missing and self._tree is None:  # on the host while the device steps
+            self._tree = candidates.means_tree(self.prior.space.mean)
         within = np.asarray(within)[:n]
         stepped = state._replace(posterior=posterior, stats=stats)
         if first and self.assign == "prior":  # compiled with the first frame, unused
             _, more, at = self._missed_step(stepped, x, c, w, rays, np.zeros(0, np.int64),
                                             None)
             _with_missed(info, more, at, self.fixed.kl)
-        if self.assign == "prior" and (~within).sum() > MISSED_SHARE * n:
+        self._missing = self.assign == "prior" and (~within).sum() > MISSED_SHARE * n
+        if self._missing:
             stepped, info, within = self._missed(stepped, info, within, x, c, w, rays, limit)
         return stepped, StepInfo(*info, within if reaching else None)
 
