@@ -50,13 +50,19 @@ class VbgsLearner:
     """A :class:`experiments.tasks.protocol.Learner`: conjugate updates, no replay. With
     ``splat_scale = "auto"`` it keeps a uniform sample of the arrived frames
     (``reservoir:AUTO_SCALE_FRAMES``, counted in ``replay_bytes``) to choose the splat
-    scale on (:mod:`vbgs.render.scale_fit`) each time its splats are drawn."""
+    scale on (:mod:`vbgs.render.scale_fit`) each time its splats are drawn.
+
+    Its frames are pipelined (``pipelined``, on unless stages are timed): what a frame's
+    see-throughs forget is decided while the next frame grows (:func:`vbgs.mapping.update`'s
+    ``defer``), and reading :attr:`state` settles it first (:meth:`settle`), so
+    whatever reads the map reads what an unpipelined stream would have learned."""
 
     PROTOCOLS = ("continual",)  # VBGS always streams
 
     def __init__(self, task, scene: Scene):
         self.task = task
         prior = None if task.init == "stream" else scene_prior(task, scene)
+        self.pipelined = not task.stage_times  # timed stages wait for their own work
         self.state = mapping.init(self.config, key=init_key(task), prior=prior)
         self.skip = 0  # frames a resumed map learned already
         self.resumed = None  # the frames the map was saved after (--resume-map)
@@ -71,6 +77,22 @@ class VbgsLearner:
         self.arrived = Replay("reservoir", AUTO_SCALE_FRAMES, seed=task.seed)
         self.background = None  # the last frame's, to draw the arrived frames over
         self.scale: tuple[int, float, list[float]] | None = None  # (frames, scale, scores)
+
+    @property
+    def state(self) -> mapping.MapState:
+        """The map, settled (:meth:`settle`)."""
+        self.settle()
+        return self._state
+
+    @state.setter
+    def state(self, state: mapping.MapState) -> None:
+        self._state = state
+
+    def settle(self) -> None:
+        """Decide what the last frame's see-throughs forget, if a pipelined frame left
+        it to the next (:func:`vbgs.mapping.settled`)."""
+        if self._state.unjudged:
+            self._state = mapping.settled(self._state, self.config)
 
     @property
     def auto_scale(self) -> bool:
@@ -105,11 +127,12 @@ class VbgsLearner:
         steady = self.learned >= COMPILE_FRAMES  # as seconds_per_frame counts this run's
         self.learned += 1
         with stages.timing() if self.task.stage_times else nullcontext({}) as seconds:
-            self.state, self.info = mapping.update(self.state, frame, self.config, background)
+            self._state, self.info = mapping.update(self._state, frame, self.config,
+                                                    background, defer=self.pipelined)
         for name, value in seconds.items() if steady else ():
             self.stage_seconds[name] = self.stage_seconds.get(name, 0.0) + value
         self.timed_frames += bool(seconds) and steady
-        jax.block_until_ready((self.state.mixture.stats.count, self.state.colour.rhs))
+        jax.block_until_ready((self._state.mixture.stats.count, self._state.colour.rhs))
         if self.task.save_map:  # atomically: a run killed now loses only this frame
             mapping.save(self.task.save_map, self.state)
         if self.auto_scale:

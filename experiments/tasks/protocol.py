@@ -248,16 +248,20 @@ def stream_protocol(task, scene: Scene, learner: Learner, *, progress: bool = Fa
     change_step = frames_before_change(scene.changes, order)
     curve, frame_seconds, compiling, rows, cl_seconds = [], [], 0.0, [], 0.0
     before = None
+    settle = getattr(learner, "settle", None)  # a pipelined learner's last frame's tail
     for step, frame, background in stream_frames(task, scene, order, progress=progress,
                                                  arrive=arrive):
+        cl_views = segments.views_at(step) if segments else []
+        looked_at = step in checkpoints or step == change_step or cl_views
         t0, c0 = time.perf_counter(), compile_seconds()
         if learner.learn(frame, background) is not False:  # False: learned before a resume
+            if settle is not None and (looked_at or step == len(order)):
+                settle()  # the frame's own work, before the map is read untimed
             frame_seconds.append(time.perf_counter() - t0)
             compiling += compile_seconds() - c0
         diagnose(learner, frame)
         if step == change_step:
             before = evaluate(learner.splats(), scene.test, background, learner.blur).renders
-        cl_views = segments.views_at(step) if segments else []
         if step in checkpoints or cl_views:
             t0 = time.perf_counter()
             shown = sorted(set(early_idx if step in checkpoints else []) | set(cl_views))

@@ -170,6 +170,8 @@ class TrackedLearner:
     def __init__(self, learner, task, scene: Scene, config: TrackConfig = TrackConfig(),
                  photo: PhotoConfig | None | str = "task"):
         self.inner, self.mode, self.config, self.seed = learner, task.poses, config, task.seed
+        if getattr(learner, "pipelined", False):  # each frame registers against the
+            learner.pipelined = False  # settled map: its frame's own time, not tracking's
         self.photo = photo_config(task) if photo == "task" else photo
         self.odometry = None
         if self.mode == "odometry":

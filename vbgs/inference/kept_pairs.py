@@ -54,6 +54,18 @@ class _Kept(NamedTuple):
 _last: list[_Kept | None] = [None]
 
 
+def kept() -> _Kept | None:
+    """What the last call kept, to :func:`put_back` after a call whose answer was dropped
+    (a growth made again: :func:`vbgs.mapping.mapper.grow_components`), so the next call
+    sees the history it would have seen without it."""
+    return _last[0]
+
+
+def put_back(last: _Kept | None) -> None:
+    """Keep ``last`` (from :func:`kept`) as the last call's answer."""
+    _last[0] = last
+
+
 def choose_pairs(posterior: Mixture, counts: np.ndarray, active: np.ndarray, n: int,
                  colour_noise: float, neighbours: int = merge.NEIGHBOURS) -> np.ndarray:
     """:func:`vbgs.inference.merge.choose_pairs` (the same pairs), redoing only what

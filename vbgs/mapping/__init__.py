@@ -22,6 +22,7 @@ from vbgs.mapping.mapper import (
     grow_components,
     init,
     mapper,
+    settled,
     splats,
     update,
     update_points,
@@ -30,5 +31,5 @@ from vbgs.mapping.store import load, save
 
 __all__ = ["BudgetConfig", "Config", "EvidenceConfig", "GrowthConfig", "MapInfo", "MapState",
            "Mapper", "RenderConfig", "SensorConfig", "bound", "dotted_names", "get_dotted",
-           "grow_components", "init", "load", "mapper", "save", "splats", "update",
-           "update_points", "with_dotted"]
+           "grow_components", "init", "load", "mapper", "save", "settled", "splats",
+           "update", "update_points", "with_dotted"]

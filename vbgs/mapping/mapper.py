@@ -135,6 +135,13 @@ class MapState(NamedTuple):
     n_merged: int = 0  # components merged into a neighbour in them
     paid: np.ndarray | None = None  # [g, 3] where merged components stood, about the
     #                                 grid's origin: ground the budget paid for (_make_room)
+    pending: _Pending | None = None  # the last frame's evidence, not yet observed nor
+    #                                  judged (update's defer; settled observes it)
+
+    @property
+    def unjudged(self) -> bool:
+        """The last frame's evidence waits for :func:`settled` (update's ``defer``)."""
+        return self.pending is not None
 
     @property
     def points_unlearned(self) -> float:
@@ -202,22 +209,37 @@ def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) 
                     colour_fit.no_frames(k), 0, 0, prior is None)
 
 
-def update(state: MapState, frame: Frame, config: Config,
-           background=None) -> tuple[MapState, MapInfo]:
+def update(state: MapState, frame: Frame, config: Config, background=None, *,
+           defer: bool = False) -> tuple[MapState, MapInfo]:
     """Learn one arriving frame (the steps of the module docstring): its depth becomes
     points that go through :func:`update_points`, then the frame's opacity evidence and
     colour terms are added. ``background`` ([3] or None: black) is what the frame's pixels
     without a splat show; the colour fit reads it, and with a measured depth the opacity
     evidence (a depth-less pixel of its colour beside a silhouette shows it; pixels
-    without depth are not points)."""
+    without depth are not points).
+
+    ``defer``: the frame's opacity evidence (step 4) is left to the next :func:`update`,
+    which sends it to the device once it has split its random keys and judges what it
+    forgets after growing its own frame's components: the device works out this frame's
+    evidence while the host grows the next one, where otherwise each waits for the
+    other (a host read of a new device value waits for all the work queued before it).
+    The state returned is then ``unjudged``; :func:`settled` observes and judges it, and
+    every function here that reads a map settles it first, so a stream learns the same
+    with ``defer`` as without, to the bit (the next frame's growth is made again on the
+    settled map after a frame that forgets). Ignored under ``render.colour_rule ==
+    "fit"``, whose colour terms read the map after forgetting."""
     with stage("prepare"):
         state, p = _prepare(state, frame, config, background)
-    state, info = update_points(state, p.xyz, p.rgb, config, ray=p.ray,
-                                footprint=p.footprint, weight=p.weight, camera=frame.camera,
-                                pixel=p.pixel)
-    with stage("evidence") as done:
-        state = _observe(state, info, p, config, background)
-        done(state.evidence, state.colour)
+    state, info = _update_points(state, p.xyz, p.rgb, config, ray=p.ray,
+                                 footprint=p.footprint, weight=p.weight,
+                                 camera=frame.camera, pixel=p.pixel)
+    state = state._replace(pending=_Pending(info, p, background))
+    if not defer or config.render.colour_rule == "fit":
+        state = settled(state, config)
+    if config.render.colour_rule == "fit":
+        with stage("evidence") as done:
+            state = _fit_colours(state, frame, config, background)
+            done(state.colour)
     return state, info
 
 
@@ -272,8 +294,9 @@ class _Prepared(NamedTuple):
 
 def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config,
              background) -> MapState:
-    """Steps 4 and 5 of the module docstring: the learned points counted in their cells
-    (saturation), the frame's opacity evidence and colour terms added."""
+    """Step 4 of the module docstring: the learned points counted in their cells
+    (saturation), the frame's opacity evidence added and its see-throughs counted
+    (:func:`_judged` decides what they forget)."""
     frame, empty, level = prepared.frame, prepared.empty, prepared.level
     sensor = config.sensor
     state = _count_seen(state, prepared.xyz, prepared.footprint, config, prepared.keys)
@@ -294,14 +317,49 @@ def _observe(state: MapState, info: MapInfo, prepared: _Prepared, config: Config
             if reads_colour and e.recolour_reference == "map" else None,
             shaped=change.shaped(state.mixture.stats, e.shaped_points)
             if state.growing and sensor.exact else None)  # a sensor's tails: the band
-        state = _forget(state._replace(evidence=opacity.added(state.evidence, seen)),
-                        seen, state.evidence, info.before.colour, config)
-    if config.render.colour_rule == "fit":
-        colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
-                                    frame.rgb, 0.0 if background is None else background,
-                                    blur=config.render.splat_blur)
-        state = state._replace(colour=colour)
+        state = _doubted(state._replace(evidence=opacity.added(state.evidence, seen)),
+                         seen, state.evidence, info.before.colour, config)
     return state
+
+
+class _Pending(NamedTuple):
+    """A frame's evidence left to the next frame (:func:`update`'s ``defer``): what
+    :func:`_observe` reads."""
+
+    info: MapInfo
+    prepared: _Prepared
+    background: object  # [3] or None
+
+
+def settled(state: MapState, config: Config) -> MapState:
+    """The map with its last frame's evidence observed and judged (:func:`update`'s
+    ``defer``): the components seen through (or recoloured) ``evidence.forget_after``
+    frames in a row forgotten (:func:`vbgs.mapping.change.gone`), their slots emptied for
+    new ground; a settled map as it is."""
+    if state.pending is None:
+        return state
+    return _judged(_observed(state, config), config)
+
+
+def _observed(state: MapState, config: Config) -> MapState:
+    """The state with its pending evidence added and its see-throughs counted (on the
+    device: nothing here waits for it), still to be :func:`_judged`."""
+    if state.pending is None:
+        return state
+    info, prepared, background = state.pending
+    with stage("evidence") as done:
+        state = _observe(state._replace(pending=None), info, prepared, config, background)
+        done(state.evidence, state.colour)
+    return state
+
+
+def _fit_colours(state: MapState, frame: Frame, config: Config, background) -> MapState:
+    """Step 5 of the module docstring: the frame's colour least-squares terms added
+    against the splats of the settled map (``render.colour_rule == "fit"``)."""
+    colour = colour_fit.observe(state.colour, _splats(state, config), frame.camera,
+                                frame.rgb, 0.0 if background is None else background,
+                                blur=config.render.splat_blur)
+    return state._replace(colour=colour)
 
 
 def _through(empty, sensor, background: bool) -> dict:
@@ -329,16 +387,15 @@ def _blame(state: MapState, info: MapInfo, frame: Frame, background, config: Con
                         config.render.splat_blur)
 
 
-def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Evidence,
-            colour, config: Config) -> MapState:
-    """A growing map's components that its frames have now seen through (or recoloured:
-    ``colour`` the colour posterior before the frame; :func:`vbgs.mapping.change.observe`)
-    ``evidence.forget_after`` times in a row forgotten (:mod:`vbgs.mapping.change`):
-    ``seen`` the frame's evidence, ``before`` the evidence before it."""
-    after = config.evidence.forget_after
-    if not state.growing or after <= 0:
+def _doubted(state: MapState, seen: opacity.FrameEvidence, before: opacity.Evidence,
+             colour, config: Config) -> MapState:
+    """A growing map's run of frames that have seen through (or recoloured: ``colour`` the
+    colour posterior before the frame) each component, counted on the device
+    (:func:`vbgs.mapping.change.observe`; ``seen`` the frame's evidence, ``before`` the
+    evidence before it), which :func:`_judged` reads."""
+    if not state.growing or config.evidence.forget_after <= 0:
         return state
-    prior, gate = state.mixture.prior, config.evidence.recolour_gate
+    prior = state.mixture.prior
     doubt = change.observe(change.no_doubt(prior.n_components) if state.doubt is None
                            else state.doubt, seen, before, prior.alpha > grow.ACTIVE_ALPHA,
                            reference=config.evidence.recolour_reference, colour=colour,
@@ -346,17 +403,28 @@ def _forget(state: MapState, seen: opacity.FrameEvidence, before: opacity.Eviden
                            colour_noise=config.prior.colour_noise,
                            doubt_opacity=config.doubt_opacity,
                            prior=(config.evidence.prior_hits, config.evidence.prior_passes),
-                           apart=gate > 0)
-    slots = change.gone(doubt, after, gate, state.n_forgotten)
+                           apart=config.evidence.recolour_gate > 0)
+    return state._replace(doubt=doubt)
+
+
+def _judged(state: MapState, config: Config) -> MapState:
+    """An observed state's components seen through (or recoloured) in
+    ``evidence.forget_after`` frames in a row forgotten (:func:`settled`); none where no
+    evidence was read (``render.opacity_rule`` other than ``"evidence"``)."""
+    if not state.growing or config.evidence.forget_after <= 0 or state.doubt is None:
+        return state
+    gate = config.evidence.recolour_gate
+    slots = change.gone(state.doubt, config.evidence.forget_after, gate, state.n_forgotten)
     if len(slots) == 0:
-        return state._replace(doubt=doubt)
+        return state
+    prior = state.mixture.prior
     empty = grow.empty_prior(prior.n_components, prior.origin, state.rule.cell, config.prior,
                              prior.alpha.dtype)
     state = state._replace(paid=_unpaid(state, slots),
                            mixture=change.emptied(state.mixture, slots, empty),
                            evidence=change.cleared(state.evidence, slots),
                            colour=change.cleared(state.colour, slots),
-                           doubt=change.cleared(doubt, slots),
+                           doubt=change.cleared(state.doubt, slots),
                            n_forgotten=state.n_forgotten + len(slots))
     return _sync_stepper(state, slots, config)
 
@@ -382,6 +450,14 @@ def update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footpr
     ``footprint``; None: a KD-tree over the batch) and by which the projective search
     learns the frame's tiles (:mod:`vbgs.inference.frame_tiles`); all from a frame
     (:mod:`vbgs.mapping.measurement`, :mod:`vbgs.mapping.budget`), None for bare points."""
+    return _update_points(settled(state, config), xyz, rgb, config, ray=ray,
+                          footprint=footprint, weight=weight, camera=camera, pixel=pixel)
+
+
+def _update_points(state: MapState, xyz, rgb, config: Config, *, ray=None, footprint=None,
+                   weight=None, camera=None, pixel=None) -> tuple[MapState, MapInfo]:
+    """:func:`update_points` on a map that may be ``unjudged``
+    (:func:`grow_components` decides it)."""
     if len(xyz) == 0:
         raise ValueError("the batch has no points: nothing to learn")
     with stage("grow") as done:
@@ -449,7 +525,9 @@ def splats(state: MapState, config: Config, drop_unused: bool = False) -> Splats
     """The map's splats: posterior means and scaled expected covariances, opacities by
     ``render.opacity_rule``, colours by ``render.colour_rule``. ``drop_unused`` keeps
     only the splats drawn (:func:`vbgs.render.splats.drawn`; components that saw no data
-    have opacity 0); else every slot stays, a fixed splat count."""
+    have opacity 0); else every slot stays, a fixed splat count. An ``unjudged`` map is
+    :func:`settled` first."""
+    state = settled(state, config)
     colours = None
     if config.render.colour_rule == "fit":
         colours = colour_fit.solve(state.colour, state.mixture.posterior.colour.mean,
@@ -512,7 +590,30 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
     the points' noise along their rays, ``footprint [n]`` their pixel footprints
     (:mod:`vbgs.mapping.measurement`; far ground gets coarse cells); ``pixel``: the
     points on the frame's pixel grid, where the seeds' patches are found
-    (:func:`pixel_grid`; None: a KD-tree over the batch)."""
+    (:func:`pixel_grid`; None: a KD-tree over the batch).
+
+    An ``unjudged`` map (:func:`update`'s ``defer``) splits its keys, sends its last
+    frame's evidence to the device and grows as though that frame forgot nothing, while
+    the device works the evidence out; when it did forget, that growth is dropped and
+    made again on the :func:`settled` map, the merges' kept pairs put back as the first
+    growth found them (:mod:`vbgs.inference.kept_pairs`), so the answer is the settled
+    map's either way."""
+    if not state.unjudged:
+        return _grow(state, xyz, rgb, config, ray, footprint, pixel)
+    keys = jax.block_until_ready(tuple(jax.random.split(state.key)))  # before the evidence
+    observed, kept = _observed(state, config), kept_pairs.kept()
+    grown, slots = _grow(observed, xyz, rgb, config, ray, footprint, pixel, keys)
+    judged = _judged(observed, config)
+    if judged.n_forgotten == observed.n_forgotten:  # nothing forgotten: the growth stands
+        return grown, slots
+    kept_pairs.put_back(kept)  # the history the merges would have seen (ties alike)
+    return _grow(judged, xyz, rgb, config, ray, footprint, pixel, keys)
+
+
+def _grow(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None,
+          pixel: PixelGrid | None = None, keys=None) -> tuple[MapState, np.ndarray]:
+    """:func:`grow_components` on a settled map (the same arguments); ``keys``: the
+    state's key split already, ``(key, sub)`` as ``jax.random.split`` gives them."""
     if not state.growing:
         return state, np.zeros(0, np.int64)
     mixture, rule = state.mixture, state.rule
@@ -526,7 +627,7 @@ def grow_components(state: MapState, xyz, rgb, config: Config, ray=None, footpri
                               coarse=g.coarse_levels, coarse_from=g.coarse_from)
         mixture = _measured(grow.start_empty(xyz, _first_capacity(config), rule.cell,
                                              config.prior), config)
-    key, sub = jax.random.split(state.key)
+    key, sub = jax.random.split(state.key) if keys is None else keys
     levels = _spent_levels(state, grow.point_levels(rule, footprint), len(xyz), config)
     state = state._replace(mixture=mixture, rule=rule)
     earns = None

@@ -39,6 +39,9 @@ _SCHEMA = "__schema__"
 
 def save(path, state: MapState) -> Path:
     """Write ``state`` to ``path`` (``.npz`` is added when missing); returns the path."""
+    if state.unjudged:
+        raise ValueError("the map's last frame is not settled (update(..., defer=True)): "
+                         "save vbgs.mapping.settled(state, config)")
     path = Path(path)
     if path.suffix != ".npz":
         path = path.with_name(path.name + ".npz")
