@@ -176,13 +176,14 @@ class MapInfo(NamedTuple):
 
 
 class Mapper(NamedTuple):
-    """:func:`init`, :func:`update`, :func:`splats` and :func:`update_points` bound to one
-    :class:`Config`."""
+    """:func:`init`, :func:`update`, :func:`splats`, :func:`update_points` and
+    :func:`settled` bound to one :class:`Config`."""
 
     init: Callable[..., MapState]
     update: Callable[..., tuple[MapState, MapInfo]]
     splats: Callable[..., Splats]
     update_points: Callable[..., tuple[MapState, MapInfo]]
+    settled: Callable[[MapState], MapState]
 
 
 def init(config: Config, *, key: jax.Array, prior: model.Mixture | None = None) -> MapState:
@@ -552,14 +553,15 @@ def bound(info: MapInfo, config: Config) -> BatchBound:
 
 def mapper(config: Config) -> Mapper:
     """The functions with ``config`` bound: ``init(key=..., prior=None)``,
-    ``update(state, frame, background=None)``, ``splats(state, drop_unused=False)`` and
-    ``update_points(state, xyz, rgb, ray=None, footprint=None, weight=None)``."""
+    ``update(state, frame, background=None, defer=False)``, ``splats(state,
+    drop_unused=False)``, ``update_points(state, xyz, rgb, ray=None, footprint=None,
+    weight=None)`` and ``settled(state)``."""
 
     def bound_init(*, key: jax.Array, prior: model.Mixture | None = None) -> MapState:
         return init(config, key=key, prior=prior)
 
-    def bound_update(state: MapState, frame: Frame, background=None):
-        return update(state, frame, config, background)
+    def bound_update(state: MapState, frame: Frame, background=None, defer: bool = False):
+        return update(state, frame, config, background, defer=defer)
 
     def bound_splats(state: MapState, drop_unused: bool = False) -> Splats:
         return splats(state, config, drop_unused)
@@ -567,7 +569,8 @@ def mapper(config: Config) -> Mapper:
     def bound_update_points(state: MapState, xyz, rgb, **measured):
         return update_points(state, xyz, rgb, config, **measured)
 
-    return Mapper(bound_init, bound_update, bound_splats, bound_update_points)
+    return Mapper(bound_init, bound_update, bound_splats, bound_update_points,
+                  partial(settled, config=config))
 
 
 def pixel_grid(pixel, camera, footprint, config: Config) -> PixelGrid | None:

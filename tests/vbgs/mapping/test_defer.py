@@ -55,13 +55,16 @@ def test_a_deferred_stream_learns_what_a_settled_one_learns_to_the_bit(changed):
             np.testing.assert_array_equal(x, y)
 
 
-def test_an_unjudged_map_is_read_as_settled(changed):
-    state = mapping.init(CONFIG, key=jax.random.key(0))
+def test_an_unjudged_map_is_read_as_settled(changed, tmp_path):
+    bound = mapping.mapper(CONFIG)
+    state = bound.init(key=jax.random.key(0))
     for frame in changed.train[:FRAMES // 2 + 3]:  # into the second lap: doubts counted
-        state, _ = mapping.update(state, frame, CONFIG, defer=True)
+        state, _ = bound.update(state, frame, defer=True)
     assert state.unjudged
-    judged = mapping.settled(state, CONFIG)
+    judged = bound.settled(state)
     assert not judged.unjudged and mapping.settled(judged, CONFIG) is judged
+    with pytest.raises(ValueError, match="not settled"):
+        mapping.save(tmp_path / "map.npz", state)
     for a, b in zip(jax.tree_util.tree_leaves(mapping.splats(state, CONFIG)),
                     jax.tree_util.tree_leaves(mapping.splats(judged, CONFIG)), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
