@@ -343,10 +343,8 @@ def settled(state: MapState, config: Config) -> MapState:
 
 
 def _observed(state: MapState, config: Config) -> MapState:
-    """The state with its pending evidence added and its see-throughs counted (on the
-    device: nothing here waits for it), still to be :func:`_judged`."""
-    if state.pending is None:
-        return state
+    """The ``unjudged`` state with its pending evidence added and its see-throughs
+    counted, sent to the device and not waited for, still to be :func:`_judged`."""
     info, prepared, background = state.pending
     with stage("evidence") as done:
         state = _observe(state._replace(pending=None), info, prepared, config, background)
