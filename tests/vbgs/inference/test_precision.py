@@ -203,3 +203,88 @@ def test_ldl3_quadratic_forms_hold_for_thin_matrices(thin):
         "ki,kij,kj->k", v, inv, v)).max())
     lapack = np.asarray(jnp.linalg.inv(jnp.asarray(s, jnp.float32)), np.float64)
     np.testing.assert_allclose(np.einsum("ki,kij,kj->k", u, lapack, u), want_uu, rtol=tol)
+
+
+def _eigh3(s):
+    """:func:`vbgs.inference.precision.eigh3` of ``s [m, 3, 3]`` in float32 (jitted)."""
+    upper = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+    s = jnp.asarray(s, jnp.float32)
+    values, vectors = jax.jit(precision.eigh3)(*(s[:, i, j] for i, j in upper))
+    return np.asarray(values, np.float64), np.asarray(vectors, np.float64)
+
+
+def _angle(a, b):
+    """Radians between the lines along ``a [m, 3]`` and ``b [m, 3]`` (by the cross
+    product: an arccos of a float32 dot product is off by 3e-4 rad at 0)."""
+    cross = np.linalg.norm(np.cross(a, b), axis=1)
+    return np.arcsin(np.clip(cross / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1),
+                             0.0, 1.0))
+
+
+@pytest.mark.parametrize("thin", [1.0, 1e-3, 1e-6])
+@pytest.mark.parametrize("size", [1e-12, 1.0, 1e12])
+def test_eigh3_finds_each_patch_normal_as_float64_lapack(thin, size):
+    """Elementwise Jacobi in float32 against float64 LAPACK on the same (float32-rounded)
+    matrices: orthonormal vectors, ascending values, the matrix rebuilt to float32's
+    rounding of its largest eigenvalue, and the smallest eigenvalue's vector (a patch's
+    normal) within float32's rounding of the direction whatever the patch's size, down to
+    patches a millionth as thick as wide, and at least as close as XLA's own float32
+    ``eigh``."""
+    rng = np.random.default_rng(2)
+    axes = np.linalg.qr(rng.normal(size=(2000, 3, 3)))[0]
+    spread = np.array([thin, 0.5, 1.0])[None] * rng.uniform(0.5, 2.0, (2000, 3)) * size
+    s = (axes @ (spread[:, :, None] * np.swapaxes(axes, 1, 2))).astype(np.float32)
+    want_values, want_vectors = np.linalg.eigh(s.astype(np.float64))
+    values, vectors = _eigh3(s)
+    assert (np.diff(values, axis=1) >= 0).all()
+    np.testing.assert_allclose(np.swapaxes(vectors, 1, 2) @ vectors,
+                               np.broadcast_to(np.eye(3), (2000, 3, 3)), atol=1e-6)
+    rebuilt = vectors @ (values[:, :, None] * np.swapaxes(vectors, 1, 2))
+    scale = want_values[:, 2][:, None, None]
+    assert (np.abs(rebuilt - s) / scale).max() < 1e-6
+    np.testing.assert_allclose(values / scale[:, :, 0], want_values / scale[:, :, 0],
+                               atol=1e-6)
+    normal = _angle(vectors[:, :, 0], want_vectors[:, :, 0])
+    xla = _angle(np.asarray(jnp.linalg.eigh(jnp.asarray(s))[1], np.float64)[:, :, 0],
+                 want_vectors[:, :, 0])
+    # a direction is as well defined as its eigenvalue is apart from the next: float32's
+    # rounding of the matrix moves it by about eps * largest / gap
+    bound = 1e-6 + 1e-6 * want_values[:, 2] / (want_values[:, 1] - want_values[:, 0])
+    assert (normal <= bound).all(), (normal / bound).max()
+    assert np.median(normal) <= max(np.median(xla), 1e-7), (np.median(normal),
+                                                            np.median(xla))
+
+
+def test_eigh3_leaves_diagonal_and_isotropic_matrices_as_they_are():
+    """A diagonal matrix needs no rotation: its own axes come back, sorted; a multiple
+    of the identity (every direction an eigenvector) and the zero matrix (a padded
+    patch) come back as the identity, finite."""
+    s = np.zeros((3, 3, 3), np.float32)
+    s[0] = np.diag([3.0, 1.0, 2.0])
+    s[1] = 5.0 * np.eye(3)
+    values, vectors = _eigh3(s)
+    np.testing.assert_array_equal(values[0], [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(np.abs(vectors[0]), np.eye(3)[:, [1, 2, 0]])
+    np.testing.assert_array_equal(vectors[1:], np.broadcast_to(np.eye(3), (2, 3, 3)))
+    np.testing.assert_array_equal(values[2], [0.0, 0.0, 0.0])
+
+
+def test_cholesky_solve_is_lapack_solve_on_normal_equations():
+    """Elementwise Cholesky solves of 6x6 normal equations (a patch's quadric) in
+    float32 against float64 LAPACK: well-conditioned systems to float32's rounding of
+    their condition, and a column the patch cannot tell (all zero, the ridge alone on
+    its diagonal) solved to 0."""
+    rng = np.random.default_rng(3)
+    design = rng.normal(size=(1000, 40, 6))
+    design[:10, :, 5] = 0.0  # a term these patches cannot tell
+    h = rng.normal(size=(1000, 40))
+    gram = np.swapaxes(design, 1, 2) @ design
+    gram += 1e-6 * np.trace(gram, axis1=1, axis2=2)[:, None, None] * np.eye(6)
+    rhs = np.einsum("mkp,mk->mp", design, h)
+    want = np.linalg.solve(gram, rhs[..., None])[..., 0]
+    entries = {(i, j): jnp.asarray(gram[:, i, j], jnp.float32)
+               for i in range(6) for j in range(i, 6)}
+    got = np.stack([np.asarray(c, np.float64) for c in jax.jit(precision.cholesky_solve)(
+        entries, [jnp.asarray(rhs[:, i], jnp.float32) for i in range(6)])], 1)
+    np.testing.assert_allclose(got, want, atol=1e-5 * np.abs(want).max())
+    assert np.abs(got[:10, 5]).max() == 0.0
