@@ -453,21 +453,78 @@ def _first_cells(x: np.ndarray, taken: np.ndarray, cell: float, order: np.ndarra
                  quota: int, ray: np.ndarray | None) -> np.ndarray:
     """:func:`_pick` over the points ``x`` in ``order``: the first point of each of the
     first ``quota`` empty cells."""
+    return _first_of_cells(*_empty_cells(x, taken, cell, ray), order, quota)
+
+
+def _empty_cells(x: np.ndarray, taken: np.ndarray, cell: float, ray: np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The cells of side ``cell`` of the points ``x [n, d]`` as keys ``[n]`` (equal
+    exactly where the cells are) and ``[n]`` bool: the cell holds none of ``taken [m,
+    d]``, nor do those a step of noise before and behind the point (``ray``, :func:`_pick`)."""
     shifted = [x] if ray is None else [x, x - NOISE_SIGMAS * ray, x + NOISE_SIGMAS * ray]
     (taken_keys, *point_keys), size = cells.box_keys([taken, *shifted], cell)
     point_keys = np.stack(point_keys)  # [shifts, n]
-    empty = ~cells.held(taken_keys, point_keys, size).any(0)
+    return point_keys[0], ~cells.held(taken_keys, point_keys, size).any(0)
+
+
+def _first_of_cells(keys: np.ndarray, empty: np.ndarray, order: np.ndarray, quota: int
+                    ) -> np.ndarray:
+    """Of the points ``order`` (indices into ``keys`` and ``empty``), the first of each of
+    the first ``quota`` cells that are empty."""
     poor = order[empty[order]]  # points in empty cells, in random order
-    _, first = np.unique(point_keys[0][poor], return_index=True)  # one point per cell
+    _, first = np.unique(keys[poor], return_index=True)  # one point per cell
     return poor[np.sort(first)][:quota]
 
 
+class Ground(NamedTuple):
+    """A batch's new ground against the components in use, found once
+    (:func:`ground_of`) and then picked from in any order (:func:`new_ground`)."""
+
+    keys: np.ndarray  # [n] int64: each point's cell at its level (equal within a level
+    #                   exactly where the cells are)
+    empty: np.ndarray  # [n] bool: the cell is new ground (as _pick tests it)
+    levels: np.ndarray | None  # [n] each point's level; None: all at level 0
+    n_cells: int  # the new-ground cells of all levels: what new_ground takes at most
+
+
+def ground(x: np.ndarray, taken: np.ndarray, rule: Growth, ray: np.ndarray | None = None,
+           levels: np.ndarray | None = None) -> Ground:
+    """The new ground of the points ``x [n, d]`` against the means ``taken [m, d]``
+    (:func:`new_ground`'s arguments), for :func:`new_ground` to pick from in any order
+    with the same answer as it finds alone. Why it can: level by level, finest first,
+    :func:`new_ground` holds the cells of the points it chose at the finer levels; a
+    point chosen in a cell of side ``c`` lies in the one cell of side ``c 2^j`` that
+    holds that cell (the grids share the origin, and dividing by a power of two is exact
+    in floating point), whichever of the cell's points was chosen. So the cells held at
+    each level do not depend on the order, as long as no quota is reached at a finer
+    level, and after one is reached nothing is picked. Each level here holds one point
+    of each of the finer levels' new cells."""
+    if levels is None:
+        keys, empty = _empty_cells(x, taken, rule.cell, ray)
+        return Ground(keys, empty, None, len(np.unique(keys[empty])))
+    keys, empty = np.zeros(len(x), np.int64), np.zeros(len(x), bool)
+    held = [taken]
+    for level in np.flatnonzero(np.bincount(levels)):  # np.unique(levels), 10x faster
+        here = np.flatnonzero(levels == level)
+        keys[here], empty[here] = _empty_cells(
+            x.take(here, 0), np.concatenate(held), rule.cell * 2.0**level,
+            None if ray is None else ray.take(here, 0))
+        new = here[empty[here]]
+        _, first = np.unique(keys[new], return_index=True)
+        held.append(x.take(new[first], 0))
+    return Ground(keys, empty, levels, sum(len(h) for h in held[1:]))
+
+
 def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray,
-               quota: int, ray: np.ndarray | None = None, levels=None) -> np.ndarray:
+               quota: int, ray: np.ndarray | None = None, levels=None,
+               found: Ground | None = None) -> np.ndarray:
     """Up to ``quota`` points of ``x [n, d]`` (indices), one per cell holding none of the
     means ``taken [m, d]``: level-0 cells, or with ``levels [n]`` (:func:`point_levels`)
     each point's own coarse cell, finest level first (a component placed on near
-    ground takes the coarse cell it lies in)."""
+    ground takes the coarse cell it lies in). ``found``: the :func:`ground` of these
+    arguments, picked from in ``order`` (the same answer)."""
+    if found is not None:
+        return _picked(found, order, quota)
     if levels is None:
         return _pick(x, taken, rule.cell, order, quota, ray)
     chosen = np.zeros(0, np.int64)
@@ -484,6 +541,22 @@ def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray
                        None if ray is None else ray.take(here, 0))
         chosen = np.concatenate([chosen, here[picked]])
     return chosen
+
+
+def _picked(found: Ground, order: np.ndarray, quota: int) -> np.ndarray:
+    """:func:`new_ground`'s answer from its :func:`ground`: up to ``quota`` points, the
+    first of each new cell in ``order``, finest level first."""
+    if found.levels is None:
+        return _first_of_cells(found.keys, found.empty, order, quota)
+    chosen = [np.zeros(0, np.int64)]
+    left = quota
+    for level in np.flatnonzero(np.bincount(found.levels)):
+        if left <= 0:
+            break
+        here = order[found.levels[order] == level]  # this level's points, in the order
+        chosen.append(_first_of_cells(found.keys, found.empty, here, left))
+        left -= len(chosen[-1])
+    return np.concatenate(chosen)
 
 
 def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
@@ -503,13 +576,13 @@ def select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 
 def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
-            key: jax.Array, ray=None, levels=None, earns=None
+            key: jax.Array, ray=None, levels=None, earns=None, found: Ground | None = None
             ) -> tuple[np.ndarray, int, np.ndarray]:
     """:func:`select`, and the refinement level of each chosen point ``[m]`` (0: new
-    ground)."""
+    ground); ``found``: :func:`new_ground`'s."""
     order = host_rng(key).permutation(len(x))  # random order of the points
     budget = int(min(rule.max_new, n_empty))
-    chosen = new_ground(x, taken, rule, order, budget, ray, levels)
+    chosen = new_ground(x, taken, rule, order, budget, ray, levels, found)
     n_ground = len(chosen)
     refine = int(min(budget - n_ground, np.floor(rule.refine * (n_empty - n_ground))))
     level_of = [np.zeros(n_ground, np.int64)]
@@ -527,7 +600,8 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
 
 def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
          config: PriorConfig = PriorConfig(), ray=None, levels=None, earns=None,
-         pixel: pixel_patches.PixelGrid | None = None, held=None) -> tuple[State, GrowInfo]:
+         pixel: pixel_patches.PixelGrid | None = None, held=None,
+         found: Ground | None = None) -> tuple[State, GrowInfo]:
     """Fill empty slots on the poorly explained points of the batch ``xyz [n, d]``,
     ``rgb [n, 3]`` (see the module docstring and :func:`select`), deterministic under
     ``key``; ``ray [n, 3]``: measured points' noise along their rays (:func:`local_normals`);
@@ -537,10 +611,12 @@ def grow(state: State, xyz, rgb, rule: Growth, *, key: jax.Array,
     (:mod:`vbgs.inference.pixel_patches`; None: bare points, a KD-tree over the batch);
     ``held [g, d]``: positions about the grid's origin whose cells count as held though
     no component's mean lies there (a component's seed after its mean moved away, ground
-    a merge emptied: ``vbgs.mapping.mapper._held``)."""
+    a merge emptied: ``vbgs.mapping.mapper._held``); ``found``: the batch's new ground
+    against this state, ``held`` and ``levels``, found already (:func:`ground_of`, for
+    :func:`shortfall`), or None."""
     prior, info = _grown_prior(state.prior, state.posterior, xyz, rgb, rule, key=key,
                                config=config, ray=ray, levels=levels, earns=earns,
-                               pixel=pixel, held=held)
+                               pixel=pixel, held=held, found=found)
     if info.n_new == 0:
         return state, info
     return state._replace(prior=prior, posterior=_m_step(prior, state.stats)), info
@@ -559,8 +635,23 @@ def _about_origin(prior: Mixture, posterior: Mixture, xyz, ray=None, held=None):
     return x, taken, active, None if ray is None else np.asarray(ray, np.float64)
 
 
+def ground_of(state: State, xyz, rule: Growth, *, ray=None, levels=None, held=None
+              ) -> Ground:
+    """The new ground (:func:`ground`) of the batch ``xyz [n, d]`` against the components
+    of ``state`` in use (and ``held``, as :func:`grow`'s): what :func:`shortfall` counts
+    and :func:`grow` picks from, found once for both while nothing changes between."""
+    x, taken, _, ray = _about_origin(state.prior, state.posterior, xyz, ray, held)
+    return ground(x, taken, rule, ray, levels)
+
+
+def short_of_slots(state: State, rule: Growth) -> bool:
+    """Whether :func:`shortfall` counts new ground: fewer empty slots than a batch may
+    add."""
+    return int((~is_active(state.prior)).sum()) < rule.max_new
+
+
 def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=None,
-              held=None) -> int:
+              held=None, found: Ground | None = None) -> int:
     """How many more components the new ground of the batch ``xyz [n, d]`` wants (at most
     ``rule.max_new``, as :func:`select` counts it) than there are empty slots: above 0
     when the budget is spent (:mod:`vbgs.inference.merge` frees slots for it). With
@@ -569,37 +660,37 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
     points' own order). Nothing is counted while the empty slots alone take the most a
     batch may add (``rule.max_new``, which bounds what it wants): the shortfall is then
     at most ``rule.max_new - empty slots <= 0``, and that bound is returned. ``held``: as
-    :func:`grow`'s."""
+    :func:`grow`'s; ``found``: the batch's :func:`ground_of` (without ``earns``)."""
     n_empty = int((~is_active(state.prior)).sum())
-    if n_empty >= rule.max_new:
+    if not short_of_slots(state, rule):
         return rule.max_new - n_empty
-    x, taken, active, ray = _about_origin(state.prior, state.posterior, xyz, ray, held)
     if earns is None:
-        wanted = len(new_ground(x, taken, rule, np.arange(len(x)), rule.max_new, ray, levels))
-    else:
-        order = np.arange(len(x))
-        chosen = new_ground(x, taken, rule, order, rule.max_new, ray, levels)
-        for level in range(1, rule.levels):
-            quota = rule.max_new - len(chosen)
-            if quota <= 0:
-                break
-            more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level,
-                         order[earns[:, level]], quota, ray)
-            chosen = np.concatenate([chosen, more])
-        wanted = len(chosen)
-    return wanted - n_empty
+        if found is None:
+            found = ground_of(state, xyz, rule, ray=ray, levels=levels, held=held)
+        return min(found.n_cells, rule.max_new) - n_empty
+    x, taken, _, ray = _about_origin(state.prior, state.posterior, xyz, ray, held)
+    order = np.arange(len(x))
+    chosen = new_ground(x, taken, rule, order, rule.max_new, ray, levels)
+    for level in range(1, rule.levels):
+        quota = rule.max_new - len(chosen)
+        if quota <= 0:
+            break
+        more = _pick(x, np.concatenate([taken, x[chosen]]), rule.cell / 2**level,
+                     order[earns[:, level]], quota, ray)
+        chosen = np.concatenate([chosen, more])
+    return len(chosen) - n_empty
 
 
 def _grown_prior(prior: Mixture, posterior: Mixture, xyz, rgb, rule: Growth, *,
                  key: jax.Array, config: PriorConfig, ray=None, levels=None, earns=None,
-                 pixel: pixel_patches.PixelGrid | None = None, held=None
-                 ) -> tuple[Mixture, GrowInfo]:
+                 pixel: pixel_patches.PixelGrid | None = None, held=None,
+                 found: Ground | None = None) -> tuple[Mixture, GrowInfo]:
     """:func:`grow`'s new prior (the components in use are those of ``posterior``)."""
     xyz, rgb = check_points_host(xyz, rgb)  # numpy: jnp.asarray compiles per shape
     x, taken, active, ray = _about_origin(prior, posterior, xyz, ray, held)
     empty = np.flatnonzero(~active)
     chosen, n_ground, split = _select(x, taken, len(empty), rule, key=key, ray=ray,
-                                      levels=levels, earns=earns)
+                                      levels=levels, earns=earns, found=found)
     n_new = len(chosen)
     if n_new == 0:
         return prior, GrowInfo(0, 0, int(active.sum()), empty[:0])

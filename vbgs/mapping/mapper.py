@@ -631,16 +631,16 @@ def _grow(state: MapState, xyz, rgb, config: Config, ray=None, footprint=None,
     key, sub = jax.random.split(state.key) if keys is None else keys
     levels = _spent_levels(state, grow.point_levels(rule, footprint), len(xyz), config)
     state = state._replace(mixture=mixture, rule=rule)
-    earns = None
+    earns = found = None  # found: the frame's new ground, where the merges' count found it
     if config.auto:
         state, merged = _auto_room(state, xyz, ray, levels, config)
         state, earns = _split_levels(state, xyz, rgb, footprint, config)
         state = _auto_widen(state, xyz, ray, levels, earns, config)
     else:
-        state, merged = _make_room(state, xyz, ray, levels, config)
+        state, merged, found = _make_room(state, xyz, ray, levels, config)
     mixture, info = grow.grow(state.mixture, xyz, rgb, rule, key=sub, config=config.prior,
                               ray=ray, levels=levels, earns=earns, pixel=pixel,
-                              held=_held(state, config))
+                              held=_held(state, config), found=found)
     return state._replace(mixture=mixture, key=key), np.concatenate([merged, info.slots])
 
 
@@ -731,22 +731,27 @@ def _cell_keys(state: MapState, xyz, footprint) -> np.ndarray:
 
 
 def _make_room(state: MapState, xyz, ray, levels, config: Config
-               ) -> tuple[MapState, np.ndarray]:
+               ) -> tuple[MapState, np.ndarray, grow.Ground | None]:
     """Free slots by merging (:mod:`vbgs.inference.merge`) when the frame shows more new
     ground than the empty slots can take (``growth.merge``); the state with the pairs
-    merged (statistics, opacity evidence and colour sums alike) and the slots changed.
+    merged (statistics, opacity evidence and colour sums alike), the slots changed, and
+    the frame's new ground where it was found and nothing merged (:func:`vbgs.inference.
+    grow.ground_of`: growth then picks from it rather than look it up again; None else).
     A round frees what the frame lacks, at least ``growth.merge_ahead`` of K (its comment
     says how it is chosen). The pairs are the merge's own choice, redone only where
     components changed since the last round (:mod:`vbgs.inference.kept_pairs`)."""
     mixture, rule, g = state.mixture, state.rule, config.growth
     none = np.zeros(0, np.int64)
     if not g.merge:
-        return state, none
+        return state, none, None
     with stage("merge") as done:
-        short = grow.shortfall(mixture, xyz, rule, ray=ray, levels=levels,
-                               held=_held(state, config))
+        held, found = _held(state, config), None
+        if grow.short_of_slots(mixture, rule):
+            found = grow.ground_of(mixture, xyz, rule, ray=ray, levels=levels, held=held)
+        short = grow.shortfall(mixture, xyz, rule, ray=ray, levels=levels, held=held,
+                               found=found)
         if short <= 0:
-            return state, none
+            return state, none, found
         prior = mixture.prior
         counts = np.asarray(mixture.stats.count, np.float64)
         n_pairs = max(short, int(g.merge_ahead * prior.n_components))
@@ -757,7 +762,7 @@ def _make_room(state: MapState, xyz, ray, levels, config: Config
         state = _merged(state, pairs, config)
         done(state.mixture)
     return state._replace(n_merge_rounds=state.n_merge_rounds + 1,
-                          n_merged=state.n_merged + len(pairs)), pairs.reshape(-1)
+                          n_merged=state.n_merged + len(pairs)), pairs.reshape(-1), None
 
 
 def _held(state: MapState, config: Config) -> np.ndarray | None:
@@ -854,7 +859,8 @@ def _auto_room(state: MapState, xyz, ray, levels, config: Config
         state = _widened(state, k0 + short, config)
         k = state.mixture.prior.n_components
         if k0 + short > k:  # at the ceiling: make room as a fixed K does
-            state, more = _make_room(state._replace(capped=True), xyz, ray, levels, config)
+            state, more, _ = _make_room(state._replace(capped=True), xyz, ray, levels,
+                                        config)
             merged = np.concatenate([merged, more])
     return state, merged
 

@@ -340,3 +340,52 @@ def test_cells_of_held_positions_are_not_new_ground():
     state = grow.start_empty(xy, 12, full.cell)
     state, _ = grow.grow(state, xy[:32], colours(xy[:32]), full, key=jax.random.key(1))
     assert grow.shortfall(state, xy, full) > grow.shortfall(state, xy, full, held=held)
+
+
+@pytest.mark.parametrize("noisy", [False, True])
+@pytest.mark.parametrize("leveled", [False, True])
+def test_new_ground_found_once_is_picked_as_a_pass_picks_it(noisy, leveled):
+    """The ground found once (grow.ground) gives new_ground's answer in any order and at
+    any quota (points of four coarse levels, noise along rays or none, quotas that stop
+    within a level and that take every cell), and its count is what new_ground takes
+    with a quota of every point: what shortfall counts and growth then picks."""
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-4, 4, (30000, 3)) * [1.0, 1.0, 0.05]
+    taken = rng.uniform(-4, 4, (400, 3)) * [1.0, 1.0, 0.05]
+    ray = np.tile([0.0, 0.0, 0.01], (len(x), 1)) if noisy else None
+    # farther ground coarser, as a frame's footprints grow with depth; a few points of
+    # each level among the next level's
+    levels = np.minimum(np.abs(x[:, 0]).astype(np.int64), 3)
+    levels = np.where(rng.random(len(x)) < 0.02, np.maximum(levels - 1, 0), levels)
+    levels = levels if leveled else None
+    rule = grow.Growth(cell=0.25, levels=1, refine=0.0, max_new=10**6)
+    found = grow.ground(x, taken, rule, ray, levels)
+    every = grow.new_ground(x, taken, rule, np.arange(len(x)), len(x), ray, levels)
+    assert found.n_cells == len(every) > 100
+    stops_within_a_level = False
+    for seed, quota in ((0, 5), (1, 97), (2, len(every) - 10), (3, len(every) + 1)):
+        order = np.random.default_rng(seed).permutation(len(x))
+        want = grow.new_ground(x, taken, rule, order, quota, ray, levels)
+        got = grow.new_ground(x, taken, rule, order, quota, ray, levels, found)
+        np.testing.assert_array_equal(got, want)
+        if levels is not None:
+            stops_within_a_level |= 0 < quota < len(every) and len(np.unique(levels[want])) > 1
+    assert stops_within_a_level or levels is None
+
+
+def test_shortfall_and_growth_from_the_ground_found_once_are_those_found_apart():
+    """A map short of slots: the shortfall counted from grow.ground_of is the one counted
+    alone, and growth picking from it grows the same components to the bit."""
+    pts = lattice(16)
+    rule = grow.calibrate(pts, 20, 16, rate=0.5)
+    state = grow.start_empty(pts, 20, rule.cell)
+    for n, key in ((128, 0), (192, 1)):
+        state, _ = grow.grow(state, pts[:n], colours(pts[:n]), rule, key=jax.random.key(key))
+    assert grow.short_of_slots(state, rule)
+    found = grow.ground_of(state, pts, rule)
+    assert grow.shortfall(state, pts, rule, found=found) == grow.shortfall(state, pts, rule)
+    a, info_a = grow.grow(state, pts, colours(pts), rule, key=jax.random.key(2))
+    b, info_b = grow.grow(state, pts, colours(pts), rule, key=jax.random.key(2), found=found)
+    assert info_a.n_new == info_b.n_new > 0 and np.array_equal(info_a.slots, info_b.slots)
+    for x, y in zip(jax.tree.leaves(a.prior), jax.tree.leaves(b.prior), strict=True):
+        assert np.asarray(x).tobytes() == np.asarray(y).tobytes()
