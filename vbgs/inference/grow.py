@@ -481,6 +481,12 @@ def _first_of_cells(keys: np.ndarray, empty: np.ndarray, order: np.ndarray, quot
     return poor[np.sort(first)][:quota]
 
 
+def _present(levels: np.ndarray) -> np.ndarray:
+    """The levels among ``levels [n]`` (whole numbers >= 0), ascending: ``np.unique``'s
+    answer, 10x faster."""
+    return np.flatnonzero(np.bincount(levels))
+
+
 class Ground(NamedTuple):
     """A batch's new ground against the components in use, found once
     (:func:`ground_of`) and then picked from in any order (:func:`new_ground`)."""
@@ -509,7 +515,7 @@ def ground(x: np.ndarray, taken: np.ndarray, rule: Growth, ray: np.ndarray | Non
         return Ground(keys, empty, None, len(np.unique(keys[empty])))
     keys, empty = np.zeros(len(x), np.int64), np.zeros(len(x), bool)
     held = [taken]
-    for level in np.flatnonzero(np.bincount(levels)):  # np.unique(levels), 10x faster
+    for level in _present(levels):
         here = np.flatnonzero(levels == level)
         keys[here], empty[here] = _empty_cells(
             x.take(here, 0), np.concatenate(held), rule.cell * 2.0**level,
@@ -533,7 +539,7 @@ def new_ground(x: np.ndarray, taken: np.ndarray, rule: Growth, order: np.ndarray
     if levels is None:
         return _pick(x, taken, rule.cell, order, quota, ray)
     chosen = np.zeros(0, np.int64)
-    present = np.flatnonzero(np.bincount(levels))  # np.unique(levels), 10x faster
+    present = _present(levels)
     if len(present) == 1:  # one level (near ground alone): the points as they are
         return _pick(x, taken, rule.cell * 2.0 ** present[0], order, quota, ray)
     for level in present:
@@ -555,7 +561,7 @@ def _picked(found: Ground, order: np.ndarray, quota: int) -> np.ndarray:
         return _first_of_cells(found.keys, found.empty, order, quota)
     chosen = [np.zeros(0, np.int64)]
     left = quota
-    for level in np.flatnonzero(np.bincount(found.levels)):
+    for level in _present(found.levels):
         if left <= 0:
             break
         here = order[found.levels[order] == level]  # this level's points, in the order

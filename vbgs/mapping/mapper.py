@@ -337,7 +337,7 @@ def settled(state: MapState, config: Config) -> MapState:
     ``defer``): the components seen through (or recoloured) ``evidence.forget_after``
     frames in a row forgotten (:func:`vbgs.mapping.change.gone`), their slots emptied for
     new ground; a settled map as it is."""
-    if state.pending is None:
+    if not state.unjudged:
         return state
     return _judged(_observed(state, config), config)
 
