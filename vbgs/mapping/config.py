@@ -65,6 +65,11 @@ REFINE_SHARE = 0.05
 # 35, results/stream_rate/merge_ahead/), but loses under the Kinect at 640 x 480, where a
 # round frees 10k slots of a 20-frame stream: 0.02 stays.
 MERGE_AHEAD = 0.02
+# Once the map has forgotten anything (its world is seen to change), refinement may take
+# refine_share of the capacity K a frame, a fresh map's rate at its start, paid for by
+# merges; True: the best mean on the changing scenes' validation views
+# (results/tuning/changed_refine/mean.md, made by the command in it).
+CHANGED_REFINE = True
 # New ground once the budget is spent: as many levels coarser as the ground met allows
 # (mapper.ground_levels). The rule: the best validation PSNR on every stream the setting
 # changes. One lap (object, room and walk at fit-scene's defaults) never reaches a level
@@ -111,6 +116,11 @@ class GrowthConfig:
 
     first_frame_share: share of K the first frame gets (fixes the cell side);
     refine_share: share of the empty slots a frame may spend on finer cells;
+    changed_refine: once the map has forgotten components as gone
+        (:mod:`vbgs.mapping.change`), refinement may take ``refine_share`` of K a frame,
+        as a fresh map does at its start, not of the empty slots alone: merges pay for
+        it (``vbgs.mapping.mapper._refining``; not for ``components="auto"``, whose
+        splits decide its refinement);
     levels: cell levels refinement may use (each half the side of the one before);
     max_new_share: the most components one frame may add, as a share of K;
     reach_cells: points farther than this many cells from every component are left
@@ -152,6 +162,7 @@ class GrowthConfig:
 
     first_frame_share: float = FIRST_FRAME_SHARE
     refine_share: float = REFINE_SHARE
+    changed_refine: bool = CHANGED_REFINE
     levels: int = grow.LEVELS
     max_new_share: float = grow.MAX_NEW_SHARE
     reach_cells: float = grow.REACH_CELLS
@@ -207,8 +218,9 @@ class GrowthConfig:
         _positive("growth", "refine_footprints", self.refine_footprints)
         _positive("growth", "max_new_share", self.max_new_share, upper=1.0)
         _positive("growth", "reach_cells", self.reach_cells)
-        if not (isinstance(self.refine_share, (int, float)) and 0 <= self.refine_share <= 1):
-            raise ValueError(f"growth.refine_share must be in [0, 1], got {self.refine_share!r}")
+        s = self.refine_share
+        if not (isinstance(s, (int, float)) and not isinstance(s, bool) and 0 <= s <= 1):
+            raise ValueError(f"growth.refine_share must be in [0, 1], got {s!r}")
         j = self.spent_levels
         if j != "ground" and (not isinstance(j, int) or isinstance(j, bool) or j < 0):
             raise ValueError(f"growth.spent_levels must be a whole number of cell levels >= 0 "
@@ -217,7 +229,7 @@ class GrowthConfig:
                              f"got {j!r}")
         if not isinstance(self.levels, int) or self.levels < 1:
             raise ValueError(f"growth.levels must be a positive integer, got {self.levels!r}")
-        for name in ("merge", "hold_paid", "hold_seeds"):
+        for name in ("merge", "hold_paid", "hold_seeds", "changed_refine"):
             _switch(f"growth.{name}", getattr(self, name))
         _positive("growth", "coarse_from", self.coarse_from)
         if not (isinstance(self.merge_ahead, (int, float)) and 0 <= self.merge_ahead < 0.5):

@@ -12,7 +12,7 @@ from vbgs.data.synthetic import changing_scene, make_scene
 from vbgs.inference.grow import is_active
 from vbgs.mapping import change
 from vbgs.mapping.config import (EXACT_RECOLOUR_SIGMAS, RECOLOUR_GATE, EvidenceConfig,
-                                 SensorConfig)
+                                 GrowthConfig, SensorConfig)
 from vbgs.sensors import simulate
 
 SIZE, FRAMES, K = 64, 24, 4000  # twelve frames a lap
@@ -303,6 +303,33 @@ def test_a_bad_setting_is_refused():
         EvidenceConfig(forget_after=2.5)
     with pytest.raises(ValueError, match="shaped_points"):
         EvidenceConfig(shaped_points=-1.0)
+    with pytest.raises(ValueError, match="growth.changed_refine"):
+        GrowthConfig(changed_refine="yes")
+
+
+def test_once_the_world_is_seen_to_change_refinement_takes_a_fresh_maps_rate(changed):
+    """Until a component is forgotten the stream is the one without the rule, to the bit;
+    from the frame that forgets, refinement may take refine_share of K a frame (a fresh
+    map's rate at its start), not refine_share of the empty slots."""
+    runs = {}
+    for on in (False, True):
+        cfg = mapping.Config(components=K, growth=GrowthConfig(changed_refine=on))
+        state, rows = mapping.init(cfg, key=jax.random.key(0)), []
+        for frame in changed.train:
+            state, info = mapping.update(state, frame, cfg, changed.background)
+            rows.append((state.n_forgotten, info.n_new, jax.tree_util.tree_leaves(
+                state.mixture)))
+        runs[on] = rows
+    first = next(i for i, (forgotten, _, _) in enumerate(runs[True]) if forgotten)
+    for (_, n_off, off), (_, n_on, on) in zip(runs[False][:first], runs[True][:first],
+                                              strict=True):
+        assert n_off == n_on
+        for a, b in zip(off, on, strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    least = int(GrowthConfig().refine_share * K)  # 200 slots a frame
+    after = slice(first + 1, first + 6)  # the frames after: measured 233-249 against 56-88
+    assert min(n for _, n, _ in runs[True][after]) >= least
+    assert max(n for _, n, _ in runs[False][after]) < least / 2
 
 
 def test_forgetting_is_a_new_prior_not_a_frames_evidence(changed):
