@@ -322,9 +322,6 @@ class Growth(NamedTuple):
     cell: side of the level-0 cells (new ground);
     levels: cell sides ``cell / 2^l`` for l < levels (finer levels refine);
     refine: share of the empty slots that refinement (levels >= 1) may take per batch;
-    refine_least: the slots refinement may take per batch whatever that share gives
-        (within the empty slots and ``max_new``; a world seen to change,
-        ``vbgs.mapping.mapper._refining``);
     max_new: the most components one batch may add (the bounded rate);
     coarse, footprint, coarse_from: see :func:`point_levels` (far ground, seen coarsely,
         gets coarse cells).
@@ -337,7 +334,6 @@ class Growth(NamedTuple):
     coarse: int = 0  # coarse levels far ground may use (cell * 2^j, j <= coarse)
     footprint: float = 0.0  # the first batch's median pixel footprint (0: not given)
     coarse_from: float = 4.0  # footprints this many times the median's start coarse cells
-    refine_least: int = 0
 
 
 def point_levels(rule: Growth, footprint) -> np.ndarray | None:
@@ -599,8 +595,7 @@ def _select(x: np.ndarray, taken: np.ndarray, n_empty: int, rule: Growth, *,
     budget = int(min(rule.max_new, n_empty))
     chosen = new_ground(x, taken, rule, order, budget, ray, levels, found)
     n_ground = len(chosen)
-    refine = int(min(budget - n_ground, max(np.floor(rule.refine * (n_empty - n_ground)),
-                                            rule.refine_least)))
+    refine = int(min(budget - n_ground, np.floor(rule.refine * (n_empty - n_ground))))
     level_of = [np.zeros(n_ground, np.int64)]
     for level in range(1, rule.levels):
         if refine <= 0:

@@ -65,10 +65,11 @@ REFINE_SHARE = 0.05
 # 35, results/stream_rate/merge_ahead/), but loses under the Kinect at 640 x 480, where a
 # round frees 10k slots of a 20-frame stream: 0.02 stays.
 MERGE_AHEAD = 0.02
-# Once the map has forgotten anything (its world is seen to change), refinement may take
-# refine_share of the capacity K a frame, a fresh map's rate at its start, paid for by
-# merges; True: the best mean on the changing scenes' validation views
-# (results/tuning/changed_refine/mean.md, made by the command in it).
+# Once the map has forgotten anything (its world is seen to change) and fewer slots are
+# empty than refine_share of K, a frame's refinement may take every empty slot new ground
+# leaves, merges paying for ground to come; True: the best mean on the changing scenes'
+# validation views at seeds 0, 1 and 2 (results/tuning/changed_refine/mean.md and
+# seed1/, seed2/, made by the commands in them).
 CHANGED_REFINE = True
 # New ground once the budget is spent: as many levels coarser as the ground met allows
 # (mapper.ground_levels). The rule: the best validation PSNR on every stream the setting
@@ -117,10 +118,11 @@ class GrowthConfig:
     first_frame_share: share of K the first frame gets (fixes the cell side);
     refine_share: share of the empty slots a frame may spend on finer cells;
     changed_refine: once the map has forgotten components as gone
-        (:mod:`vbgs.mapping.change`), refinement may take ``refine_share`` of K a frame,
-        as a fresh map does at its start, not of the empty slots alone: merges pay for
-        it (``vbgs.mapping.mapper._refining``; not for ``components="auto"``, whose
-        splits decide its refinement);
+        (:mod:`vbgs.mapping.change`) and fewer slots are empty than ``refine_share`` of
+        K, refinement may take every empty slot new ground leaves, as a fresh map's
+        first frames would, merges paying for ground to come
+        (``vbgs.mapping.mapper._refining``; not for ``components="auto"``, whose splits
+        decide its refinement);
     levels: cell levels refinement may use (each half the side of the one before);
     max_new_share: the most components one frame may add, as a share of K;
     reach_cells: points farther than this many cells from every component are left

@@ -110,17 +110,6 @@ def test_refinement_fills_finer_cells_within_its_share():
     assert info.n_new - ground == np.floor(0.5 * (64 - ground))  # refinement took its share
 
 
-@pytest.mark.parametrize("least, refined", [(0, 3), (20, 20), (40, 34)])
-def test_refinement_takes_at_least_its_least_within_the_empty_slots(least, refined):
-    xy = lattice(16)  # about its centre: 16 cells of side 4, 64 of side 2
-    rule = grow.Growth(cell=4.0, levels=2, refine=0.1, max_new=200, refine_least=least)
-    state = grow.start_empty(xy, 50, rule.cell)
-    state, info = grow.grow(state, xy, colours(xy), rule, key=jax.random.key(0))
-    assert info.n_ground == 16
-    # the share alone: floor(0.1 (50 - 16)) = 3; at least `least`, within the 34 slots left
-    assert info.n_new - info.n_ground == refined
-
-
 @pytest.mark.parametrize("estep", ["dense", "sparse"])
 def test_empty_slots_take_no_responsibility(estep):
     xy = lattice(8)
