@@ -145,7 +145,7 @@ def test_fit_scene_through_background_forgets_what_left_against_the_background(c
     turns it off): under the Kinect, the changing object's pixels that now show the
     background see through the components of what left, so more are forgotten and the
     changed pixels are drawn better (32 px, 600 components, measured: 90 forgotten and
-    14.45 dB on the changed pixels, against 28 and 14.00 with the flag off)."""
+    14.55 dB on the changed pixels, against 28 and 14.10 with the flag off)."""
     scores = []
     for flag in ([], ["--no-through-background"]):
         assert main(["fit-scene", "--scene", "object-change", "--size", "32", "--components",
@@ -154,4 +154,4 @@ def test_fit_scene_through_background_forgets_what_left_against_the_background(c
         scores.append(json.loads(capsys.readouterr().out.strip().splitlines()[-1]))
     on, off = scores
     assert on["components_forgotten"] >= 60 and off["components_forgotten"] <= 40
-    assert on["psnr_changed"] > 14.2 > off["psnr_changed"] + 0.1
+    assert on["psnr_changed"] > 14.3 and on["psnr_changed"] > off["psnr_changed"] + 0.3
