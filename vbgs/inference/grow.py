@@ -655,10 +655,15 @@ def ground_of(state: State, xyz, rule: Growth, *, ray=None, levels=None, held=No
     return ground(x, taken, rule, ray, levels)
 
 
+def empty_slots(state: State) -> int:
+    """How many slots of ``state`` no component uses (:func:`is_active`)."""
+    return int((~is_active(state.prior)).sum())
+
+
 def short_of_slots(state: State, rule: Growth) -> bool:
     """Whether :func:`shortfall` counts new ground: fewer empty slots than a batch may
     add."""
-    return int((~is_active(state.prior)).sum()) < rule.max_new
+    return empty_slots(state) < rule.max_new
 
 
 def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=None,
@@ -672,7 +677,7 @@ def shortfall(state: State, xyz, rule: Growth, *, ray=None, levels=None, earns=N
     batch may add (``rule.max_new``, which bounds what it wants): the shortfall is then
     at most ``rule.max_new - empty slots <= 0``, and that bound is returned. ``held``: as
     :func:`grow`'s; ``found``: the batch's :func:`ground_of` (without ``earns``)."""
-    n_empty = int((~is_active(state.prior)).sum())
+    n_empty = empty_slots(state)
     if not short_of_slots(state, rule):
         return rule.max_new - n_empty
     if earns is None:

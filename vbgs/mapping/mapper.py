@@ -669,8 +669,7 @@ def _refining(state: MapState, rule: grow.Growth, config: Config) -> grow.Growth
     changed_refine/``)."""
     if config.auto or not config.growth.changed_refine or state.n_forgotten == 0:
         return rule
-    n_empty = int((~grow.is_active(state.mixture.prior)).sum())
-    if n_empty > rule.refine * config.max_components:
+    if grow.empty_slots(state.mixture) > rule.refine * config.max_components:
         return rule
     return rule._replace(refine=1.0)
 
